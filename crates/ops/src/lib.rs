@@ -1,0 +1,1 @@
+//! Volume-rendering ops (not built yet).

@@ -1,0 +1,82 @@
+//! Broadcasting: the shape rule, and the one place where a broadcast is undone in backward.
+
+use ndarray::{ArrayD, Axis};
+
+use crate::error::OpError;
+use crate::float::Float;
+
+/// The numpy broadcast of two shapes: aligned from the right, each pair equal or one of them 1.
+pub fn broadcast_shape(a: &[usize], b: &[usize]) -> Result<Vec<usize>, OpError> {
+    let n = a.len().max(b.len());
+    let dim = |s: &[usize], k: usize| if k + s.len() >= n { s[k + s.len() - n] } else { 1 };
+    (0..n)
+        .map(|k| match (dim(a, k), dim(b, k)) {
+            (x, y) if x == y => Ok(x),
+            (1, y) => Ok(y),
+            (x, 1) => Ok(x),
+            _ => Err(OpError::ShapeMismatch {
+                lhs: a.to_vec(),
+                rhs: b.to_vec(),
+            }),
+        })
+        .collect()
+}
+
+/// Sums a gradient of a broadcast result back to the shape of the operand that was broadcast.
+///
+/// Leading axes the operand did not have are summed away; axes where the operand had size 1
+/// are summed and kept. `shape` must be broadcastable to `g`'s shape.
+pub fn sum_to_shape<F: Float>(g: ArrayD<F>, shape: &[usize]) -> ArrayD<F> {
+    if g.shape() == shape {
+        return g;
+    }
+    let mut g = g;
+    while g.ndim() > shape.len() {
+        g = g.sum_axis(Axis(0));
+    }
+    for (k, &s) in shape.iter().enumerate() {
+        if s == 1 && g.shape()[k] != 1 {
+            g = g.sum_axis(Axis(k)).insert_axis(Axis(k));
+        }
+    }
+    g
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{ArrayD, IxDyn};
+    use proptest::prelude::*;
+
+    #[test]
+    fn shapes_follow_numpy() {
+        assert_eq!(broadcast_shape(&[3, 1], &[4]).unwrap(), vec![3, 4]);
+        assert_eq!(broadcast_shape(&[], &[2, 5]).unwrap(), vec![2, 5]);
+        assert_eq!(broadcast_shape(&[2, 1, 3], &[5, 1]).unwrap(), vec![2, 5, 3]);
+        assert!(matches!(
+            broadcast_shape(&[3], &[4]),
+            Err(OpError::ShapeMismatch { .. })
+        ));
+    }
+
+    proptest! {
+        // sum_to_shape(ones(broadcast), s) counts how many broadcast elements each operand
+        // element stands for: the product of the broadcast sizes it was stretched over.
+        #[test]
+        fn sum_to_shape_counts_broadcast_copies(
+            s in proptest::collection::vec(prop_oneof![Just(1usize), 2usize..4], 0..4),
+            extra in proptest::collection::vec(1usize..4, 0..3),
+            stretch in proptest::collection::vec(1usize..4, 4),
+        ) {
+            let big: Vec<usize> = extra.iter().copied()
+                .chain(s.iter().zip(&stretch).map(|(&d, &k)| if d == 1 { k } else { d }))
+                .collect();
+            let g = ArrayD::<f64>::ones(IxDyn(&big));
+            let r = sum_to_shape(g, &s);
+            prop_assert_eq!(r.shape(), s.as_slice());
+            let copies: usize = big.iter().product::<usize>() / s.iter().product::<usize>().max(1);
+            let all_equal = r.iter().all(|&v| v == copies as f64);
+            prop_assert!(all_equal || r.is_empty());
+        }
+    }
+}

@@ -1,0 +1,219 @@
+//! Shape ops: `reshape` (row-major), `slice` along one axis, `concat` along one axis.
+
+use ndarray::{concatenate, ArrayD, ArrayViewD, Axis, IxDyn, Slice};
+
+use crate::custom::{BackwardCtx, CustomOp};
+use crate::error::{OpError, Result};
+use crate::float::Float;
+use crate::tape::Tape;
+use crate::var::Var;
+
+/// Reinterprets the elements in row-major order with a new shape of the same size.
+#[derive(Debug, Clone)]
+pub struct Reshape(pub Vec<usize>);
+
+/// Keeps indices `start..end` of one axis.
+#[derive(Debug, Clone, Copy)]
+pub struct SliceAxis {
+    /// The axis.
+    pub axis: usize,
+    /// First kept index.
+    pub start: usize,
+    /// One past the last kept index.
+    pub end: usize,
+}
+
+/// Joins its inputs along one axis; all other axes must agree.
+#[derive(Debug, Clone, Copy)]
+pub struct Concat(pub usize);
+
+fn reshaped<F: Float>(x: &ArrayViewD<'_, F>, shape: &[usize]) -> Result<ArrayD<F>, OpError> {
+    x.to_shape(IxDyn(shape))
+        .map(|c| c.into_owned())
+        .map_err(|_| OpError::ShapeMismatch {
+            lhs: x.shape().to_vec(),
+            rhs: shape.to_vec(),
+        })
+}
+
+impl<F: Float> CustomOp<F> for Reshape {
+    type Saved = ();
+    fn name(&self) -> &'static str {
+        "reshape"
+    }
+    fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
+        let [x] = inputs else {
+            return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
+        };
+        Ok((vec![reshaped(x, &self.0)?], ()))
+    }
+    fn backward(
+        &self,
+        ctx: &BackwardCtx<'_, F, ()>,
+        grads: &[Option<ArrayViewD<'_, F>>],
+    ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
+        let Some(g) = &grads[0] else { return Ok(vec![None]) };
+        Ok(vec![Some(reshaped(g, ctx.input(0).shape())?)])
+    }
+}
+
+impl<F: Float> CustomOp<F> for SliceAxis {
+    type Saved = ();
+    fn name(&self) -> &'static str {
+        "slice"
+    }
+    fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
+        let [x] = inputs else {
+            return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
+        };
+        let SliceAxis { axis, start, end } = *self;
+        if axis >= x.ndim() || start > end || end > x.shape()[axis] {
+            return Err(OpError::InvalidArgument(format!(
+                "range {start}..{end} of axis {axis} does not fit shape {:?}",
+                x.shape()
+            )));
+        }
+        Ok((vec![x.slice_axis(Axis(axis), Slice::from(start..end)).to_owned()], ()))
+    }
+    fn backward(
+        &self,
+        ctx: &BackwardCtx<'_, F, ()>,
+        grads: &[Option<ArrayViewD<'_, F>>],
+    ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
+        let Some(g) = &grads[0] else { return Ok(vec![None]) };
+        let mut gx = ArrayD::zeros(ctx.input(0).shape());
+        gx.slice_axis_mut(Axis(self.axis), Slice::from(self.start..self.end))
+            .assign(g);
+        Ok(vec![Some(gx)])
+    }
+}
+
+impl<F: Float> CustomOp<F> for Concat {
+    type Saved = ();
+    fn name(&self) -> &'static str {
+        "concat"
+    }
+    fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
+        let Some(first) = inputs.first() else {
+            return Err(OpError::InvalidArgument("needs at least one input".into()));
+        };
+        let axis = self.0;
+        if axis >= first.ndim() {
+            return Err(OpError::InvalidArgument(format!(
+                "axis {axis} out of range for shape {:?}",
+                first.shape()
+            )));
+        }
+        for x in inputs {
+            let same_rank = x.ndim() == first.ndim();
+            if !same_rank || (0..x.ndim()).any(|k| k != axis && x.shape()[k] != first.shape()[k]) {
+                return Err(OpError::ShapeMismatch {
+                    lhs: first.shape().to_vec(),
+                    rhs: x.shape().to_vec(),
+                });
+            }
+        }
+        let joined = concatenate(Axis(axis), inputs).map_err(|e| OpError::InvalidArgument(e.to_string()))?;
+        Ok((vec![joined], ()))
+    }
+    fn backward(
+        &self,
+        ctx: &BackwardCtx<'_, F, ()>,
+        grads: &[Option<ArrayViewD<'_, F>>],
+    ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
+        let n = ctx.num_inputs();
+        let Some(g) = &grads[0] else { return Ok(vec![None; n]) };
+        let mut start = 0;
+        let mut out = Vec::with_capacity(n);
+        for i in 0..n {
+            let len = ctx.input(i).shape()[self.0];
+            let part = g.slice_axis(Axis(self.0), Slice::from(start..start + len));
+            out.push(ctx.needs_input_grad(i).then(|| part.to_owned()));
+            start += len;
+        }
+        Ok(out)
+    }
+}
+
+impl<F: Float> Tape<F> {
+    /// The same elements (row-major order) with a new shape of the same number of elements.
+    pub fn reshape(&mut self, x: Var, shape: &[usize]) -> Result<Var> {
+        self.apply1(Reshape(shape.to_vec()), &[x])
+    }
+    /// Indices `start..end` of `axis`; errors if the range does not fit.
+    pub fn slice(&mut self, x: Var, axis: usize, start: usize, end: usize) -> Result<Var> {
+        self.apply1(SliceAxis { axis, start, end }, &[x])
+    }
+    /// Joins `xs` along `axis`; every other axis must agree, and `xs` must not be empty.
+    pub fn concat(&mut self, xs: &[Var], axis: usize) -> Result<Var> {
+        self.apply1(Concat(axis), xs)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::test_util::assert_gradcheck;
+    use crate::{Tape, TapeError};
+    use ndarray::{arr1, arr2, ArrayD};
+
+    #[test]
+    fn values() {
+        let mut t = Tape::<f64>::new();
+        let x = t.param(arr2(&[[1.0, 2.0, 3.0], [4.0, 5.0, 6.0]]));
+        let r = t.reshape(x, &[3, 2]).unwrap();
+        assert_eq!(
+            t.value(r).unwrap(),
+            arr2(&[[1.0, 2.0], [3.0, 4.0], [5.0, 6.0]]).into_dyn()
+        );
+        let s = t.slice(x, 1, 1, 3).unwrap();
+        assert_eq!(t.value(s).unwrap(), arr2(&[[2.0, 3.0], [5.0, 6.0]]).into_dyn());
+        let c = t.concat(&[x, s], 1).unwrap();
+        assert_eq!(
+            t.value(c).unwrap(),
+            arr2(&[[1.0, 2.0, 3.0, 2.0, 3.0], [4.0, 5.0, 6.0, 5.0, 6.0]]).into_dyn()
+        );
+        // d sum(concat(x, x[:,1:3])) / dx = 1 + [column >= 1].
+        let y = t.sum(c).unwrap();
+        let g = t.backward(y).unwrap();
+        assert_eq!(g.get(x).unwrap(), arr2(&[[1.0, 2.0, 2.0], [1.0, 2.0, 2.0]]).into_dyn());
+    }
+
+    #[test]
+    fn errors_name_the_op() {
+        let mut t = Tape::<f32>::new();
+        let x = t.param(arr1(&[1.0f32, 2.0, 3.0]));
+        let y = t.param(arr2(&[[1.0f32]]));
+        assert!(matches!(
+            t.reshape(x, &[2, 2]),
+            Err(TapeError::ShapeMismatch { op: "reshape", .. })
+        ));
+        assert!(matches!(
+            t.slice(x, 0, 2, 4),
+            Err(TapeError::InvalidArgument { op: "slice", .. })
+        ));
+        assert!(matches!(
+            t.concat(&[x, y], 0),
+            Err(TapeError::ShapeMismatch { op: "concat", .. })
+        ));
+        assert!(matches!(
+            t.concat(&[], 0),
+            Err(TapeError::InvalidArgument { op: "concat", .. })
+        ));
+        assert_eq!(t.len(), 2);
+    }
+
+    #[test]
+    fn gradcheck_shape_ops() {
+        let x = ArrayD::from_shape_vec(vec![2, 3], vec![0.3, -0.7, 1.3, 2.1, 0.9, -1.4]).unwrap();
+        let w = ArrayD::from_shape_vec(vec![3, 2], vec![1.0, 2.0, 3.0, 4.0, 5.0, 6.0]).unwrap();
+        assert_gradcheck("reshape", &[x.clone(), w], |t, v| {
+            let r = t.reshape(v[0], &[3, 2])?;
+            t.mul(r, v[1])
+        });
+        assert_gradcheck("slice", std::slice::from_ref(&x), |t, v| t.slice(v[0], 1, 1, 3));
+        assert_gradcheck("concat", &[x.clone(), x], |t, v| {
+            let sq = t.square(v[1])?;
+            t.concat(&[v[0], sq], 0)
+        });
+    }
+}

@@ -1,0 +1,266 @@
+//! The tape: an arena of values in creation order and the records of the ops that made them.
+
+use std::ops::Range;
+
+use ndarray::{ArrayD, ArrayViewD, Dimension};
+
+use crate::custom::{Backward, CustomOp, Recorded};
+use crate::error::{Result, TapeError};
+use crate::float::Float;
+use crate::var::{fresh_epoch, Var};
+
+/// One value on the tape.
+#[derive(Debug)]
+pub(crate) struct Value<F: Float> {
+    pub(crate) data: ArrayD<F>,
+    /// A param, or the output of a record with an input that needs a gradient.
+    pub(crate) needs_grad: bool,
+    /// Whether `backward` keeps this intermediate's gradient (params' are always kept).
+    pub(crate) retain: bool,
+    /// `true` for values made by `param`, `constant` or `detach`.
+    pub(crate) is_leaf: bool,
+}
+
+/// One op application that needs a backward: its inputs, its consecutive outputs, its rule.
+#[derive(Debug)]
+pub(crate) struct Record<F: Float> {
+    pub(crate) inputs: Vec<u32>,
+    pub(crate) outputs: Range<u32>,
+    pub(crate) op: Box<dyn Backward<F>>,
+}
+
+/// Sizes of what a tape holds, from [`Tape::stats`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TapeStats {
+    /// Values on the tape (params, constants and op outputs).
+    pub values: usize,
+    /// Op applications recorded for backward (those with an input that needs a gradient).
+    pub records: usize,
+    /// Bytes of value data.
+    pub value_bytes: usize,
+    /// Bytes of residuals saved by ops for their backward, as the ops report them.
+    pub saved_bytes: usize,
+}
+
+/// A Wengert list: values in creation order (a topological order) and the records of the ops
+/// that need a backward.
+///
+/// Every op is a method returning `Result<Var>`; a failed op leaves the tape as it was.
+/// The tape is `Send` (not `Sync`): parallelism belongs inside ops, never across the tape.
+#[derive(Debug)]
+pub struct Tape<F: Float> {
+    pub(crate) values: Vec<Value<F>>,
+    pub(crate) records: Vec<Record<F>>,
+    pub(crate) epoch: u64,
+    grad_enabled: bool,
+}
+
+impl<F: Float> Default for Tape<F> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<F: Float> Tape<F> {
+    /// An empty tape with recording on.
+    pub fn new() -> Self {
+        Tape {
+            values: Vec::new(),
+            records: Vec::new(),
+            epoch: fresh_epoch(),
+            grad_enabled: true,
+        }
+    }
+
+    /// A leaf that gradients are computed for.
+    pub fn param<D: Dimension>(&mut self, value: ndarray::Array<F, D>) -> Var {
+        self.push_leaf(value.into_dyn(), true)
+    }
+
+    /// A leaf that never receives a gradient.
+    pub fn constant<D: Dimension>(&mut self, value: ndarray::Array<F, D>) -> Var {
+        self.push_leaf(value.into_dyn(), false)
+    }
+
+    /// A zero-dimensional constant holding `x`.
+    pub fn scalar(&mut self, x: F) -> Var {
+        self.push_leaf(ArrayD::from_elem(ndarray::IxDyn(&[]), x), false)
+    }
+
+    /// A constant copy of `v`'s value: no gradient flows through it.
+    pub fn detach(&mut self, v: Var) -> Result<Var> {
+        let data = self.value(v)?.to_owned();
+        Ok(self.push_leaf(data, false))
+    }
+
+    /// The value behind `v`.
+    pub fn value(&self, v: Var) -> Result<ArrayViewD<'_, F>> {
+        Ok(self.values[self.check(v)?].data.view())
+    }
+
+    /// The shape of `v`'s value.
+    pub fn shape(&self, v: Var) -> Result<&[usize]> {
+        Ok(self.values[self.check(v)?].data.shape())
+    }
+
+    /// Whether `v` needs a gradient (it is a param, or depends on one through recorded ops).
+    pub fn needs_grad(&self, v: Var) -> Result<bool> {
+        Ok(self.values[self.check(v)?].needs_grad)
+    }
+
+    /// Keeps `v`'s gradient in the result of the next `backward`, even if it is an intermediate.
+    pub fn retain(&mut self, v: Var) -> Result<()> {
+        let i = self.check(v)?;
+        self.values[i].retain = true;
+        Ok(())
+    }
+
+    /// Whether op applications are being recorded (see [`Tape::no_grad`]).
+    pub fn grad_enabled(&self) -> bool {
+        self.grad_enabled
+    }
+
+    /// Turns recording on or off; off, op outputs need no gradient and nothing is recorded.
+    pub fn set_grad_enabled(&mut self, on: bool) {
+        self.grad_enabled = on;
+    }
+
+    /// Runs `f` with recording off (for evaluation loops), then restores the previous mode.
+    pub fn no_grad<R>(&mut self, f: impl FnOnce(&mut Self) -> R) -> R {
+        let before = std::mem::replace(&mut self.grad_enabled, false);
+        let out = f(self);
+        self.grad_enabled = before;
+        out
+    }
+
+    /// Drops every value and record but keeps the allocations, for reuse in a training loop.
+    ///
+    /// Every handle made before is invalidated: using one is [`TapeError::StaleVar`].
+    pub fn clear(&mut self) {
+        self.values.clear();
+        self.records.clear();
+        self.epoch = fresh_epoch();
+    }
+
+    /// Number of values on the tape.
+    pub fn len(&self) -> usize {
+        self.values.len()
+    }
+
+    /// Whether the tape holds no value.
+    pub fn is_empty(&self) -> bool {
+        self.values.is_empty()
+    }
+
+    /// What the tape holds: values, records and bytes.
+    pub fn stats(&self) -> TapeStats {
+        TapeStats {
+            values: self.values.len(),
+            records: self.records.len(),
+            value_bytes: self
+                .values
+                .iter()
+                .map(|v| v.data.len() * std::mem::size_of::<F>())
+                .sum(),
+            saved_bytes: self.records.iter().map(|r| r.op.saved_bytes()).sum(),
+        }
+    }
+
+    /// Applies an op with any number of inputs and outputs and returns the outputs' handles.
+    ///
+    /// The forward runs on the input values; if it fails, or returns no output, nothing is
+    /// pushed. A record for backward is kept only if recording is on and some input needs a
+    /// gradient.
+    pub fn apply<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var]) -> Result<Vec<Var>> {
+        let ids = inputs.iter().map(|&v| self.check(v)).collect::<Result<Vec<_>>>()?;
+        let (outputs, saved) = {
+            let views: Vec<ArrayViewD<'_, F>> = ids.iter().map(|&i| self.values[i].data.view()).collect();
+            op.forward(&views).map_err(|e| TapeError::from_op(op.name(), e))?
+        };
+        if outputs.is_empty() {
+            return Err(TapeError::InvalidArgument {
+                op: op.name(),
+                reason: "forward returned no output".into(),
+            });
+        }
+        let needs_grad = self.grad_enabled && ids.iter().any(|&i| self.values[i].needs_grad);
+        let first = self.values.len();
+        let count = outputs.len();
+        if first + count > u32::MAX as usize {
+            return Err(TapeError::InvalidArgument {
+                op: op.name(),
+                reason: "the tape is full (2^32 values)".into(),
+            });
+        }
+        for data in outputs {
+            self.values.push(Value {
+                data,
+                needs_grad,
+                retain: false,
+                is_leaf: false,
+            });
+        }
+        if needs_grad {
+            self.records.push(Record {
+                inputs: ids.iter().map(|&i| i as u32).collect(),
+                outputs: first as u32..(first + count) as u32,
+                op: Box::new(Recorded { op, saved }),
+            });
+        }
+        Ok((first..first + count).map(|i| self.handle(i)).collect())
+    }
+
+    /// [`Tape::apply`] for an op with exactly one output.
+    pub fn apply1<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var]) -> Result<Var> {
+        let name = op.name();
+        let outs = self.apply(op, inputs)?;
+        match outs.as_slice() {
+            [one] => Ok(*one),
+            _ => {
+                // Undo the push so that a failed call leaves the tape unchanged.
+                self.truncate_to(outs[0].index as usize);
+                Err(TapeError::InvalidArgument {
+                    op: name,
+                    reason: format!("apply1 needs one output, the op returned {}", outs.len()),
+                })
+            }
+        }
+    }
+
+    /// Removes every value from index `len` on, and the records that produced them.
+    fn truncate_to(&mut self, len: usize) {
+        self.values.truncate(len);
+        while self.records.last().is_some_and(|r| r.outputs.start as usize >= len) {
+            self.records.pop();
+        }
+    }
+
+    /// The arena index of `v`, or `StaleVar` if the handle is not from this tape's epoch.
+    pub(crate) fn check(&self, v: Var) -> Result<usize> {
+        if v.epoch != self.epoch || v.index() >= self.values.len() {
+            return Err(TapeError::StaleVar {
+                index: v.index,
+                epoch: v.epoch,
+                tape_epoch: self.epoch,
+            });
+        }
+        Ok(v.index())
+    }
+
+    pub(crate) fn handle(&self, index: usize) -> Var {
+        Var {
+            index: index as u32,
+            epoch: self.epoch,
+        }
+    }
+
+    fn push_leaf(&mut self, data: ArrayD<F>, needs_grad: bool) -> Var {
+        self.values.push(Value {
+            data,
+            needs_grad,
+            retain: false,
+            is_leaf: true,
+        });
+        self.handle(self.values.len() - 1)
+    }
+}
