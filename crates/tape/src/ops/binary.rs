@@ -1,7 +1,7 @@
 //! Element-wise functions of two inputs, with numpy broadcasting.
 //!
 //! Broadcasting is undone in backward by the one shared helper
-//! [`sum_to_shape`](crate::broadcast::sum_to_shape). At ties `maximum` and `minimum` split the
+//! [`sum_to_shape`](crate::broadcast::sum_to_shape()). At ties `maximum` and `minimum` split the
 //! gradient 0.5 / 0.5 between their inputs (as candle and tinygrad).
 
 use ndarray::{ArrayD, ArrayViewD, IxDyn, Zip};

@@ -2,7 +2,7 @@
 //!
 //! Conventions at kinks: `abs'(0) = 0`, `relu'(0) = 0`, and `clamp` passes the gradient
 //! where `lo <= x <= hi` (inclusive, as PyTorch). Derivatives follow the strong-zero rule
-//! (see [`strong_mul`](super::strong_mul)).
+//! (a zero upstream gradient contributes exactly zero).
 
 use ndarray::{ArrayD, ArrayViewD, Zip};
 
