@@ -1,0 +1,213 @@
+//! Input validation, flat views of the packed arrays, and the split into ray blocks that the
+//! parallel loops run over.
+
+use std::borrow::Cow;
+use std::ops::Range;
+
+use fogray_tape::Float;
+use ndarray::ArrayViewD;
+
+use super::config::{Background, Composite};
+use crate::error::CompositeError;
+
+/// Rays per parallel work item: fixed, so results never depend on the thread count.
+const RAYS_PER_BLOCK: usize = 64;
+
+/// The composite's inputs as flat row-major slices, validated.
+pub(crate) struct Flat<'a, F: Float> {
+    pub sigma: Cow<'a, [F]>,
+    pub delta: Cow<'a, [F]>,
+    pub color: Cow<'a, [F]>,
+    pub ch: usize,
+    /// Empty (no background), `ch` values (shared) or `R * ch` (per ray).
+    pub background: Cow<'a, [F]>,
+    pub t: Option<Cow<'a, [F]>>,
+}
+
+impl<F: Float> Flat<'_, F> {
+    /// The background of ray `r` (empty when there is none).
+    pub fn background_of(&self, r: usize) -> &[F] {
+        match self.background.len() {
+            0 => &[],
+            n if n == self.ch => &self.background,
+            _ => &self.background[r * self.ch..(r + 1) * self.ch],
+        }
+    }
+}
+
+fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
+    match x.as_slice() {
+        Some(s) => Cow::Borrowed(s),
+        None => Cow::Owned(x.iter().copied().collect()),
+    }
+}
+
+fn shape_err(what: &'static str, expected: String, got: &[usize]) -> CompositeError {
+    CompositeError::Shape {
+        what,
+        expected,
+        got: format!("shape {got:?}"),
+    }
+}
+
+/// The ray that owns global sample `i`, and the sample's index within it.
+pub(crate) fn locate(offsets: &[usize], i: usize) -> (usize, usize) {
+    let r = offsets.partition_point(|&o| o <= i).saturating_sub(1);
+    // Skip empty rays that share the start offset.
+    let r = (r..offsets.len() - 1).find(|&r| offsets[r + 1] > i).unwrap_or(r);
+    (r, i - offsets[r])
+}
+
+/// Checks shapes and values of the inputs in the op's order
+/// (sigma, delta, color, [background], [t]) and returns them flat.
+pub(crate) fn validate<'a, F: Float>(
+    op: &Composite,
+    inputs: &'a [ArrayViewD<'_, F>],
+) -> Result<Flat<'a, F>, CompositeError> {
+    let expected_inputs = 3 + usize::from(op.background != Background::None) + usize::from(op.depth);
+    if inputs.len() != expected_inputs {
+        return Err(CompositeError::Shape {
+            what: "inputs",
+            expected: format!("{expected_inputs} inputs"),
+            got: format!("{}", inputs.len()),
+        });
+    }
+    let (n, rays) = (op.samples(), op.rays());
+    for (what, x) in [("sigma", &inputs[0]), ("delta", &inputs[1])] {
+        if x.shape() != [n] {
+            return Err(shape_err(what, format!("[{n}] (the offsets end at {n})"), x.shape()));
+        }
+    }
+    let color = &inputs[2];
+    if color.ndim() != 2 || color.shape()[0] != n || color.shape()[1] == 0 {
+        return Err(shape_err("color", format!("[{n}, ch] with ch >= 1"), color.shape()));
+    }
+    let ch = color.shape()[1];
+    let mut next = 3;
+    let background = match op.background {
+        Background::None => Cow::Borrowed(&[][..]),
+        mode => {
+            let bg = &inputs[next];
+            next += 1;
+            let want: &[usize] = if mode == Background::Shared { &[ch] } else { &[rays, ch] };
+            if bg.shape() != want {
+                return Err(shape_err("background", format!("{want:?}"), bg.shape()));
+            }
+            flat(bg)
+        }
+    };
+    let t = if op.depth {
+        let t = &inputs[next];
+        if t.shape() != [n] {
+            return Err(shape_err("t", format!("[{n}]"), t.shape()));
+        }
+        Some(flat(t))
+    } else {
+        None
+    };
+    let flat = Flat {
+        sigma: flat(&inputs[0]),
+        delta: flat(&inputs[1]),
+        color: flat(color),
+        ch,
+        background,
+        t,
+    };
+    check_values(op, &flat)?;
+    Ok(flat)
+}
+
+fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), CompositeError> {
+    let bad = |i: usize, what: String, value: F, rule: &'static str| {
+        let (ray, sample) = locate(&op.offsets, i);
+        CompositeError::InvalidSample {
+            ray,
+            sample,
+            what,
+            value: value.as_f64(),
+            rule,
+        }
+    };
+    let non_negative = |x: F| x.is_finite() && x >= F::zero();
+    if let Some(i) = f.sigma.iter().position(|&x| !non_negative(x)) {
+        return Err(bad(i, "sigma".into(), f.sigma[i], "density must be finite and >= 0"));
+    }
+    if let Some(i) = f.delta.iter().position(|&x| !non_negative(x)) {
+        return Err(bad(i, "delta".into(), f.delta[i], "step must be finite and >= 0"));
+    }
+    if let Some(j) = f.color.iter().position(|x| !x.is_finite()) {
+        return Err(bad(
+            j / f.ch,
+            format!("color[{}]", j % f.ch),
+            f.color[j],
+            "must be finite",
+        ));
+    }
+    if let Some(t) = &f.t {
+        if let Some(i) = t.iter().position(|x| !x.is_finite()) {
+            return Err(bad(i, "t".into(), t[i], "must be finite"));
+        }
+    }
+    if let Some(j) = f.background.iter().position(|x| !x.is_finite()) {
+        let ray = if f.background.len() == f.ch { 0 } else { j / f.ch };
+        return Err(CompositeError::InvalidBackground {
+            ray,
+            channel: j % f.ch,
+            value: f.background[j].as_f64(),
+        });
+    }
+    Ok(())
+}
+
+/// A run of consecutive rays and the samples they own.
+#[derive(Debug, Clone)]
+pub(crate) struct Block {
+    pub rays: Range<usize>,
+    pub samples: Range<usize>,
+}
+
+/// Cuts the rays into blocks of a fixed number of rays.
+pub(crate) fn blocks(offsets: &[usize]) -> Vec<Block> {
+    let rays = offsets.len() - 1;
+    (0..rays)
+        .step_by(RAYS_PER_BLOCK)
+        .map(|r0| {
+            let r1 = (r0 + RAYS_PER_BLOCK).min(rays);
+            Block {
+                rays: r0..r1,
+                samples: offsets[r0]..offsets[r1],
+            }
+        })
+        .collect()
+}
+
+/// Splits off the first `len` elements of `rest` (disjoint mutable pieces for parallel work).
+pub(crate) fn take_front<'a, T>(rest: &mut &'a mut [T], len: usize) -> &'a mut [T] {
+    let (head, tail) = std::mem::take(rest).split_at_mut(len);
+    *rest = tail;
+    head
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locate_skips_empty_rays() {
+        let offsets = [0, 2, 2, 2, 5];
+        assert_eq!(locate(&offsets, 0), (0, 0));
+        assert_eq!(locate(&offsets, 1), (0, 1));
+        assert_eq!(locate(&offsets, 2), (3, 0));
+        assert_eq!(locate(&offsets, 4), (3, 2));
+        assert_eq!(locate(&[0, 0, 1], 0), (1, 0));
+    }
+
+    #[test]
+    fn blocks_cover_every_ray_once() {
+        let offsets: Vec<usize> = (0..=200).map(|r| r * 3).collect();
+        let b = blocks(&offsets);
+        assert_eq!(b.len(), 4);
+        assert_eq!(b[3].rays, 192..200);
+        assert_eq!(b[3].samples, 576..600);
+    }
+}

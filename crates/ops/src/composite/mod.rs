@@ -1,0 +1,61 @@
+//! The emission-absorption composite of lesson 8 over packed rays, as one fused op.
+//!
+//! # The formulas
+//!
+//! Ray `r` owns samples `offsets[r]..offsets[r+1]`. Sample `k` has density `sigma_k >= 0`,
+//! length `delta_k >= 0`, colour `c_k` (any number of channels) and optionally a depth `t_k`.
+//! With optical depth `tau_k = sigma_k delta_k`:
+//!
+//! ```text
+//! alpha_k = 1 - exp(-tau_k)            T_k = exp(-sum_{j<k} tau_j)       w_k = T_k alpha_k
+//! C = sum_k w_k c_k + T_end c_bg       opacity = 1 - T_end               depth = sum_k w_k t_k
+//! ```
+//!
+//! (`depth` is the unnormalised expected depth: the background contributes 0, an empty ray has
+//! depth 0; divide by the opacity for the depth given that the ray stops.)
+//!
+//! The backward is the closed form of lesson 8, §5. For a loss `L` with upstream gradients
+//! `gC`, `gO`, `gD`, `gW_k`, `gT_k`, every output is linear in per-sample "values"
+//! `v_k = gC.c_k + gO + gD t_k + gW_k` (the background's value is `gC.c_bg`), and
+//!
+//! ```text
+//! dL/dtau_k = T_{k+1} (v_k - R_{k+1}) - sum_{i>k} gT_i T_i     "what it adds minus what it hides"
+//! R_k = R_{k+1} + alpha_k (v_k - R_{k+1}),  R_end = gC.c_bg       (back to front)
+//! dL/dsigma_k = delta_k dL/dtau_k    dL/ddelta_k = sigma_k dL/dtau_k    dL/dc_k = w_k gC
+//! dL/dt_k = w_k gD                   dL/dc_bg = T_end gC
+//! ```
+//!
+//! `R_k` is the expected value of what lies behind sample `k` given that the ray reaches it,
+//! so `T_{k+1} R_{k+1}` is the suffix sum `S_k = sum_{i>k} w_i v_i + T_end v_bg` of the lesson,
+//! accumulated back to front with no division and no `C - prefix` subtraction.
+//!
+//! # Numerics, by design
+//!
+//! - `alpha = -expm1(-tau)`: `1 - exp(-tau)` loses every digit for `tau < 1e-8` (and 0.6 % at
+//!   `tau = 1e-5` in f32, coherently along a ray).
+//! - `T_k = exp(-running optical depth)`, not a product of `1 - alpha`, which rounds to 0 or
+//!   loses all digits as `alpha -> 1`; the opacity is `-expm1(-total depth)`, not `1 - T_end`,
+//!   which is 0 for a faint ray.
+//! - Every running sum (optical depth, colour, depth, the suffix recurrence) is carried in
+//!   f64, also for f32 data: f32 running sums lose 1e-4 of C on a 1e5-sample ray.
+//! - The suffix is a true back-to-front recurrence (above): `C - prefix` is off by
+//!   thousands of times behind an opaque sample.
+//!
+//! # Early termination
+//!
+//! With `min_transmittance > 0`, the first sample whose transmittance `T_k` is below the
+//! threshold and every sample after it are treated as empty (density 0): they get zero weight
+//! and zero gradient, their `T` is the ray's residual `T_stop`, and the background is blended
+//! with `T_stop`. The forward and backward compute exactly that truncated function, whose
+//! colour differs from the exact one by at most `T_stop max|c - c_bg|`. The default 0 is exact.
+
+mod backward;
+mod config;
+mod forward;
+mod layout;
+
+pub(crate) use layout::locate;
+mod op;
+
+pub use config::{Background, Composite, CompositeInputs, CompositeVars};
+pub use forward::Residuals;

@@ -1,0 +1,48 @@
+//! Errors of the volume-rendering ops: each names the ray and sample at fault.
+
+use thiserror::Error;
+
+/// Why a composite's input was rejected. Nothing is computed when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum CompositeError {
+    /// The offsets are not a valid packing (must start at 0 and never decrease).
+    #[error("offsets: {0}")]
+    Offsets(String),
+    /// An array's length or shape does not fit the packing.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input.
+        what: &'static str,
+        /// What the packing requires.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A value outside its domain (NaN, infinite, negative density or step...).
+    #[error("ray {ray}, sample {sample}: {what} is {value} ({rule})")]
+    InvalidSample {
+        /// Ray index.
+        ray: usize,
+        /// Sample index within the ray.
+        sample: usize,
+        /// Which input (`sigma`, `delta`, `color[1]`, `t`).
+        what: String,
+        /// The offending value.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
+    },
+    /// A background value that is not finite.
+    #[error("ray {ray}: background[{channel}] is {value} (must be finite)")]
+    InvalidBackground {
+        /// Ray index (0 for a shared background).
+        ray: usize,
+        /// Channel.
+        channel: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// A configuration value outside its domain.
+    #[error("{0}")]
+    Config(String),
+}
