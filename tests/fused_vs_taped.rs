@@ -2,6 +2,9 @@
 //! itself in f32 (1e-5 element by element), and against central finite differences; results
 //! independent of the thread count.
 
+// Index loops mirror the formulas' subscripts in these tests.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::{assert_close_scaled, grad_scale, run, worst_scaled, Method, Rays};

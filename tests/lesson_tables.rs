@@ -2,6 +2,9 @@
 //! and by the stable taped twin, in f64 and f32. Each expected number is the lesson's printed
 //! value; "to the printed digits" means within half a unit of the last printed digit.
 
+// Index loops mirror the formulas' subscripts in these tests.
+#![allow(clippy::needless_range_loop)]
+
 mod common;
 
 use common::{run, Method, Rays, Run};

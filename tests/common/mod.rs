@@ -91,7 +91,7 @@ pub fn run_with<F: Float>(rays: &Rays, method: Method, min_transmittance: f64, g
     let sigma = tape.param(Array1::from(to::<F>(&rays.sigma)));
     let delta = tape.param(Array1::from(to::<F>(&rays.delta)));
     let color = tape.param(Array2::from_shape_vec((n, ch), to::<F>(&rays.color)).unwrap());
-    let background = Some(tape.param(Array1::from(to::<F>(&rays.background))));
+    let background = tape.param(Array1::from(to::<F>(&rays.background)));
     let op = Composite::new(&rays.offsets)
         .unwrap()
         .background(Background::Shared)
@@ -103,7 +103,7 @@ pub fn run_with<F: Float>(rays: &Rays, method: Method, min_transmittance: f64, g
         sigma,
         delta,
         color,
-        background,
+        background: Some(background),
         t: None,
     };
     let out = match method {
@@ -123,7 +123,7 @@ pub fn run_with<F: Float>(rays: &Rays, method: Method, min_transmittance: f64, g
         d_sigma: grad(sigma),
         d_delta: grad(delta),
         d_color: grad(color),
-        d_background: grad(background.unwrap()),
+        d_background: grad(background),
     }
 }
 
@@ -163,8 +163,9 @@ pub fn worst_scaled(got: &[f64], want: &[f64], scale: &[f64], floor: f64) -> (f6
     let mut worst = (0.0, 0);
     for (k, (g, w)) in got.iter().zip(want).enumerate() {
         let e = (g - w).abs() / scale[k].max(floor);
-        if !(e <= worst.0) {
-            worst = (if e.is_nan() { f64::INFINITY } else { e }, k);
+        let e = if e.is_nan() { f64::INFINITY } else { e };
+        if e > worst.0 {
+            worst = (e, k);
         }
     }
     worst

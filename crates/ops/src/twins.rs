@@ -11,7 +11,7 @@
 
 use fogray_tape::{Float, Tape, TapeError, Var};
 
-use crate::composite::{Background, Composite, CompositeInputs, CompositeVars};
+use crate::composite::{validate, Background, Composite, CompositeInputs, CompositeVars};
 
 fn invalid(reason: &str) -> TapeError {
     TapeError::InvalidArgument {
@@ -20,6 +20,8 @@ fn invalid(reason: &str) -> TapeError {
     }
 }
 
+/// The same checks as the fused op (shapes, packing, finite non-negative densities and
+/// steps...), so that both paths reject exactly the same inputs.
 fn check<F: Float>(tape: &Tape<F>, op: &Composite, inputs: &CompositeInputs) -> Result<(), TapeError> {
     if op.min_transmittance != 0.0 {
         return Err(invalid("the taped twins are exact: min_transmittance must be 0"));
@@ -30,17 +32,19 @@ fn check<F: Float>(tape: &Tape<F>, op: &Composite, inputs: &CompositeInputs) -> 
     if op.depth != inputs.t.is_some() {
         return Err(invalid("t input does not match the depth option"));
     }
-    let n = op.samples();
-    for (what, v) in [("sigma", inputs.sigma), ("delta", inputs.delta)] {
-        if tape.shape(v)? != [n] {
-            return Err(invalid(&format!("{what} must have shape [{n}]")));
-        }
-    }
-    let cs = tape.shape(inputs.color)?;
-    if cs.len() != 2 || cs[0] != n {
-        return Err(invalid(&format!("color must have shape [{n}, ch]")));
-    }
-    Ok(())
+    let vars = [
+        Some(inputs.sigma),
+        Some(inputs.delta),
+        Some(inputs.color),
+        inputs.background,
+        inputs.t,
+    ];
+    let views = vars
+        .iter()
+        .flatten()
+        .map(|&v| tape.value(v))
+        .collect::<Result<Vec<_>, _>>()?;
+    validate(op, &views).map(|_| ()).map_err(|e| invalid(&e.to_string()))
 }
 
 /// The colour and the optional depth, weights and transmittance shared by both forms, given

@@ -136,8 +136,8 @@ fn backward_ray<F: Float>(
 
     if want.background {
         if let Some(gc) = gc {
-            for c in 0..ch {
-                o.background[j * ch + c] = F::lit(t_end * f(gc[c]));
+            for (out, &g) in o.background[j * ch..(j + 1) * ch].iter_mut().zip(gc) {
+                *out = F::lit(t_end * f(g));
             }
         }
     }
@@ -173,8 +173,8 @@ fn backward_ray<F: Float>(
         let w = t_k * a;
         if want.color {
             if let Some(gc) = gc {
-                for c in 0..ch {
-                    o.color[local * ch + c] = F::lit(w * f(gc[c]));
+                for (out, &g) in o.color[local * ch..(local + 1) * ch].iter_mut().zip(gc) {
+                    *out = F::lit(w * f(g));
                 }
             }
         }

@@ -54,7 +54,7 @@ mod config;
 mod forward;
 mod layout;
 
-pub(crate) use layout::locate;
+pub(crate) use layout::{locate, validate};
 mod op;
 
 pub use config::{Background, Composite, CompositeInputs, CompositeVars};

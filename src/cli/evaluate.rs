@@ -1,0 +1,114 @@
+//! Runs a packed input through the fused op or a taped twin, in f32 or f64.
+
+use fogray_ops::{twins, Background, Composite, CompositeInputs};
+use fogray_tape::{Float, Tape};
+use ndarray::{Array1, Array2};
+
+use super::input::Packed;
+
+/// Which implementation of the composite.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Method {
+    /// The fused op with its hand-written backward.
+    Fused,
+    /// The stable taped twin (exclusive cumsum of optical depth, exp, expm1).
+    Taped,
+    /// The naive taped twin (cumulative product of 1 - alpha).
+    TapedNaive,
+}
+
+/// Gradients of `L = sum(grad_color * C)`.
+#[derive(Debug, Clone)]
+pub struct InputGrads<F> {
+    pub sigma: Vec<F>,
+    pub delta: Vec<F>,
+    /// `[n * ch]`.
+    pub color: Vec<F>,
+    /// `[R * ch]`.
+    pub background: Vec<F>,
+}
+
+/// Every output of one evaluation, flat.
+#[derive(Debug, Clone)]
+pub struct Evaluation<F> {
+    /// `[R * ch]`.
+    pub color: Vec<F>,
+    pub opacity: Vec<F>,
+    pub depth: Option<Vec<F>>,
+    pub weights: Vec<F>,
+    pub transmittance: Vec<F>,
+    pub grads: Option<InputGrads<F>>,
+}
+
+fn cast<F: Float>(v: &[f64]) -> Vec<F> {
+    v.iter().map(|&x| F::lit(x)).collect()
+}
+
+fn flat<F: Float>(v: ndarray::ArrayViewD<'_, F>) -> Vec<F> {
+    v.iter().copied().collect()
+}
+
+/// Evaluates `p` with `method` in precision `F`; `seed` overrides the input's `grad_color`.
+pub fn evaluate<F: Float>(p: &Packed, method: Method, seed: Option<&[f64]>) -> Result<Evaluation<F>, String> {
+    let (n, rays, ch) = (p.sigma.len(), p.offsets.len() - 1, p.ch);
+    let shape_err = |e: ndarray::ShapeError| e.to_string();
+    let mut tape = Tape::<F>::new();
+    let sigma = tape.param(Array1::from(cast::<F>(&p.sigma)));
+    let delta = tape.param(Array1::from(cast::<F>(&p.delta)));
+    let color = tape.param(Array2::from_shape_vec((n, ch), cast::<F>(&p.color)).map_err(shape_err)?);
+    let background = tape.param(Array2::from_shape_vec((rays, ch), cast::<F>(&p.background)).map_err(shape_err)?);
+    let t = p.t.as_ref().map(|t| tape.param(Array1::from(cast::<F>(t))));
+    let mut op = Composite::new(&p.offsets)
+        .map_err(|e| e.to_string())?
+        .background(Background::PerRay)
+        .min_transmittance(p.min_transmittance)
+        .map_err(|e| e.to_string())?
+        .with_weights()
+        .with_transmittance();
+    if t.is_some() {
+        op = op.with_depth();
+    }
+    if method != Method::Fused && p.min_transmittance != 0.0 {
+        return Err("min_transmittance is offered by the fused method only (the taped twins are exact)".into());
+    }
+    let inputs = CompositeInputs {
+        sigma,
+        delta,
+        color,
+        background: Some(background),
+        t,
+    };
+    let out = match method {
+        Method::Fused => op.apply(&mut tape, &inputs),
+        Method::Taped => twins::stable(&mut tape, &op, &inputs),
+        Method::TapedNaive => twins::naive(&mut tape, &op, &inputs),
+    }
+    .map_err(|e| e.to_string())?;
+    let value = |v| tape.value(v).map(flat).map_err(|e| e.to_string());
+    let grads = match seed.or(p.grad_color.as_deref()) {
+        None => None,
+        Some(seed) => {
+            let seed = ndarray::ArrayD::from_shape_vec(vec![rays, ch], cast::<F>(seed)).map_err(shape_err)?;
+            let g = tape.backward_with(out.color, seed).map_err(|e| e.to_string())?;
+            let grad = |v| {
+                g.get_or_zeros(&tape, v)
+                    .map(|a| flat(a.view()))
+                    .map_err(|e| e.to_string())
+            };
+            Some(InputGrads {
+                sigma: grad(sigma)?,
+                delta: grad(delta)?,
+                color: grad(color)?,
+                background: grad(background)?,
+            })
+        }
+    };
+    Ok(Evaluation {
+        color: value(out.color)?,
+        opacity: value(out.opacity)?,
+        depth: out.depth.map(value).transpose()?,
+        weights: value(out.weights.ok_or("weights were not produced")?)?,
+        transmittance: value(out.transmittance.ok_or("transmittance was not produced")?)?,
+        grads,
+    })
+}

@@ -1,0 +1,6 @@
+//! The `fogray` command line.
+
+pub mod composite;
+pub mod evaluate;
+pub mod gradcheck;
+pub mod input;
