@@ -22,8 +22,9 @@ fn err<E: std::fmt::Display>(e: E) -> String {
 /// Draws with `$draw` into `$stem.svg` and `$stem.png`.
 macro_rules! both {
     ($stem:expr, $size:expr, $draw:ident, $($arg:expr),*) => {{
-        let svg = $stem.with_extension("svg");
-        let png = $stem.with_extension("png");
+        // Not with_extension: a name like "landscape-tau0.45" already has a dot.
+        let svg = std::path::PathBuf::from(format!("{}.svg", $stem.display()));
+        let png = std::path::PathBuf::from(format!("{}.png", $stem.display()));
         {
             let root = SVGBackend::new(&svg, $size).into_drawing_area();
             $draw(&root, $($arg),*)?;
