@@ -64,6 +64,16 @@ pub(crate) fn validate<'a, F: Float>(
     op: &Composite,
     inputs: &'a [ArrayViewD<'_, F>],
 ) -> Result<Flat<'a, F>, CompositeError> {
+    let flat = flatten(op, inputs)?;
+    check_values(op, &flat)?;
+    Ok(flat)
+}
+
+/// Checks the shapes only (the backward's inputs are the forward's, already checked).
+pub(crate) fn flatten<'a, F: Float>(
+    op: &Composite,
+    inputs: &'a [ArrayViewD<'_, F>],
+) -> Result<Flat<'a, F>, CompositeError> {
     let expected_inputs = 3 + usize::from(op.background != Background::None) + usize::from(op.depth);
     if inputs.len() != expected_inputs {
         return Err(CompositeError::Shape {
@@ -105,16 +115,14 @@ pub(crate) fn validate<'a, F: Float>(
     } else {
         None
     };
-    let flat = Flat {
+    Ok(Flat {
         sigma: flat(&inputs[0]),
         delta: flat(&inputs[1]),
         color: flat(color),
         ch,
         background,
         t,
-    };
-    check_values(op, &flat)?;
-    Ok(flat)
+    })
 }
 
 fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), CompositeError> {
