@@ -10,6 +10,24 @@ use clap::{Parser, Subcommand};
 
 use cli::evaluate::Method;
 
+/// Counts allocated bytes, so that `fogray bench` can report each method's peak extra memory.
+#[global_allocator]
+static PEAK: peak_alloc::PeakAlloc = peak_alloc::PeakAlloc;
+
+struct Allocator;
+
+impl cli::bench::Memory for Allocator {
+    fn current(&self) -> usize {
+        PEAK.current_usage()
+    }
+    fn peak(&self) -> usize {
+        PEAK.peak_usage()
+    }
+    fn reset_peak(&self) {
+        PEAK.reset_peak_usage();
+    }
+}
+
 #[derive(Parser)]
 #[command(
     name = "fogray",
@@ -40,6 +58,22 @@ enum Command {
         /// JSON input file (the format of `fogray composite`), or - for standard input.
         #[arg(long, default_value = "-")]
         input: PathBuf,
+    },
+    /// Samples per second (forward+backward, and forward alone) of the fused op on 1 and all
+    /// threads and of the stable and naive taped twins, in f32 and f64, on the workloads
+    /// 4096x64, 65536x64, 16384x256 and 1024x4096 (RGB; sigma ~ U[0,5], total optical depth
+    /// ~5), each beside its error against an independent compensated f64 reference on the
+    /// same rays and its peak extra memory.
+    Bench {
+        /// One run per measurement (after a warm-up) instead of the median of five.
+        #[arg(long)]
+        quick: bool,
+        /// Print {"results": [...]} as JSON.
+        #[arg(long)]
+        json: bool,
+        /// Only this workload, as RxS (rays x samples per ray).
+        #[arg(long)]
+        workload: Option<String>,
     },
 }
 
@@ -80,9 +114,36 @@ fn read_input(path: &PathBuf) -> Result<String, String> {
     Ok(text)
 }
 
+fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, String> {
+    let workloads = match workload {
+        Some(w) => vec![cli::bench::parse_workload(w)?],
+        None => cli::bench::WORKLOADS.to_vec(),
+    };
+    let mut log = |m: &cli::bench::Measurement| {
+        if !json {
+            eprintln!(
+                "  {} {} {} thread(s) {}x{}: {:.1} M samples/s",
+                m.method,
+                m.precision,
+                m.threads,
+                m.rays,
+                m.samples,
+                m.samples_per_sec / 1e6
+            );
+        }
+    };
+    let results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
+    if json {
+        serde_json::to_string_pretty(&serde_json::json!({ "results": results })).map_err(|e| e.to_string())
+    } else {
+        Ok(cli::bench::table(&results))
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let (name, result) = match &cli.command {
+        Command::Bench { quick, json, workload } => ("bench", bench(*quick, *json, workload.as_deref())),
         Command::Composite { method, input } => (
             "composite",
             read_input(input)

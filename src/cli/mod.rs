@@ -1,6 +1,8 @@
 //! The `fogray` command line.
 
+pub mod bench;
 pub mod composite;
 pub mod evaluate;
 pub mod gradcheck;
 pub mod input;
+pub mod reference;

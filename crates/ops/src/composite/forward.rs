@@ -40,7 +40,9 @@ struct BlockOut<'a, F> {
     stop: &'a mut [usize],
 }
 
-pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> Residuals<F> {
+/// Composites every ray; the flag is false if any sample value was invalid (NaN, infinite,
+/// negative density or step), checked on the fly so that valid input costs no extra pass.
+pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F>, bool) {
     let (n, rays, ch) = (op.samples(), op.rays(), x.ch);
     let zero = F::zero();
     let mut out = Residuals {
@@ -77,38 +79,44 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> Residuals<F>
             ));
         }
     }
-    work.into_par_iter().for_each(|(block, o)| {
-        let mut acc = vec![0.0f64; ch];
-        let s0 = block.samples.start;
-        for (j, r) in block.rays.clone().enumerate() {
-            let samples = op.offsets[r]..op.offsets[r + 1];
-            let local = samples.start - s0..samples.end - s0;
-            let result = forward_ray(
-                RayIn {
-                    sigma: &x.sigma[samples.clone()],
-                    delta: &x.delta[samples.clone()],
-                    color: &x.color[samples.start * ch..samples.end * ch],
-                    t: x.t.as_ref().map(|t| &t[samples.clone()]),
-                    background: x.background_of(r),
-                },
-                op.min_transmittance,
-                &mut acc,
-                &mut o.transmittance[local.clone()],
-                &mut o.alpha[local.clone()],
-                if op.weights { Some(&mut o.weights[local]) } else { None },
-            );
-            for (c, &a) in acc.iter().enumerate() {
-                o.color[j * ch + c] = F::lit(a);
+    let valid = work
+        .into_par_iter()
+        .map(|(block, o)| {
+            let mut acc = vec![0.0f64; ch];
+            let mut valid = true;
+            let s0 = block.samples.start;
+            for (j, r) in block.rays.clone().enumerate() {
+                let samples = op.offsets[r]..op.offsets[r + 1];
+                let local = samples.start - s0..samples.end - s0;
+                let result = forward_ray(
+                    RayIn {
+                        sigma: &x.sigma[samples.clone()],
+                        delta: &x.delta[samples.clone()],
+                        color: &x.color[samples.start * ch..samples.end * ch],
+                        t: x.t.as_ref().map(|t| &t[samples.clone()]),
+                        background: x.background_of(r),
+                    },
+                    op.min_transmittance,
+                    &mut acc,
+                    &mut o.transmittance[local.clone()],
+                    &mut o.alpha[local.clone()],
+                    if op.weights { Some(&mut o.weights[local]) } else { None },
+                );
+                for (c, &a) in acc.iter().enumerate() {
+                    o.color[j * ch + c] = F::lit(a);
+                }
+                o.opacity[j] = F::lit(result.opacity);
+                if op.depth {
+                    o.depth[j] = F::lit(result.depth);
+                }
+                o.t_end[j] = F::lit(result.t_end);
+                o.stop[j] = result.stop;
+                valid &= result.valid;
             }
-            o.opacity[j] = F::lit(result.opacity);
-            if op.depth {
-                o.depth[j] = F::lit(result.depth);
-            }
-            o.t_end[j] = F::lit(result.t_end);
-            o.stop[j] = result.stop;
-        }
-    });
-    out
+            valid
+        })
+        .reduce(|| true, |a, b| a && b);
+    (out, valid)
 }
 
 /// One ray's inputs.
@@ -128,6 +136,8 @@ pub(crate) struct RayResult {
     pub(crate) depth: f64,
     pub(crate) t_end: f64,
     pub(crate) stop: usize,
+    /// Every sample's values are in their domain.
+    pub(crate) valid: bool,
 }
 
 /// Composites one ray front to back. `color` (the f64 accumulator, `[ch]`) receives the pixel.
@@ -146,6 +156,8 @@ pub(crate) fn forward_ray<F: Float>(
     let mut optical_depth = 0.0f64;
     let mut depth = 0.0f64;
     let mut stop = len;
+    let mut valid = true;
+    let domain = |s: f64| s >= 0.0 && s.is_finite();
     for k in 0..len {
         let t_k = (-optical_depth).exp();
         if t_k < min_transmittance {
@@ -153,7 +165,9 @@ pub(crate) fn forward_ray<F: Float>(
             break;
         }
         // The product of two f32 values is exact in f64; -expm1 keeps every digit at small tau.
-        let tau = ray.sigma[k].as_f64() * ray.delta[k].as_f64();
+        let (sigma, delta) = (ray.sigma[k].as_f64(), ray.delta[k].as_f64());
+        valid &= domain(sigma) & domain(delta);
+        let tau = sigma * delta;
         let a = -(-tau).exp_m1();
         let w = t_k * a;
         transmittance[k] = F::lit(t_k);
@@ -162,9 +176,11 @@ pub(crate) fn forward_ray<F: Float>(
             ws[k] = F::lit(w);
         }
         for (acc, &c) in color.iter_mut().zip(&ray.color[k * ch..(k + 1) * ch]) {
+            valid &= c.is_finite();
             *acc += w * c.as_f64();
         }
         if let Some(t) = ray.t {
+            valid &= t[k].is_finite();
             depth += w * t[k].as_f64();
         }
         optical_depth += tau;
@@ -172,6 +188,10 @@ pub(crate) fn forward_ray<F: Float>(
     let t_end = (-optical_depth).exp();
     // Skipped samples: empty space behind the stop, seen through the residual T_stop.
     for k in stop..len {
+        // Not composited, but still checked: invalid input is an error wherever it is.
+        valid &= domain(ray.sigma[k].as_f64()) & domain(ray.delta[k].as_f64());
+        valid &= ray.color[k * ch..(k + 1) * ch].iter().all(|c| c.is_finite());
+        valid &= ray.t.is_none_or(|t| t[k].is_finite());
         transmittance[k] = F::lit(t_end);
         alpha[k] = F::zero();
         if let Some(ws) = weights.as_deref_mut() {
@@ -187,5 +207,6 @@ pub(crate) fn forward_ray<F: Float>(
         depth,
         t_end,
         stop,
+        valid,
     }
 }

@@ -125,7 +125,7 @@ pub(crate) fn flatten<'a, F: Float>(
     })
 }
 
-fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), CompositeError> {
+pub(crate) fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), CompositeError> {
     let bad = |i: usize, what: String, value: F, rule: &'static str| {
         let (ray, sample) = locate(&op.offsets, i);
         CompositeError::InvalidSample {
@@ -156,6 +156,11 @@ fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), Composi
             return Err(bad(i, "t".into(), t[i], "must be finite"));
         }
     }
+    check_background(f)
+}
+
+/// The background's values must be finite (checked before compositing: it is small).
+pub(crate) fn check_background<F: Float>(f: &Flat<'_, F>) -> Result<(), CompositeError> {
     if let Some(j) = f.background.iter().position(|x| !x.is_finite()) {
         let ray = if f.background.len() == f.ch { 0 } else { j / f.ch };
         return Err(CompositeError::InvalidBackground {

@@ -10,7 +10,7 @@ use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use super::backward::{backward, Upstream, Wanted};
 use super::config::{Background, Composite};
 use super::forward::{forward, Residuals};
-use super::layout::{flatten, validate};
+use super::layout::{check_background, check_values, flatten};
 use crate::error::CompositeError;
 
 fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, CompositeError> {
@@ -35,9 +35,17 @@ impl Composite {
     ///
     /// `inputs` are sigma `[n]`, delta `[n]`, color `[n, ch]`, then the background unless
     /// [`Background::None`], then t with depth. Errors name the ray and sample at fault.
-    pub fn evaluate<F: Float>(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, Residuals<F>), CompositeError> {
-        let x = validate(self, inputs)?;
-        let mut fwd = forward(self, &x);
+    pub fn evaluate<F: Float>(
+        &self,
+        inputs: &[ArrayViewD<'_, F>],
+    ) -> Result<(Vec<ArrayD<F>>, Residuals<F>), CompositeError> {
+        let x = flatten(self, inputs)?;
+        check_background(&x)?;
+        let (mut fwd, valid) = forward(self, &x);
+        if !valid {
+            // Find and name the first offending value; no output is returned.
+            check_values(self, &x)?;
+        }
         let (n, rays) = (self.samples(), self.rays());
         let mut outs = vec![
             array(&[rays, x.ch], std::mem::take(&mut fwd.color))?,
@@ -71,11 +79,23 @@ impl Composite {
         let x = flatten(self, inputs)?;
         let outputs = 2 + usize::from(self.depth) + usize::from(self.weights) + usize::from(self.transmittance);
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
-        if grads.len() != outputs || needs.len() != inputs.len() || residuals.transmittance.len() != n || residuals.t_end.len() != rays {
+        if grads.len() != outputs
+            || needs.len() != inputs.len()
+            || residuals.transmittance.len() != n
+            || residuals.t_end.len() != rays
+        {
             return Err(CompositeError::Shape {
                 what: "vjp arguments",
-                expected: format!("{outputs} upstream gradients, {} needs, residuals of {n} samples", inputs.len()),
-                got: format!("{} gradients, {} needs, residuals of {} samples", grads.len(), needs.len(), residuals.transmittance.len()),
+                expected: format!(
+                    "{outputs} upstream gradients, {} needs, residuals of {n} samples",
+                    inputs.len()
+                ),
+                got: format!(
+                    "{} gradients, {} needs, residuals of {} samples",
+                    grads.len(),
+                    needs.len(),
+                    residuals.transmittance.len()
+                ),
             });
         }
         let mut slot = 2..grads.len();
@@ -84,7 +104,13 @@ impl Composite {
         let (gc, go) = (flat(&grads[0]), flat(&grads[1]));
         let pick = |at: Option<usize>| at.and_then(|i| flat(&grads[i]));
         let (gd, gw, gt) = (pick(depth_at), pick(weights_at), pick(trans_at));
-        let expect = [(gc.as_deref(), rays * ch), (go.as_deref(), rays), (gd.as_deref(), rays), (gw.as_deref(), n), (gt.as_deref(), n)];
+        let expect = [
+            (gc.as_deref(), rays * ch),
+            (go.as_deref(), rays),
+            (gd.as_deref(), rays),
+            (gw.as_deref(), n),
+            (gt.as_deref(), n),
+        ];
         if let Some((g, len)) = expect.iter().find(|(g, len)| g.is_some_and(|g| g.len() != *len)) {
             return Err(CompositeError::Shape {
                 what: "upstream gradient",
@@ -158,7 +184,11 @@ impl<F: Float> CustomOp<F> for Composite {
         self.evaluate(inputs).map_err(op_error)
     }
 
-    fn backward(&self, ctx: &BackwardCtx<'_, F, Residuals<F>>, grads: &[Option<ArrayViewD<'_, F>>]) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
+    fn backward(
+        &self,
+        ctx: &BackwardCtx<'_, F, Residuals<F>>,
+        grads: &[Option<ArrayViewD<'_, F>>],
+    ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let inputs: Vec<ArrayViewD<'_, F>> = (0..ctx.num_inputs()).map(|i| ctx.input(i)).collect();
         let needs: Vec<bool> = (0..inputs.len()).map(|i| ctx.needs_input_grad(i)).collect();
         self.vjp(&inputs, ctx.saved(), grads, &needs).map_err(op_error)

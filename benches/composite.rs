@@ -1,0 +1,94 @@
+//! Criterion benches: the fused composite against its taped twins, forward and backward
+//! (gradients for sigma and colour), on the workloads of `fogray bench`.
+//!
+//! `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
+//! selects. `fogray bench` gives the same speeds beside each method's error and memory.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use fogray::ops::{twins, Background, Composite, CompositeInputs};
+use fogray::tape::{Float, Tape};
+use ndarray::{Array1, Array2, ArrayD};
+use rand::{Rng, SeedableRng};
+
+struct Inputs<F: Float> {
+    op: Composite,
+    sigma: Array1<F>,
+    delta: Array1<F>,
+    color: Array2<F>,
+    background: Array1<F>,
+    grad: ArrayD<F>,
+}
+
+/// sigma ~ U[0, 5], delta = 2 / samples (total optical depth ~5), RGB in [0, 1].
+fn inputs<F: Float>(rays: usize, samples: usize) -> Inputs<F> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let n = rays * samples;
+    let mut u = |lo: f64, hi: f64, len: usize| -> Vec<F> { (0..len).map(|_| F::lit(rng.gen_range(lo..hi))).collect() };
+    let offsets: Vec<usize> = (0..=rays).map(|r| r * samples).collect();
+    Inputs {
+        op: Composite::new(&offsets).unwrap().background(Background::Shared),
+        sigma: Array1::from(u(0.0, 5.0, n)),
+        delta: Array1::from(vec![F::lit(2.0 / samples as f64); n]),
+        color: Array2::from_shape_vec((n, 3), u(0.0, 1.0, 3 * n)).unwrap(),
+        background: Array1::from(u(0.0, 1.0, 3)),
+        grad: ArrayD::from_shape_vec(vec![rays, 3], u(-1.0, 1.0, 3 * rays)).unwrap(),
+    }
+}
+
+fn fused<F: Float>(x: &Inputs<F>) {
+    let views = [
+        x.sigma.view().into_dyn(),
+        x.delta.view().into_dyn(),
+        x.color.view().into_dyn(),
+        x.background.view().into_dyn(),
+    ];
+    let (outs, res) = x.op.evaluate(&views).unwrap();
+    let g =
+        x.op.vjp(&views, &res, &[Some(x.grad.view()), None], &[true, false, true, false])
+            .unwrap();
+    black_box((outs, g));
+}
+
+fn taped<F: Float>(x: &Inputs<F>, naive: bool) {
+    let mut tape = Tape::new();
+    let inputs = CompositeInputs {
+        sigma: tape.param(x.sigma.clone()),
+        delta: tape.constant(x.delta.clone()),
+        color: tape.param(x.color.clone()),
+        background: Some(tape.constant(x.background.clone())),
+        t: None,
+    };
+    let out = if naive {
+        twins::naive(&mut tape, &x.op, &inputs)
+    } else {
+        twins::stable(&mut tape, &x.op, &inputs)
+    }
+    .unwrap();
+    black_box(tape.backward_with(out.color, x.grad.clone()).unwrap());
+}
+
+fn bench_precision<F: Float>(c: &mut Criterion) {
+    for (rays, samples) in [(4096, 64), (65536, 64), (16384, 256), (1024, 4096)] {
+        let x = inputs::<F>(rays, samples);
+        let id = format!("{rays}x{samples}");
+        let mut group = c.benchmark_group(format!("composite/{}", F::NAME));
+        group.throughput(Throughput::Elements((rays * samples) as u64));
+        group.sample_size(10);
+        group.bench_with_input(BenchmarkId::new("fused", &id), &x, |b, x| b.iter(|| fused(x)));
+        group.bench_with_input(BenchmarkId::new("taped", &id), &x, |b, x| b.iter(|| taped(x, false)));
+        group.bench_with_input(BenchmarkId::new("taped-naive", &id), &x, |b, x| {
+            b.iter(|| taped(x, true))
+        });
+        group.finish();
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    bench_precision::<f32>(c);
+    bench_precision::<f64>(c);
+}
+
+criterion_group!(composite, benches);
+criterion_main!(composite);

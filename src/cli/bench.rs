@@ -1,0 +1,405 @@
+//! `fogray bench`: samples per second of the fused op (1 thread and all) and of the stable and
+//! naive taped twins, in f32 and f64, each beside its error against an independent f64
+//! reference on the same rays and its peak extra memory (design.md §6).
+
+use std::hint::black_box;
+use std::time::Instant;
+
+use fogray_ops::{twins, Background, Composite, CompositeInputs};
+use fogray_tape::{Float, Tape};
+use ndarray::{Array1, Array2, ArrayD, ArrayViewD};
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+
+use super::reference::{errors, reference, Rays};
+
+/// The workloads of the issue: rays x samples per ray.
+pub const WORKLOADS: [(usize, usize); 4] = [(4096, 64), (65536, 64), (16384, 256), (1024, 4096)];
+
+/// How the bench counts bytes: the binary's global allocator.
+pub trait Memory: Sync {
+    /// Bytes allocated now.
+    fn current(&self) -> usize;
+    /// Largest `current()` since the last reset.
+    fn peak(&self) -> usize;
+    /// Starts a new peak measurement.
+    fn reset_peak(&self);
+}
+
+/// One measurement (one JSON object of `{"results": [...]}`).
+#[derive(Debug, Clone, Serialize)]
+pub struct Measurement {
+    pub method: &'static str,
+    pub precision: &'static str,
+    pub threads: usize,
+    pub rays: usize,
+    /// Samples per ray.
+    pub samples: usize,
+    /// Forward and backward (gradients for sigma and colour).
+    pub samples_per_sec: f64,
+    pub samples_per_sec_forward: f64,
+    /// Worst element-wise relative error of the colour.
+    pub err_color: f64,
+    /// Worst element-wise error of dL/dsigma, relative to the size of its terms.
+    pub err_grad_sigma: f64,
+    /// `||C - C_ref|| / ||C_ref||`.
+    pub err_color_norm: f64,
+    /// `||g - g_ref|| / ||g_ref||`.
+    pub err_grad_sigma_norm: f64,
+    /// Peak bytes allocated during forward and backward, beyond the inputs.
+    pub peak_extra_bytes: usize,
+}
+
+/// Random packed rays as the anchors measure them: sigma ~ U[0, 5], delta = 2 / samples
+/// (total optical depth about 5), RGB colours and background ~ U[0, 1], dL/dC ~ U[-1, 1].
+struct Data {
+    sigma: Vec<f64>,
+    delta: Vec<f64>,
+    color: Vec<f64>,
+    background: Vec<f64>,
+    grad_color: Vec<f64>,
+    offsets: Vec<usize>,
+}
+
+fn data(rays: usize, samples: usize) -> Data {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(2026);
+    let n = rays * samples;
+    // Rounded to f32 so that both precisions see the same inputs.
+    let mut u = |lo: f64, hi: f64| f64::from(rng.gen_range(lo..hi) as f32);
+    Data {
+        sigma: (0..n).map(|_| u(0.0, 5.0)).collect(),
+        delta: vec![f64::from((2.0 / samples as f64) as f32); n],
+        color: (0..n * 3).map(|_| u(0.0, 1.0)).collect(),
+        background: (0..3).map(|_| u(0.0, 1.0)).collect(),
+        grad_color: (0..rays * 3).map(|_| u(-1.0, 1.0)).collect(),
+        offsets: (0..=rays).map(|r| r * samples).collect(),
+    }
+}
+
+fn cast<F: Float>(v: &[f64]) -> Vec<F> {
+    v.iter().map(|&x| F::lit(x)).collect()
+}
+
+/// The inputs in precision F.
+struct Typed<F: Float> {
+    sigma: Array1<F>,
+    delta: Array1<F>,
+    color: Array2<F>,
+    background: Array1<F>,
+    grad_color: ArrayD<F>,
+}
+
+fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
+    let n = d.sigma.len();
+    let rays = d.offsets.len() - 1;
+    Ok(Typed {
+        sigma: Array1::from(cast::<F>(&d.sigma)),
+        delta: Array1::from(cast::<F>(&d.delta)),
+        color: Array2::from_shape_vec((n, 3), cast::<F>(&d.color)).map_err(|e| e.to_string())?,
+        background: Array1::from(cast::<F>(&d.background)),
+        grad_color: ArrayD::from_shape_vec(vec![rays, 3], cast::<F>(&d.grad_color)).map_err(|e| e.to_string())?,
+    })
+}
+
+/// Median wall time of `reps` runs of `f`, after one warm-up run.
+fn median_secs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
+    f()?;
+    let mut t = Vec::with_capacity(reps);
+    for _ in 0..reps {
+        let start = Instant::now();
+        f()?;
+        t.push(start.elapsed().as_secs_f64());
+    }
+    t.sort_by(f64::total_cmp);
+    Ok(t[t.len() / 2])
+}
+
+fn to_f64<F: Float>(v: ArrayViewD<'_, F>) -> Vec<f64> {
+    v.iter().map(|x| x.as_f64()).collect()
+}
+
+/// Colour and dL/dsigma of one run, and its peak extra bytes.
+struct Outcome {
+    color: Vec<f64>,
+    grad_sigma: Vec<f64>,
+    peak_extra: usize,
+}
+
+fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result<Outcome, String> {
+    let views = [
+        x.sigma.view().into_dyn(),
+        x.delta.view().into_dyn(),
+        x.color.view().into_dyn(),
+        x.background.view().into_dyn(),
+    ];
+    mem.reset_peak();
+    let base = mem.current();
+    let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
+    let grads = op
+        .vjp(
+            &views,
+            &res,
+            &[Some(x.grad_color.view()), None],
+            &[true, false, true, false],
+        )
+        .map_err(|e| e.to_string())?;
+    let peak_extra = mem.peak().saturating_sub(base);
+    let g = grads[0].as_ref().ok_or("no sigma gradient")?;
+    Ok(Outcome {
+        color: to_f64(outs[0].view()),
+        grad_sigma: to_f64(g.view()),
+        peak_extra,
+    })
+}
+
+fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), String> {
+    let views = [
+        x.sigma.view().into_dyn(),
+        x.delta.view().into_dyn(),
+        x.color.view().into_dyn(),
+        x.background.view().into_dyn(),
+    ];
+    let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
+    if backward {
+        let g = op
+            .vjp(
+                &views,
+                &res,
+                &[Some(x.grad_color.view()), None],
+                &[true, false, true, false],
+            )
+            .map_err(|e| e.to_string())?;
+        black_box(g);
+    }
+    black_box(outs);
+    Ok(())
+}
+
+/// Puts the inputs on a new tape (sigma and colour as params): the part of a taped run that is
+/// the same for every method, timed separately and subtracted.
+fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, CompositeInputs) {
+    let mut tape = Tape::new();
+    let inputs = CompositeInputs {
+        sigma: tape.param(x.sigma.clone()),
+        delta: tape.constant(x.delta.clone()),
+        color: tape.param(x.color.clone()),
+        background: Some(tape.constant(x.background.clone())),
+        t: None,
+    };
+    (tape, inputs)
+}
+
+fn taped_step<F: Float>(
+    op: &Composite,
+    x: &Typed<F>,
+    naive: bool,
+    backward: bool,
+) -> Result<
+    Option<(
+        Tape<F>,
+        CompositeInputs,
+        fogray_tape::Gradients<F>,
+        fogray_ops::CompositeVars,
+    )>,
+    String,
+> {
+    let (mut tape, inputs) = tape_with_inputs(x);
+    let out = if naive {
+        twins::naive(&mut tape, op, &inputs)
+    } else {
+        twins::stable(&mut tape, op, &inputs)
+    }
+    .map_err(|e| e.to_string())?;
+    if !backward {
+        black_box(&tape);
+        return Ok(None);
+    }
+    let g = tape
+        .backward_with(out.color, x.grad_color.clone())
+        .map_err(|e| e.to_string())?;
+    Ok(Some((tape, inputs, g, out)))
+}
+
+fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, String> {
+    let (mut tape, inputs) = tape_with_inputs(x);
+    mem.reset_peak();
+    let base = mem.current();
+    let out = if naive {
+        twins::naive(&mut tape, op, &inputs)
+    } else {
+        twins::stable(&mut tape, op, &inputs)
+    }
+    .map_err(|e| e.to_string())?;
+    let g = tape
+        .backward_with(out.color, x.grad_color.clone())
+        .map_err(|e| e.to_string())?;
+    let peak_extra = mem.peak().saturating_sub(base);
+    let gs = g.get(inputs.sigma).ok_or("no sigma gradient")?;
+    Ok(Outcome {
+        color: to_f64(tape.value(out.color).map_err(|e| e.to_string())?),
+        grad_sigma: to_f64(gs),
+        peak_extra,
+    })
+}
+
+/// Runs `f` in `pool`, or in the global pool when `None`.
+fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
+    match pool {
+        Some(p) => p.install(f),
+        None => f(),
+    }
+}
+
+/// Runs every measurement of one workload in precision F.
+fn measure<F: Float>(
+    d: &Data,
+    samples: usize,
+    reps: usize,
+    mem: &dyn Memory,
+    refs: &super::reference::Reference,
+    out: &mut Vec<Measurement>,
+    log: &mut dyn FnMut(&Measurement),
+) -> Result<(), String> {
+    let x = typed::<F>(d)?;
+    let rays = d.offsets.len() - 1;
+    let n = d.sigma.len() as f64;
+    let op = Composite::new(&d.offsets)
+        .map_err(|e| e.to_string())?
+        .background(Background::Shared);
+    let all = rayon::current_num_threads();
+    let one = rayon::ThreadPoolBuilder::new()
+        .num_threads(1)
+        .build()
+        .map_err(|e| e.to_string())?;
+    let mut push = |method: &'static str, threads: usize, both: f64, fwd: f64, o: Outcome| {
+        let (err_color, err_color_norm) = errors(
+            &o.color,
+            &refs.color,
+            &refs.color.iter().map(|c| c.abs()).collect::<Vec<_>>(),
+        );
+        let (err_grad_sigma, err_grad_sigma_norm) = errors(&o.grad_sigma, &refs.grad_sigma, &refs.grad_scale);
+        let m = Measurement {
+            method,
+            precision: F::NAME,
+            threads,
+            rays,
+            samples,
+            samples_per_sec: n / both,
+            samples_per_sec_forward: n / fwd,
+            err_color,
+            err_grad_sigma,
+            err_color_norm,
+            err_grad_sigma_norm,
+            peak_extra_bytes: o.peak_extra,
+        };
+        log(&m);
+        out.push(m);
+    };
+    let counts = if all > 1 { vec![1, all] } else { vec![1] };
+    for threads in counts {
+        let pool = (threads == 1).then_some(&one);
+        let both = within(pool, || median_secs(reps, || fused_step(&op, &x, true)))?;
+        let fwd = within(pool, || median_secs(reps, || fused_step(&op, &x, false)))?;
+        let outcome = within(pool, || fused_run(&op, &x, mem))?;
+        push("fused", threads, both, fwd, outcome);
+    }
+    for (method, naive) in [("taped", false), ("taped-naive", true)] {
+        let setup = median_secs(reps, || {
+            black_box(tape_with_inputs(&x));
+            Ok(())
+        })?;
+        let both = median_secs(reps, || taped_step(&op, &x, naive, true).map(|r| drop(black_box(r))))? - setup;
+        let fwd = median_secs(reps, || taped_step(&op, &x, naive, false).map(|r| drop(black_box(r))))? - setup;
+        push(
+            method,
+            1,
+            both.max(1e-9),
+            fwd.max(1e-9),
+            taped_run(&op, &x, naive, mem)?,
+        );
+    }
+    Ok(())
+}
+
+/// Runs the bench over `workloads`; `log` sees each measurement as it is made.
+pub fn run(
+    workloads: &[(usize, usize)],
+    quick: bool,
+    mem: &dyn Memory,
+    log: &mut dyn FnMut(&Measurement),
+) -> Result<Vec<Measurement>, String> {
+    let reps = if quick { 1 } else { 5 };
+    let mut out = Vec::new();
+    for &(rays, samples) in workloads {
+        let d = data(rays, samples);
+        let refs = reference(&Rays {
+            sigma: &d.sigma,
+            delta: &d.delta,
+            color: &d.color,
+            ch: 3,
+            offsets: &d.offsets,
+            background: &d.background,
+            grad_color: &d.grad_color,
+        });
+        measure::<f32>(&d, samples, reps, mem, &refs, &mut out, log)?;
+        measure::<f64>(&d, samples, reps, mem, &refs, &mut out, log)?;
+    }
+    Ok(out)
+}
+
+/// Parses `RxS`.
+pub fn parse_workload(s: &str) -> Result<(usize, usize), String> {
+    let (r, n) = s
+        .split_once('x')
+        .ok_or_else(|| format!("workload {s:?} is not RxS (for example 4096x64)"))?;
+    let parse = |v: &str| {
+        v.parse::<usize>()
+            .ok()
+            .filter(|&x| x > 0)
+            .ok_or_else(|| format!("workload {s:?}: {v:?} is not a positive integer"))
+    };
+    Ok((parse(r)?, parse(n)?))
+}
+
+/// The text report: one line per measurement, then the fused/taped ratios.
+pub fn table(results: &[Measurement]) -> String {
+    let mut s = format!(
+        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
+        "method", "prec", "thr", "workload", "Ms/s f+b", "Ms/s fwd", "err C", "err dC/ds", "dC/ds norm", "peak MB"
+    );
+    for m in results {
+        s += &format!(
+            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
+            m.method,
+            m.precision,
+            m.threads,
+            format!("{}x{}", m.rays, m.samples),
+            m.samples_per_sec / 1e6,
+            m.samples_per_sec_forward / 1e6,
+            m.err_color,
+            m.err_grad_sigma,
+            m.err_grad_sigma_norm,
+            m.peak_extra_bytes as f64 / 1e6
+        );
+    }
+    s += "\nfused (all threads) against the stable taped twin:\n";
+    for m in results
+        .iter()
+        .filter(|m| m.method == "fused" && m.threads == rayon::current_num_threads())
+    {
+        let twin = results
+            .iter()
+            .find(|t| t.method == "taped" && t.precision == m.precision && t.rays == m.rays && t.samples == m.samples);
+        if let Some(t) = twin {
+            s += &format!(
+                "  {} {}x{}: {:.1}x faster, {:.2}x the peak extra memory\n",
+                m.precision,
+                m.rays,
+                m.samples,
+                m.samples_per_sec / t.samples_per_sec,
+                m.peak_extra_bytes as f64 / t.peak_extra_bytes.max(1) as f64
+            );
+        }
+    }
+    s
+}
