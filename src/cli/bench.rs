@@ -189,20 +189,7 @@ fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, CompositeInputs) {
     (tape, inputs)
 }
 
-fn taped_step<F: Float>(
-    op: &Composite,
-    x: &Typed<F>,
-    naive: bool,
-    backward: bool,
-) -> Result<
-    Option<(
-        Tape<F>,
-        CompositeInputs,
-        fogray_tape::Gradients<F>,
-        fogray_ops::CompositeVars,
-    )>,
-    String,
-> {
+fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), String> {
     let (mut tape, inputs) = tape_with_inputs(x);
     let out = if naive {
         twins::naive(&mut tape, op, &inputs)
@@ -210,14 +197,14 @@ fn taped_step<F: Float>(
         twins::stable(&mut tape, op, &inputs)
     }
     .map_err(|e| e.to_string())?;
-    if !backward {
-        black_box(&tape);
-        return Ok(None);
+    if backward {
+        let g = tape
+            .backward_with(out.color, x.grad_color.clone())
+            .map_err(|e| e.to_string())?;
+        black_box(g);
     }
-    let g = tape
-        .backward_with(out.color, x.grad_color.clone())
-        .map_err(|e| e.to_string())?;
-    Ok(Some((tape, inputs, g, out)))
+    black_box(tape);
+    Ok(())
 }
 
 fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, String> {
@@ -308,8 +295,8 @@ fn measure<F: Float>(
             black_box(tape_with_inputs(&x));
             Ok(())
         })?;
-        let both = median_secs(reps, || taped_step(&op, &x, naive, true).map(|r| drop(black_box(r))))? - setup;
-        let fwd = median_secs(reps, || taped_step(&op, &x, naive, false).map(|r| drop(black_box(r))))? - setup;
+        let both = median_secs(reps, || taped_step(&op, &x, naive, true))? - setup;
+        let fwd = median_secs(reps, || taped_step(&op, &x, naive, false))? - setup;
         push(
             method,
             1,

@@ -64,9 +64,9 @@ fn one_ray(r: &Rays<'_>, ray: usize) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
     }
     t[len] = (-depth.value()).exp();
     let mut color = vec![Compensated::default(); ch];
-    for k in 0..len {
+    for (k, &wk) in w.iter().enumerate() {
         for (c, acc) in color.iter_mut().enumerate() {
-            acc.add(w[k] * r.color[(s + k) * ch + c]);
+            acc.add(wk * r.color[(s + k) * ch + c]);
         }
     }
     let color: Vec<f64> = color
