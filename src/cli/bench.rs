@@ -101,9 +101,11 @@ fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
     })
 }
 
-/// Median wall time of `reps` runs of `f`, after one warm-up run.
+/// Median wall time of `reps` runs of `f`, after one warm-up run when `reps > 1`.
 fn median_secs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
-    f()?;
+    if reps > 1 {
+        f()?;
+    }
     let mut t = Vec::with_capacity(reps);
     for _ in 0..reps {
         let start = Instant::now();
