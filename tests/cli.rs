@@ -181,14 +181,24 @@ fn bench_reports_speed_beside_error_and_memory() {
     // in f32 and f64.
     assert!(results.len() == 8 || results.len() == 6, "{}", results.len());
     for r in results {
-        for field in ["samples_per_sec", "samples_per_sec_forward", "err_color", "err_grad_sigma", "peak_extra_bytes", "threads"] {
+        for field in [
+            "samples_per_sec",
+            "samples_per_sec_forward",
+            "err_color",
+            "err_grad_sigma",
+            "peak_extra_bytes",
+            "threads",
+        ] {
             assert!(r[field].is_number(), "{field} in {r}");
         }
         assert_eq!((r["rays"].as_u64(), r["samples"].as_u64()), (Some(64), Some(32)));
         // Accuracy is asserted, never speed: the fused op in f32 stays within 1e-5 element-wise.
         if r["method"] == "fused" {
             let tol = if r["precision"] == "f32" { 1e-5 } else { 1e-12 };
-            assert!(r["err_color"].as_f64().unwrap() < tol && r["err_grad_sigma"].as_f64().unwrap() < tol, "{r}");
+            assert!(
+                r["err_color"].as_f64().unwrap() < tol && r["err_grad_sigma"].as_f64().unwrap() < tol,
+                "{r}"
+            );
         }
     }
     let (code, _, err) = fogray(&["bench", "--workload", "64by32"], "");

@@ -12,6 +12,7 @@ pub mod anneal;
 pub mod experiments;
 pub mod hard;
 pub mod plots;
+pub mod report;
 pub mod reproduce;
 pub mod sampling;
 pub mod scene;
