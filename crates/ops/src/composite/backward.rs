@@ -1,12 +1,15 @@
-//! The backward kernel: one back-to-front pass per ray over the saved `T_k` and `alpha_k`,
+//! The backward kernel: one back-to-front pass per ray over `T_k` and `alpha_k` (recomputed),
 //! with "what it adds minus what it hides" carried as the recurrence `R_k` of the module docs.
 
 use fogray_tape::Float;
 use rayon::prelude::*;
 
+use super::attenuation::Attenuation;
 use super::config::Composite;
 use super::forward::Residuals;
 use super::layout::{blocks, take_front, Flat};
+use super::rows::{add_row_dots, outer_product};
+use super::suffix::adds_minus_hides;
 
 /// Upstream gradients as flat slices (`None`: that output reached nothing).
 pub(crate) struct Upstream<'a, F> {
@@ -90,6 +93,7 @@ pub(crate) fn backward<F: Float>(
         }
     }
     work.into_par_iter().for_each(|(block, mut o)| {
+        let mut scratch = Scratch::default();
         for (j, r) in block.rays.clone().enumerate() {
             let ray = Ray {
                 index: r,
@@ -97,7 +101,7 @@ pub(crate) fn backward<F: Float>(
                 block_start: block.samples.start,
                 in_block: j,
             };
-            backward_ray(x, saved, g, want, ray, &mut o);
+            backward_ray(x, saved, g, want, ray, &mut scratch, &mut o);
         }
     });
     out
@@ -111,12 +115,25 @@ struct Ray {
     in_block: usize,
 }
 
+/// Per-block buffers of the backward, reused ray after ray.
+#[derive(Default)]
+struct Scratch {
+    att: Attenuation,
+    /// What sample k is worth if the ray stops there: `g_C . c_k + g_O + g_D t_k + g_w_k`.
+    value: Vec<f64>,
+    /// `dL/dtau_k`.
+    d_tau: Vec<f64>,
+    /// The upstream colour gradient in f64.
+    g_color: Vec<f64>,
+}
+
 fn backward_ray<F: Float>(
     x: &Flat<'_, F>,
     saved: &Residuals<F>,
     g: &Upstream<'_, F>,
     want: Wanted,
     ray: Ray,
+    scratch: &mut Scratch,
     o: &mut BlockOut<'_, F>,
 ) {
     let Ray {
@@ -127,64 +144,82 @@ fn backward_ray<F: Float>(
     } = ray;
     let ch = x.ch;
     let f = |v: F| v.as_f64();
+    let Scratch {
+        att,
+        value,
+        d_tau,
+        g_color,
+    } = scratch;
     let gc: Option<&[F]> = g.color.map(|gc| &gc[r * ch..(r + 1) * ch]);
+    g_color.clear();
+    g_color.extend(gc.into_iter().flatten().map(|&v| f(v)));
     let g_opacity = g.opacity.map_or(0.0, |v| f(v[r]));
     let g_depth = g.depth.map_or(0.0, |v| f(v[r]));
     let bg = x.background_of(r);
-    let t_end = f(saved.t_end[r]);
-    let stop = samples.start + saved.stop[r];
+    // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
+    let (sigma, delta) = (&x.sigma[samples.clone()], &x.delta[samples.clone()]);
+    att.compute(sigma, delta);
+    let stop = saved.stop[r];
+    let (trans, alpha, weights) = (att.transmittance(), att.alpha(), att.weights());
+    let t_end = trans[stop];
+    let local = samples.start - block_start..samples.start - block_start + stop;
 
-    if want.background {
-        if let Some(gc) = gc {
-            for (out, &g) in o.background[j * ch..(j + 1) * ch].iter_mut().zip(gc) {
-                *out = F::lit(t_end * f(g));
-            }
+    if want.background && gc.is_some() {
+        for (out, &g) in o.background[j * ch..(j + 1) * ch].iter_mut().zip(g_color.iter()) {
+            *out = F::lit(t_end * g);
         }
     }
+
+    value.clear();
+    value.resize(stop, g_opacity);
+    if let Some(t) = &x.t {
+        for (v, &t) in value.iter_mut().zip(&t[samples.clone()]) {
+            *v += g_depth * f(t);
+        }
+    }
+    if let Some(gw) = g.weights {
+        for (v, &gw) in value.iter_mut().zip(&gw[samples.clone()]) {
+            *v += f(gw);
+        }
+    }
+    if gc.is_some() {
+        add_row_dots(&x.color[samples.start * ch..], g_color, value);
+    }
+
     // R: expected value of what lies behind, given the ray reaches it; starts at the background.
-    let mut behind = gc.map_or(0.0, |gc| gc.iter().zip(bg).map(|(&g, &b)| f(g) * f(b)).sum());
-    // U: sum over later samples of gT_i T_i (skipped samples all see T_stop).
-    let mut hidden_t = g
-        .transmittance
-        .map_or(0.0, |gt| gt[stop..samples.end].iter().map(|&v| f(v) * t_end).sum());
-    let mut t_next = t_end;
-    for k in (samples.start..stop).rev() {
-        let local = k - block_start;
-        let (t_k, a) = (f(saved.transmittance[k]), f(saved.alpha[k]));
-        let color_k = &x.color[k * ch..(k + 1) * ch];
-        let mut value = g_opacity;
-        if let Some(gc) = gc {
-            value += gc.iter().zip(color_k).map(|(&g, &c)| f(g) * f(c)).sum::<f64>();
+    let behind: f64 = g_color.iter().zip(bg).map(|(&g, &b)| g * f(b)).sum();
+    d_tau.clear();
+    d_tau.resize(stop, 0.0);
+    adds_minus_hides(trans, alpha, value, behind, d_tau);
+    if let Some(gt) = g.transmittance.map(|gt| &gt[samples.clone()]) {
+        // U: sum over later samples of gT_i T_i (skipped samples all see T_stop), a suffix sum.
+        let mut hidden_t: f64 = gt[stop..].iter().map(|&v| f(v) * t_end).sum();
+        for k in (0..stop).rev() {
+            d_tau[k] -= hidden_t;
+            hidden_t += f(gt[k]) * trans[k];
         }
-        if let Some(t) = &x.t {
-            value += g_depth * f(t[k]);
+    }
+
+    if want.sigma {
+        for ((out, &d), &dt) in o.sigma[local.clone()].iter_mut().zip(delta).zip(d_tau.iter()) {
+            *out = F::lit(f(d) * dt);
         }
-        if let Some(gw) = g.weights {
-            value += f(gw[k]);
+    }
+    if want.delta {
+        for ((out, &s), &dt) in o.delta[local.clone()].iter_mut().zip(sigma).zip(d_tau.iter()) {
+            *out = F::lit(f(s) * dt);
         }
-        // What sample k adds minus what it hides, per unit of optical depth.
-        let d_tau = t_next * (value - behind) - hidden_t;
-        if want.sigma {
-            o.sigma[local] = F::lit(f(x.delta[k]) * d_tau);
+    }
+    if want.color && gc.is_some() {
+        outer_product(
+            &weights[..stop],
+            g_color,
+            &mut o.color[local.start * ch..local.end * ch],
+        );
+    }
+    if want.t {
+        for (out, &w) in o.t[local].iter_mut().zip(weights) {
+            *out = F::lit(w * g_depth);
         }
-        if want.delta {
-            o.delta[local] = F::lit(f(x.sigma[k]) * d_tau);
-        }
-        let w = t_k * a;
-        if want.color {
-            if let Some(gc) = gc {
-                for (out, &g) in o.color[local * ch..(local + 1) * ch].iter_mut().zip(gc) {
-                    *out = F::lit(w * f(g));
-                }
-            }
-        }
-        if want.t {
-            o.t[local] = F::lit(w * g_depth);
-        }
-        behind += a * (value - behind);
-        if let Some(gt) = g.transmittance {
-            hidden_t += f(gt[k]) * t_k;
-        }
-        t_next = t_k;
     }
 }

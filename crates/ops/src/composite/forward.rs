@@ -1,13 +1,18 @@
-//! The forward kernel: one front-to-back pass per ray, every running sum in f64.
+//! The forward kernel: per ray, the attenuation (vectorised) and one front-to-back pass of
+//! compositing, every running sum in f64.
 
 use fogray_tape::Float;
 use rayon::prelude::*;
 
+use super::attenuation::{valid_steps, Attenuation};
 use super::config::Composite;
 use super::layout::{blocks, take_front, Flat};
+use super::rows::weighted_column_sums;
 
-/// What the composite's forward keeps for its backward (`T_k`, `alpha_k`, `T_end` and the
-/// stop index of each ray); opaque to users, visible only through the tape's memory stats.
+/// What the composite's forward keeps for its backward: the stop index of each ray (its
+/// length unless early termination cut it). `T_k` and `alpha_k` are recomputed by the backward
+/// from sigma and delta, which costs less than writing and reading them back would.
+/// Opaque to users, visible only through the tape's memory stats.
 #[derive(Debug, Clone)]
 pub struct Residuals<F> {
     /// `[R * ch]`.
@@ -18,12 +23,8 @@ pub struct Residuals<F> {
     pub(crate) depth: Vec<F>,
     /// `[n]`, empty unless weights were requested.
     pub(crate) weights: Vec<F>,
-    /// Residuals: `T_k` before each sample `[n]`.
+    /// `[n]`, empty unless transmittances were requested.
     pub(crate) transmittance: Vec<F>,
-    /// Residuals: `alpha_k` `[n]` (0 for skipped samples).
-    pub(crate) alpha: Vec<F>,
-    /// Residuals: `T_end` per ray `[R]` (the residual `T_stop` with early termination).
-    pub(crate) t_end: Vec<F>,
     /// Residuals: the first sample index (within its ray) that was skipped, or its length.
     pub(crate) stop: Vec<usize>,
 }
@@ -35,8 +36,6 @@ struct BlockOut<'a, F> {
     depth: &'a mut [F],
     weights: &'a mut [F],
     transmittance: &'a mut [F],
-    alpha: &'a mut [F],
-    t_end: &'a mut [F],
     stop: &'a mut [usize],
 }
 
@@ -50,18 +49,14 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F
         opacity: vec![zero; rays],
         depth: vec![zero; if op.depth { rays } else { 0 }],
         weights: vec![zero; if op.weights { n } else { 0 }],
-        transmittance: vec![zero; n],
-        alpha: vec![zero; n],
-        t_end: vec![zero; rays],
+        transmittance: vec![zero; if op.transmittance { n } else { 0 }],
         stop: vec![0; rays],
     };
     let blocks = blocks(&op.offsets);
     let mut work = Vec::with_capacity(blocks.len());
     {
         let (mut color, mut opacity, mut depth) = (&mut out.color[..], &mut out.opacity[..], &mut out.depth[..]);
-        let (mut weights, mut trans, mut alpha) =
-            (&mut out.weights[..], &mut out.transmittance[..], &mut out.alpha[..]);
-        let (mut t_end, mut stop) = (&mut out.t_end[..], &mut out.stop[..]);
+        let (mut weights, mut trans, mut stop) = (&mut out.weights[..], &mut out.transmittance[..], &mut out.stop[..]);
         for b in &blocks {
             let (nr, ns) = (b.rays.len(), b.samples.len());
             work.push((
@@ -71,9 +66,7 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F
                     opacity: take_front(&mut opacity, nr),
                     depth: take_front(&mut depth, if op.depth { nr } else { 0 }),
                     weights: take_front(&mut weights, if op.weights { ns } else { 0 }),
-                    transmittance: take_front(&mut trans, ns),
-                    alpha: take_front(&mut alpha, ns),
-                    t_end: take_front(&mut t_end, nr),
+                    transmittance: take_front(&mut trans, if op.transmittance { ns } else { 0 }),
                     stop: take_front(&mut stop, nr),
                 },
             ));
@@ -83,6 +76,7 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F
         .into_par_iter()
         .map(|(block, o)| {
             let mut acc = vec![0.0f64; ch];
+            let mut att = Attenuation::default();
             let mut valid = true;
             let s0 = block.samples.start;
             for (j, r) in block.rays.clone().enumerate() {
@@ -97,10 +91,12 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F
                         background: x.background_of(r),
                     },
                     op.min_transmittance,
+                    &mut att,
                     &mut acc,
-                    &mut o.transmittance[local.clone()],
-                    &mut o.alpha[local.clone()],
-                    if op.weights { Some(&mut o.weights[local]) } else { None },
+                    RayOut {
+                        transmittance: op.transmittance.then(|| &mut o.transmittance[local.clone()]),
+                        weights: op.weights.then(|| &mut o.weights[local]),
+                    },
                 );
                 for (c, &a) in acc.iter().enumerate() {
                     o.color[j * ch + c] = F::lit(a);
@@ -109,7 +105,6 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F
                 if op.depth {
                     o.depth[j] = F::lit(result.depth);
                 }
-                o.t_end[j] = F::lit(result.t_end);
                 o.stop[j] = result.stop;
                 valid &= result.valid;
             }
@@ -130,11 +125,16 @@ pub(crate) struct RayIn<'a, F> {
     pub background: &'a [F],
 }
 
+/// One ray's optional per-sample outputs.
+pub(crate) struct RayOut<'a, F> {
+    pub transmittance: Option<&'a mut [F]>,
+    pub weights: Option<&'a mut [F]>,
+}
+
 /// One ray's scalar results.
 pub(crate) struct RayResult {
     pub(crate) opacity: f64,
     pub(crate) depth: f64,
-    pub(crate) t_end: f64,
     pub(crate) stop: usize,
     /// Every sample's values are in their domain.
     pub(crate) valid: bool,
@@ -144,68 +144,46 @@ pub(crate) struct RayResult {
 pub(crate) fn forward_ray<F: Float>(
     ray: RayIn<'_, F>,
     min_transmittance: f64,
+    att: &mut Attenuation,
     color: &mut [f64],
-    transmittance: &mut [F],
-    alpha: &mut [F],
-    mut weights: Option<&mut [F]>,
+    out: RayOut<'_, F>,
 ) -> RayResult {
-    let ch = color.len();
-    color.fill(0.0);
     let len = ray.sigma.len();
-    // The running optical depth, in f64: T_k = exp(-depth_before_k), never a product of 1 - alpha.
-    let mut optical_depth = 0.0f64;
-    let mut depth = 0.0f64;
-    let mut stop = len;
-    let mut valid = true;
-    let domain = |s: f64| s >= 0.0 && s.is_finite();
-    for k in 0..len {
-        let t_k = (-optical_depth).exp();
-        if t_k < min_transmittance {
-            stop = k;
-            break;
+    let mut valid = valid_steps(ray.sigma, ray.delta);
+    att.compute(ray.sigma, ray.delta);
+    let stop = att.stop(min_transmittance);
+    let (trans, weights) = (att.transmittance(), att.weights());
+    let t_end = trans[stop];
+    color.fill(0.0);
+    weighted_column_sums(ray.color, &weights[..stop], color);
+    let depth = ray.t.map_or(0.0, |t| {
+        weights[..stop]
+            .iter()
+            .zip(t)
+            .fold(0.0, |d, (&w, &t)| d + w * t.as_f64())
+    });
+    // Checked for every sample, composited or skipped: invalid input is an error wherever it is.
+    valid &= ray.color.iter().fold(true, |ok, c| ok & c.is_finite());
+    valid &= ray.t.is_none_or(|t| t.iter().fold(true, |ok, v| ok & v.is_finite()));
+    // Skipped samples are empty space behind the stop, seen through the residual T_stop.
+    if let Some(ts) = out.transmittance {
+        for (k, t) in ts.iter_mut().enumerate() {
+            *t = F::lit(if k < stop { trans[k] } else { t_end });
         }
-        // The product of two f32 values is exact in f64; -expm1 keeps every digit at small tau.
-        let (sigma, delta) = (ray.sigma[k].as_f64(), ray.delta[k].as_f64());
-        valid &= domain(sigma) & domain(delta);
-        let tau = sigma * delta;
-        let a = -(-tau).exp_m1();
-        let w = t_k * a;
-        transmittance[k] = F::lit(t_k);
-        alpha[k] = F::lit(a);
-        if let Some(ws) = weights.as_deref_mut() {
-            ws[k] = F::lit(w);
-        }
-        for (acc, &c) in color.iter_mut().zip(&ray.color[k * ch..(k + 1) * ch]) {
-            valid &= c.is_finite();
-            *acc += w * c.as_f64();
-        }
-        if let Some(t) = ray.t {
-            valid &= t[k].is_finite();
-            depth += w * t[k].as_f64();
-        }
-        optical_depth += tau;
     }
-    let t_end = (-optical_depth).exp();
-    // Skipped samples: empty space behind the stop, seen through the residual T_stop.
-    for k in stop..len {
-        // Not composited, but still checked: invalid input is an error wherever it is.
-        valid &= domain(ray.sigma[k].as_f64()) & domain(ray.delta[k].as_f64());
-        valid &= ray.color[k * ch..(k + 1) * ch].iter().all(|c| c.is_finite());
-        valid &= ray.t.is_none_or(|t| t[k].is_finite());
-        transmittance[k] = F::lit(t_end);
-        alpha[k] = F::zero();
-        if let Some(ws) = weights.as_deref_mut() {
-            ws[k] = F::zero();
+    if let Some(ws) = out.weights {
+        for (k, w) in ws.iter_mut().enumerate() {
+            *w = if k < stop { F::lit(weights[k]) } else { F::zero() };
         }
     }
     for (acc, &bg) in color.iter_mut().zip(ray.background) {
         *acc += t_end * bg.as_f64();
     }
+    debug_assert!(stop <= len);
     RayResult {
         // Not 1 - T_end, which is 0 for a faint ray.
-        opacity: -(-optical_depth).exp_m1(),
+        opacity: -(-att.depth_before(stop)).exp_m1(),
         depth,
-        t_end,
         stop,
         valid,
     }

@@ -58,7 +58,7 @@ impl Composite {
             outs.push(array(&[n], std::mem::take(&mut fwd.weights))?);
         }
         if self.transmittance {
-            outs.push(array(&[n], fwd.transmittance.clone())?);
+            outs.push(array(&[n], std::mem::take(&mut fwd.transmittance))?);
         }
         Ok((outs, fwd))
     }
@@ -79,22 +79,18 @@ impl Composite {
         let x = flatten(self, inputs)?;
         let outputs = 2 + usize::from(self.depth) + usize::from(self.weights) + usize::from(self.transmittance);
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
-        if grads.len() != outputs
-            || needs.len() != inputs.len()
-            || residuals.transmittance.len() != n
-            || residuals.t_end.len() != rays
-        {
+        if grads.len() != outputs || needs.len() != inputs.len() || residuals.stop.len() != rays {
             return Err(CompositeError::Shape {
                 what: "vjp arguments",
                 expected: format!(
-                    "{outputs} upstream gradients, {} needs, residuals of {n} samples",
+                    "{outputs} upstream gradients, {} needs, residuals of {rays} rays",
                     inputs.len()
                 ),
                 got: format!(
-                    "{} gradients, {} needs, residuals of {} samples",
+                    "{} gradients, {} needs, residuals of {} rays",
                     grads.len(),
                     needs.len(),
-                    residuals.transmittance.len()
+                    residuals.stop.len()
                 ),
             });
         }
@@ -172,8 +168,8 @@ fn op_error(e: CompositeError) -> OpError {
 }
 
 impl<F: Float> CustomOp<F> for Composite {
-    /// `T_k`, `alpha_k`, `T_end` and the stop index of each ray: the backward is one pass
-    /// with no exponential recomputed.
+    /// The stop index of each ray; the backward recomputes `T_k` and `alpha_k` from the
+    /// inputs the tape keeps anyway.
     type Saved = Residuals<F>;
 
     fn name(&self) -> &'static str {
@@ -195,7 +191,6 @@ impl<F: Float> CustomOp<F> for Composite {
     }
 
     fn saved_bytes(&self, saved: &Residuals<F>) -> usize {
-        let floats = saved.transmittance.len() + saved.alpha.len() + saved.t_end.len();
-        floats * std::mem::size_of::<F>() + saved.stop.len() * std::mem::size_of::<usize>()
+        saved.stop.len() * std::mem::size_of::<usize>()
     }
 }
