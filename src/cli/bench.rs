@@ -18,12 +18,10 @@ pub const WORKLOADS: [(usize, usize); 4] = [(4096, 64), (65536, 64), (16384, 256
 
 /// How the bench counts bytes: the binary's global allocator.
 pub trait Memory: Sync {
-    /// Bytes allocated now.
-    fn current(&self) -> usize;
-    /// Largest `current()` since the last reset.
-    fn peak(&self) -> usize;
-    /// Starts a new peak measurement.
-    fn reset_peak(&self);
+    /// Starts a new measurement.
+    fn reset(&self);
+    /// The most bytes allocated beyond those held at the last reset, at any moment since.
+    fn peak_since_reset(&self) -> usize;
 }
 
 /// One measurement (one JSON object of `{"results": [...]}`).
@@ -134,8 +132,7 @@ fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result
         x.color.view().into_dyn(),
         x.background.view().into_dyn(),
     ];
-    mem.reset_peak();
-    let base = mem.current();
+    mem.reset();
     let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
     let grads = op
         .vjp(
@@ -145,7 +142,7 @@ fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result
             &[true, false, true, false],
         )
         .map_err(|e| e.to_string())?;
-    let peak_extra = mem.peak().saturating_sub(base);
+    let peak_extra = mem.peak_since_reset();
     let g = grads[0].as_ref().ok_or("no sigma gradient")?;
     Ok(Outcome {
         color: to_f64(outs[0].view()),
@@ -211,8 +208,7 @@ fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: boo
 
 fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, String> {
     let (mut tape, inputs) = tape_with_inputs(x);
-    mem.reset_peak();
-    let base = mem.current();
+    mem.reset();
     let out = if naive {
         twins::naive(&mut tape, op, &inputs)
     } else {
@@ -222,7 +218,7 @@ fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memo
     let g = tape
         .backward_with(out.color, x.grad_color.clone())
         .map_err(|e| e.to_string())?;
-    let peak_extra = mem.peak().saturating_sub(base);
+    let peak_extra = mem.peak_since_reset();
     let gs = g.get(inputs.sigma).ok_or("no sigma gradient")?;
     Ok(Outcome {
         color: to_f64(tape.value(out.color).map_err(|e| e.to_string())?),

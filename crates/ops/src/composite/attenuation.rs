@@ -21,6 +21,31 @@ pub(crate) struct Attenuation {
     weights: Vec<f64>,
 }
 
+/// `out[k] = sum_{j<k} x[j]`; returns the total. Four samples at a time: the sums within a
+/// group are off the chain, which carries one addition per group instead of one per sample
+/// (each `out[k]` is then the running total plus at most three terms, as accurate as the
+/// one-at-a-time sum).
+fn exclusive_prefix_sums(x: &[f64], out: &mut [f64]) -> f64 {
+    let mut running = 0.0f64;
+    let mut groups = out.chunks_exact_mut(4);
+    let mut terms = x.chunks_exact(4);
+    for (o, t) in (&mut groups).zip(&mut terms) {
+        let p1 = t[0] + t[1];
+        let p2 = p1 + t[2];
+        let p3 = p2 + t[3];
+        o[0] = running;
+        o[1] = running + t[0];
+        o[2] = running + p1;
+        o[3] = running + p2;
+        running += p3;
+    }
+    for (o, &t) in groups.into_remainder().iter_mut().zip(terms.remainder()) {
+        *o = running;
+        running += t;
+    }
+    running
+}
+
 /// Whether every sigma and delta is finite and non-negative (a fold, not a search, so that it
 /// vectorises: valid input, the common case, is read once at full speed).
 pub(crate) fn valid_steps<F: Float>(sigma: &[F], delta: &[F]) -> bool {
@@ -39,13 +64,7 @@ impl Attenuation {
         self.tau
             .extend(sigma.iter().zip(delta).map(|(&s, &d)| s.as_f64() * d.as_f64()));
         self.depth.resize(len + 1, 0.0);
-        // The one sequential chain of the forward: a single f64 addition per sample.
-        let mut running = 0.0f64;
-        for (d, &tau) in self.depth.iter_mut().zip(&self.tau) {
-            *d = running;
-            running += tau;
-        }
-        self.depth[len] = running;
+        self.depth[len] = exclusive_prefix_sums(&self.tau, &mut self.depth[..len]);
         self.trans.resize(len + 1, 0.0);
         self.alpha.resize(len, 0.0);
         exp_neg_slice(&self.depth, &mut self.trans);
@@ -83,8 +102,48 @@ impl Attenuation {
         &self.weights
     }
 
-    /// The optical depth before sample `k` (`k = len`: the whole ray's).
-    pub(crate) fn depth_before(&self, k: usize) -> f64 {
-        self.depth[k]
+    /// `-expm1(-depth)` of the optical depth before sample `k` (`k = stop`: the ray's opacity,
+    /// not `1 - T`, which is 0 for a faint ray), by the vectorised kernel's code.
+    pub(crate) fn opacity_before(&self, k: usize) -> f64 {
+        let mut out = [0.0];
+        one_minus_exp_neg_slice(&self.depth[k..=k], &mut out);
+        out[0]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grouped_prefix_sums_equal_the_plain_ones_on_exact_data_for_every_length() {
+        // Small integers: every partial sum is exact, so any grouping must agree exactly.
+        for len in 0..23 {
+            let x: Vec<f64> = (0..len).map(|k| ((k * 7) % 5) as f64).collect();
+            let mut out = vec![f64::NAN; len];
+            let total = exclusive_prefix_sums(&x, &mut out);
+            let mut want = 0.0;
+            for k in 0..len {
+                assert_eq!(out[k], want, "len {len} k {k}");
+                want += x[k];
+            }
+            assert_eq!(total, want);
+        }
+    }
+
+    #[test]
+    fn grouped_prefix_sums_stay_within_a_few_roundings_of_a_compensated_sum() {
+        let x: Vec<f64> = (0..100_000).map(|k| 1e-3 * (1.0 + (k as f64 * 0.61).sin())).collect();
+        let mut out = vec![0.0; x.len()];
+        exclusive_prefix_sums(&x, &mut out);
+        // Kahan-compensated reference.
+        let (mut sum, mut comp) = (0.0f64, 0.0f64);
+        for (k, &v) in x.iter().enumerate() {
+            assert!((out[k] - sum).abs() <= 1e-13 * sum.max(1e-300), "k {k}");
+            let y = v - comp;
+            let t = sum + y;
+            comp = (t - sum) - y;
+            sum = t;
+        }
     }
 }

@@ -5,6 +5,7 @@ use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::attenuation::Attenuation;
+use super::buffers::zeroed;
 use super::config::Composite;
 use super::forward::Residuals;
 use super::layout::{blocks, take_front, Flat};
@@ -54,7 +55,7 @@ struct BlockOut<'a, F> {
 }
 
 fn sized<F: Float>(want: bool, len: usize) -> Vec<F> {
-    vec![F::zero(); if want { len } else { 0 }]
+    zeroed(if want { len } else { 0 })
 }
 
 pub(crate) fn backward<F: Float>(

@@ -5,6 +5,7 @@ use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::attenuation::{valid_steps, Attenuation};
+use super::buffers::zeroed;
 use super::config::Composite;
 use super::layout::{blocks, take_front, Flat};
 use super::rows::weighted_column_sums;
@@ -43,13 +44,12 @@ struct BlockOut<'a, F> {
 /// negative density or step), checked on the fly so that valid input costs no extra pass.
 pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F>, bool) {
     let (n, rays, ch) = (op.samples(), op.rays(), x.ch);
-    let zero = F::zero();
     let mut out = Residuals {
-        color: vec![zero; rays * ch],
-        opacity: vec![zero; rays],
-        depth: vec![zero; if op.depth { rays } else { 0 }],
-        weights: vec![zero; if op.weights { n } else { 0 }],
-        transmittance: vec![zero; if op.transmittance { n } else { 0 }],
+        color: zeroed(rays * ch),
+        opacity: zeroed(rays),
+        depth: zeroed(if op.depth { rays } else { 0 }),
+        weights: zeroed(if op.weights { n } else { 0 }),
+        transmittance: zeroed(if op.transmittance { n } else { 0 }),
         stop: vec![0; rays],
     };
     let blocks = blocks(&op.offsets);
@@ -182,7 +182,7 @@ pub(crate) fn forward_ray<F: Float>(
     debug_assert!(stop <= len);
     RayResult {
         // Not 1 - T_end, which is 0 for a faint ray.
-        opacity: -(-att.depth_before(stop)).exp_m1(),
+        opacity: att.opacity_before(stop),
         depth,
         stop,
         valid,

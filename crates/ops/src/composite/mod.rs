@@ -64,6 +64,7 @@
 
 mod attenuation;
 mod backward;
+mod buffers;
 mod config;
 mod decay;
 mod forward;
