@@ -4,7 +4,7 @@
 //! [`sum_to_shape`](crate::broadcast::sum_to_shape()). At ties `maximum` and `minimum` split the
 //! gradient 0.5 / 0.5 between their inputs (as candle and tinygrad).
 
-use ndarray::{ArrayD, ArrayViewD, IxDyn, Zip};
+use ndarray::{ArrayD, ArrayViewD, Ix2, IxDyn, Zip};
 
 use super::strong_mul;
 use crate::broadcast::{broadcast_shape, sum_to_shape};
@@ -40,17 +40,6 @@ impl BinaryFn {
             BinaryFn::Div => "div",
             BinaryFn::Maximum => "maximum",
             BinaryFn::Minimum => "minimum",
-        }
-    }
-
-    fn f<F: Float>(self, a: F, b: F) -> F {
-        match self {
-            BinaryFn::Add => a + b,
-            BinaryFn::Sub => a - b,
-            BinaryFn::Mul => a * b,
-            BinaryFn::Div => a / b,
-            BinaryFn::Maximum => a.max(b),
-            BinaryFn::Minimum => a.min(b),
         }
     }
 
@@ -97,8 +86,16 @@ impl<F: Float> CustomOp<F> for Binary {
         };
         let shape = broadcast_shape(a.shape(), b.shape())?;
         let (a, b) = broadcast_pair(a, b, &shape)?;
-        let f = self.0;
-        Ok((vec![Zip::from(&a).and(&b).map_collect(|&a, &b| f.f(a, b))], ()))
+        // One closure per function, chosen outside the loop, so that each loop vectorises.
+        let y = match self.0 {
+            BinaryFn::Add => map2(&a, &b, |a, b| a + b),
+            BinaryFn::Sub => map2(&a, &b, |a, b| a - b),
+            BinaryFn::Mul => map2(&a, &b, |a, b| a * b),
+            BinaryFn::Div => map2(&a, &b, |a, b| a / b),
+            BinaryFn::Maximum => map2(&a, &b, |a, b| a.max(b)),
+            BinaryFn::Minimum => map2(&a, &b, |a, b| a.min(b)),
+        };
+        Ok((vec![y], ()))
     }
 
     fn backward(
@@ -118,15 +115,40 @@ impl<F: Float> CustomOp<F> for Binary {
             if !ctx.needs_input_grad(k) {
                 continue;
             }
-            let full = Zip::from(g).and(&a).and(&b).and(&y).map_collect(|&g, &a, &b, &y| {
-                let (da, db) = f.df(a, b, y);
-                strong_mul(g, if k == 0 { da } else { db })
-            });
+            // The common cases read only what they need; the rest go through `df`.
+            let full = match (f, k) {
+                (BinaryFn::Add, _) | (BinaryFn::Sub, 0) => g.to_owned(),
+                (BinaryFn::Sub, _) => g.mapv(|g| -g),
+                (BinaryFn::Mul, 0) => map2(g, &b, strong_mul),
+                (BinaryFn::Mul, _) => map2(g, &a, strong_mul),
+                _ => Zip::from(g).and(&a).and(&b).and(&y).map_collect(|&g, &a, &b, &y| {
+                    let (da, db) = f.df(a, b, y);
+                    strong_mul(g, if k == 0 { da } else { db })
+                }),
+            };
             let shape = if k == 0 { a0.shape() } else { b0.shape() };
             *slot = Some(sum_to_shape(full, shape));
         }
         Ok(out)
     }
+}
+
+/// `f` element by element over two views of one shape; contiguous views of the same layout
+/// take a plain slice loop (which vectorises), broadcast ones go through `Zip`.
+fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F) -> F) -> ArrayD<F> {
+    if let (Some(x), Some(y)) = (a.as_slice(), b.as_slice()) {
+        if a.shape() == b.shape() {
+            let v: Vec<F> = x.iter().zip(y).map(|(&x, &y)| f(x, y)).collect();
+            if let Ok(out) = ArrayD::from_shape_vec(a.raw_dim(), v) {
+                return out;
+            }
+        }
+    }
+    // Static dimensions give `Zip` a fast inner loop; `IxDyn` indexes every element.
+    if let (Ok(x), Ok(y)) = (a.view().into_dimensionality::<Ix2>(), b.view().into_dimensionality::<Ix2>()) {
+        return Zip::from(&x).and(&y).map_collect(|&x, &y| f(x, y)).into_dyn();
+    }
+    Zip::from(a).and(b).map_collect(|&x, &y| f(x, y))
 }
 
 fn broadcast_pair<'a, F: Float>(
