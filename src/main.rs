@@ -64,7 +64,8 @@ enum Command {
     /// threads and of the stable and naive taped twins, in f32 and f64, on the workloads
     /// 4096x64, 65536x64, 16384x256 and 1024x4096 (RGB; sigma ~ U[0,5], total optical depth
     /// ~5), each beside its error against an independent compensated f64 reference on the
-    /// same rays and its peak extra memory.
+    /// same rays and its peak extra memory; then the tape's own cost per recorded op and per
+    /// byte.
     Bench {
         /// One run per measurement (after a warm-up) instead of the median of five.
         #[arg(long)]
@@ -134,10 +135,12 @@ fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, Stri
         }
     };
     let results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
+    let tape = cli::tape_cost::run(quick)?;
     if json {
-        serde_json::to_string_pretty(&serde_json::json!({ "results": results })).map_err(|e| e.to_string())
+        serde_json::to_string_pretty(&serde_json::json!({ "results": results, "tape_overhead": tape }))
+            .map_err(|e| e.to_string())
     } else {
-        Ok(cli::bench::table(&results))
+        Ok(cli::bench::table(&results) + &cli::tape_cost::table(&tape))
     }
 }
 

@@ -100,7 +100,7 @@ fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
 }
 
 /// Median wall time of `reps` runs of `f`, after one warm-up run when `reps > 1`.
-fn median_secs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
+pub fn median_secs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
     if reps > 1 {
         f()?;
     }

@@ -6,3 +6,4 @@ pub mod evaluate;
 pub mod gradcheck;
 pub mod input;
 pub mod reference;
+pub mod tape_cost;

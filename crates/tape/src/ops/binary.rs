@@ -145,7 +145,10 @@ fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F)
         }
     }
     // Static dimensions give `Zip` a fast inner loop; `IxDyn` indexes every element.
-    if let (Ok(x), Ok(y)) = (a.view().into_dimensionality::<Ix2>(), b.view().into_dimensionality::<Ix2>()) {
+    if let (Ok(x), Ok(y)) = (
+        a.view().into_dimensionality::<Ix2>(),
+        b.view().into_dimensionality::<Ix2>(),
+    ) {
         return Zip::from(&x).and(&y).map_collect(|&x, &y| f(x, y)).into_dyn();
     }
     Zip::from(a).and(b).map_collect(|&x, &y| f(x, y))
