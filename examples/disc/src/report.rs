@@ -238,6 +238,7 @@ where
         .filter(|&e| e > 0.0)
         .fold(1.0, f64::min)
         / 10.0;
+    let ceiling = rows.iter().map(|r| r.max_error).fold(floor, f64::max) * 1e3;
     let tmax = rows.iter().map(|r| r.ns_per_sample).fold(1.0, f64::max) * 1.5;
     let tmin = rows.iter().map(|r| r.ns_per_sample).fold(f64::INFINITY, f64::min) / 1.5;
     let mut chart = ChartBuilder::on(&root)
@@ -248,14 +249,16 @@ where
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        // Two empty decades on top leave room for the legend.
-        .build_cartesian_2d((tmin..tmax).log_scale(), (floor..100.0).log_scale())
+        // Empty decades on top leave room for the legend.
+        .build_cartesian_2d((tmin..tmax).log_scale(), (floor..ceiling).log_scale())
         .map_err(e)?;
     chart
         .configure_mesh()
         .x_desc("forward + backward time per sample (ns, log)")
         .y_desc("worst |C - C_exact| over all pixels (log)")
         .y_label_formatter(&|v| format!("{v:.0e}"))
+        .x_labels(12)
+        .x_label_formatter(&|v| format!("{v:.0}"))
         .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(e)?;
