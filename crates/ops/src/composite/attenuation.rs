@@ -19,14 +19,19 @@ pub(crate) struct Attenuation {
     alpha: Vec<f64>,
     /// `w_k = T_k alpha_k`.
     weights: Vec<f64>,
+    /// See [`Attenuation::stop`].
+    stop: usize,
 }
 
-/// `out[k] = sum_{j<k} x[j]`; returns the total. Four samples at a time: the sums within a
+/// Samples per step when early termination may stop a ray: a multiple of the prefix sums'
+/// group of 4, so that the values are bitwise those of the ray taken whole.
+const CHUNK: usize = 32;
+
+/// `out[k] = running + sum_{j<k} x[j]`; returns the new running total. Four samples at a time: the sums within a
 /// group are off the chain, which carries one addition per group instead of one per sample
 /// (each `out[k]` is then the running total plus at most three terms, as accurate as the
 /// one-at-a-time sum).
-fn exclusive_prefix_sums(x: &[f64], out: &mut [f64]) -> f64 {
-    let mut running = 0.0f64;
+fn exclusive_prefix_sums(x: &[f64], out: &mut [f64], mut running: f64) -> f64 {
     let mut groups = out.chunks_exact_mut(4);
     let mut terms = x.chunks_exact(4);
     for (o, t) in (&mut groups).zip(&mut terms) {
@@ -56,35 +61,58 @@ pub(crate) fn valid_steps<F: Float>(sigma: &[F], delta: &[F]) -> bool {
 }
 
 impl Attenuation {
-    /// Fills the buffers for one ray. Values outside the domain (see [`valid_steps`]) give
-    /// meaningless results, never a panic.
-    pub(crate) fn compute<F: Float>(&mut self, sigma: &[F], delta: &[F]) {
+    /// Fills the buffers for one ray, up to its stop: with `min_transmittance > 0`, samples are
+    /// taken [`CHUNK`] at a time and nothing is computed past the chunk where the transmittance
+    /// first falls below it (so early termination saves the work it promises). Values outside
+    /// the domain (see [`valid_steps`]) give meaningless results, never a panic.
+    pub(crate) fn compute<F: Float>(&mut self, sigma: &[F], delta: &[F], min_transmittance: f64) {
         let len = sigma.len();
-        self.tau.clear();
-        self.tau
-            .extend(sigma.iter().zip(delta).map(|(&s, &d)| s.as_f64() * d.as_f64()));
-        self.depth.resize(len + 1, 0.0);
-        self.depth[len] = exclusive_prefix_sums(&self.tau, &mut self.depth[..len]);
-        self.trans.resize(len + 1, 0.0);
+        self.tau.resize(len, 0.0);
         self.alpha.resize(len, 0.0);
-        exp_neg_slice(&self.depth, &mut self.trans);
-        one_minus_exp_neg_slice(&self.tau, &mut self.alpha);
-        self.weights.clear();
-        self.weights
-            .extend(self.trans.iter().zip(&self.alpha).map(|(&t, &a)| t * a));
+        self.weights.resize(len, 0.0);
+        self.depth.resize(len + 1, 0.0);
+        self.trans.resize(len + 1, 0.0);
+        self.stop = len;
+        let chunk = if min_transmittance > 0.0 { CHUNK } else { len.max(1) };
+        let mut running = 0.0f64;
+        let mut start = 0;
+        while start < len {
+            let end = (start + chunk).min(len);
+            let part = start..end;
+            for ((t, &s), &d) in self.tau[part.clone()]
+                .iter_mut()
+                .zip(&sigma[part.clone()])
+                .zip(&delta[part.clone()])
+            {
+                *t = s.as_f64() * d.as_f64();
+            }
+            running = exclusive_prefix_sums(&self.tau[part.clone()], &mut self.depth[part.clone()], running);
+            exp_neg_slice(&self.depth[part.clone()], &mut self.trans[part.clone()]);
+            one_minus_exp_neg_slice(&self.tau[part.clone()], &mut self.alpha[part.clone()]);
+            for ((w, &t), &a) in self.weights[part.clone()]
+                .iter_mut()
+                .zip(&self.trans[part.clone()])
+                .zip(&self.alpha[part.clone()])
+            {
+                *w = t * a;
+            }
+            if min_transmittance > 0.0 {
+                if let Some(k) = self.trans[part].iter().position(|&t| t < min_transmittance) {
+                    // T_stop is computed (it is in this chunk); nothing behind it is read.
+                    self.stop = start + k;
+                    return;
+                }
+            }
+            start = end;
+        }
+        self.depth[len] = running;
+        exp_neg_slice(&self.depth[len..], &mut self.trans[len..]);
     }
 
-    /// The first sample whose transmittance is below `min_transmittance` (early termination),
-    /// or the ray's length.
-    pub(crate) fn stop(&self, min_transmittance: f64) -> usize {
-        let len = self.alpha.len();
-        if min_transmittance <= 0.0 {
-            return len;
-        }
-        self.trans[..len]
-            .iter()
-            .position(|&t| t < min_transmittance)
-            .unwrap_or(len)
+    /// The first sample whose transmittance is below the `min_transmittance` of the last
+    /// [`Attenuation::compute`] (early termination), or the ray's length.
+    pub(crate) fn stop(&self) -> usize {
+        self.stop
     }
 
     /// `T_k`, `k = 0..=len`.
@@ -121,7 +149,7 @@ mod tests {
         for len in 0..23 {
             let x: Vec<f64> = (0..len).map(|k| ((k * 7) % 5) as f64).collect();
             let mut out = vec![f64::NAN; len];
-            let total = exclusive_prefix_sums(&x, &mut out);
+            let total = exclusive_prefix_sums(&x, &mut out, 0.0);
             let mut want = 0.0;
             for k in 0..len {
                 assert_eq!(out[k], want, "len {len} k {k}");
@@ -132,10 +160,33 @@ mod tests {
     }
 
     #[test]
+    fn chunked_early_termination_gives_the_whole_ray_values_bitwise_up_to_the_stop() {
+        let sigma: Vec<f32> = (0..203).map(|k| 0.05 + (k % 9) as f32 * 0.03).collect();
+        let delta = vec![0.25f32; sigma.len()];
+        let mut whole = Attenuation::default();
+        whole.compute(&sigma, &delta, 0.0);
+        assert_eq!(whole.stop(), sigma.len());
+        // A threshold never reached: chunked, yet the same bits everywhere.
+        let mut chunked = Attenuation::default();
+        chunked.compute(&sigma, &delta, 1e-300);
+        assert_eq!(chunked.stop(), sigma.len());
+        assert_eq!(chunked.transmittance(), whole.transmittance());
+        assert_eq!(chunked.alpha(), whole.alpha());
+        // A threshold reached mid-ray: the stop is the first T below it, the values agree
+        // up to it and T_stop is there.
+        let mut early = Attenuation::default();
+        early.compute(&sigma, &delta, 1e-2);
+        let want = whole.transmittance().iter().position(|&t| t < 1e-2).unwrap();
+        assert_eq!(early.stop(), want);
+        assert_eq!(early.transmittance()[..=want], whole.transmittance()[..=want]);
+        assert_eq!(early.weights()[..want], whole.weights()[..want]);
+    }
+
+    #[test]
     fn grouped_prefix_sums_stay_within_a_few_roundings_of_a_compensated_sum() {
         let x: Vec<f64> = (0..100_000).map(|k| 1e-3 * (1.0 + (k as f64 * 0.61).sin())).collect();
         let mut out = vec![0.0; x.len()];
-        exclusive_prefix_sums(&x, &mut out);
+        exclusive_prefix_sums(&x, &mut out, 0.0);
         // Kahan-compensated reference.
         let (mut sum, mut comp) = (0.0f64, 0.0f64);
         for (k, &v) in x.iter().enumerate() {

@@ -101,6 +101,7 @@ pub(crate) fn backward<F: Float>(
                 samples: op.offsets[r]..op.offsets[r + 1],
                 block_start: block.samples.start,
                 in_block: j,
+                min_transmittance: op.min_transmittance,
             };
             backward_ray(x, saved, g, want, ray, &mut scratch, &mut o);
         }
@@ -108,12 +109,14 @@ pub(crate) fn backward<F: Float>(
     out
 }
 
-/// Where a ray sits: its index, its global samples, and its place in its block.
+/// Where a ray sits: its index, its global samples, and its place in its block; and the
+/// early-termination threshold it was composited with.
 struct Ray {
     index: usize,
     samples: std::ops::Range<usize>,
     block_start: usize,
     in_block: usize,
+    min_transmittance: f64,
 }
 
 /// Per-block buffers of the backward, reused ray after ray.
@@ -142,6 +145,7 @@ fn backward_ray<F: Float>(
         samples,
         block_start,
         in_block: j,
+        min_transmittance,
     } = ray;
     let ch = x.ch;
     let f = |v: F| v.as_f64();
@@ -159,8 +163,9 @@ fn backward_ray<F: Float>(
     let bg = x.background_of(r);
     // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
     let (sigma, delta) = (&x.sigma[samples.clone()], &x.delta[samples.clone()]);
-    att.compute(sigma, delta);
+    att.compute(sigma, delta, min_transmittance);
     let stop = saved.stop[r];
+    debug_assert_eq!(stop, att.stop(), "the same code gives the same stop");
     let (trans, alpha, weights) = (att.transmittance(), att.alpha(), att.weights());
     let t_end = trans[stop];
     let local = samples.start - block_start..samples.start - block_start + stop;

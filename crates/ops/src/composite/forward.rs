@@ -150,8 +150,8 @@ pub(crate) fn forward_ray<F: Float>(
 ) -> RayResult {
     let len = ray.sigma.len();
     let mut valid = valid_steps(ray.sigma, ray.delta);
-    att.compute(ray.sigma, ray.delta);
-    let stop = att.stop(min_transmittance);
+    att.compute(ray.sigma, ray.delta, min_transmittance);
+    let stop = att.stop();
     let (trans, weights) = (att.transmittance(), att.weights());
     let t_end = trans[stop];
     color.fill(0.0);
