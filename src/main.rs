@@ -76,6 +76,10 @@ enum Command {
         /// Only this workload, as RxS (rays x samples per ray).
         #[arg(long)]
         workload: Option<String>,
+        /// Have glibc keep freed memory for reuse (a training loop's steady state) instead of
+        /// returning it, so that no measurement pays for fresh pages. Linux with glibc only.
+        #[arg(long)]
+        keep_freed_memory: bool,
     },
 }
 
@@ -147,7 +151,20 @@ fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, Stri
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let (name, result) = match &cli.command {
-        Command::Bench { quick, json, workload } => ("bench", bench(*quick, *json, workload.as_deref())),
+        Command::Bench {
+            quick,
+            json,
+            workload,
+            keep_freed_memory,
+        } => (
+            "bench",
+            if *keep_freed_memory {
+                cli::heap::keep_freed_memory()
+            } else {
+                Ok(())
+            }
+            .and_then(|()| bench(*quick, *json, workload.as_deref())),
+        ),
         Command::Composite { method, input } => (
             "composite",
             read_input(input)

@@ -1,0 +1,26 @@
+//! `fogray bench --keep-freed-memory`: tells glibc to keep freed memory for reuse instead of
+//! returning it to the kernel, the steady state of a training loop under a caching allocator.
+//! By default every large buffer is fresh memory that the kernel must map and clear page by
+//! page, which the bench shows is a large share of both the fused op's and the tape's time.
+
+/// Serves large allocations from the heap and never trims it.
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+pub fn keep_freed_memory() -> Result<(), String> {
+    // SAFETY: mallopt only changes two of glibc's allocation thresholds; it is called from the
+    // main thread before the bench allocates anything large or starts a thread pool, and glibc
+    // serialises it with its own lock in any case. It returns 1 on success.
+    let done = unsafe {
+        libc::mallopt(libc::M_MMAP_THRESHOLD, 1 << 30) == 1 && libc::mallopt(libc::M_TRIM_THRESHOLD, i32::MAX) == 1
+    };
+    if done {
+        Ok(())
+    } else {
+        Err("glibc refused to change its mmap and trim thresholds".into())
+    }
+}
+
+/// Serves large allocations from the heap and never trims it.
+#[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+pub fn keep_freed_memory() -> Result<(), String> {
+    Err("--keep-freed-memory needs Linux with glibc".into())
+}
