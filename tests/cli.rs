@@ -201,6 +201,31 @@ fn bench_reports_speed_beside_error_and_memory() {
             );
         }
     }
+    // The tape's own costs, one object per precision (sizes only: speed is never asserted).
+    let tape = json["tape_overhead"].as_array().unwrap();
+    let precisions: Vec<&str> = tape.iter().map(|t| t["precision"].as_str().unwrap()).collect();
+    assert_eq!(precisions, ["f32", "f64"]);
+    for t in tape {
+        assert!(
+            t["ns_per_op"].as_f64().unwrap() > 0.0 && t["ns_per_byte"].as_f64().unwrap() > 0.0,
+            "{t}"
+        );
+    }
+    // With glibc keeping freed memory: the same measurements, the same accuracy.
+    let (code, out, err) = fogray(
+        &[
+            "bench",
+            "--quick",
+            "--json",
+            "--workload",
+            "64x32",
+            "--keep-freed-memory",
+        ],
+        "",
+    );
+    assert_eq!(code, 0, "{err}");
+    let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+    assert_eq!(json["results"].as_array().unwrap().len(), results.len());
     let (code, _, err) = fogray(&["bench", "--workload", "64by32"], "");
     assert_eq!(code, 2);
     assert!(err.contains("RxS"), "{err}");
