@@ -70,14 +70,16 @@ enum Command {
         /// One run per measurement (after a warm-up) instead of the median of five.
         #[arg(long)]
         quick: bool,
-        /// Print {"results": [...]} as JSON.
+        /// Print {"results": [...], "tape_overhead": [...]} as JSON.
         #[arg(long)]
         json: bool,
         /// Only this workload, as RxS (rays x samples per ray).
         #[arg(long)]
         workload: Option<String>,
         /// Have glibc keep freed memory for reuse (a training loop's steady state) instead of
-        /// returning it, so that no measurement pays for fresh pages. Linux with glibc only.
+        /// returning it, so that the main thread's buffers are not fresh pages (the fused
+        /// 1-thread runs allocate on a pool thread, which this does not cover). Linux with
+        /// glibc only.
         #[arg(long)]
         keep_freed_memory: bool,
     },
