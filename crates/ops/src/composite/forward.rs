@@ -12,7 +12,8 @@ use super::rows::weighted_column_sums;
 
 /// What the composite's forward keeps for its backward: the stop index of each ray (its
 /// length unless early termination cut it). `T_k` and `alpha_k` are recomputed by the backward
-/// from sigma and delta, which costs less than writing and reading them back would.
+/// from sigma and delta (two vectorised exponentials per sample), so that the op's extra memory
+/// is its outputs and gradients alone.
 /// Opaque to users, visible only through the tape's memory stats.
 #[derive(Debug, Clone)]
 pub struct Residuals<F> {
