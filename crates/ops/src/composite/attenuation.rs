@@ -54,7 +54,9 @@ fn exclusive_prefix_sums(x: &[f64], out: &mut [f64], mut running: f64) -> f64 {
 /// Whether every sigma and delta is finite and non-negative (a fold, not a search, so that it
 /// vectorises: valid input, the common case, is read once at full speed).
 pub(crate) fn valid_steps<F: Float>(sigma: &[F], delta: &[F]) -> bool {
-    let in_domain = |v: F| v >= F::zero() && v.is_finite();
+    // Two comparisons and no branch: NaN fails both, infinity the second.
+    let (zero, max) = (F::zero(), F::max_value());
+    let in_domain = |v: F| (v >= zero) & (v <= max);
     let s = sigma.iter().fold(true, |ok, &v| ok & in_domain(v));
     let d = delta.iter().fold(true, |ok, &v| ok & in_domain(v));
     s & d

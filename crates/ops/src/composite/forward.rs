@@ -126,6 +126,12 @@ pub(crate) struct RayIn<'a, F> {
     pub background: &'a [F],
 }
 
+/// Whether no value is NaN or infinite, without a branch per value (so that it vectorises).
+fn all_finite<F: Float>(v: &[F]) -> bool {
+    let max = F::max_value();
+    v.iter().fold(true, |ok, &x| ok & (x.abs() <= max))
+}
+
 /// One ray's optional per-sample outputs.
 pub(crate) struct RayOut<'a, F> {
     pub transmittance: Option<&'a mut [F]>,
@@ -164,8 +170,8 @@ pub(crate) fn forward_ray<F: Float>(
             .fold(0.0, |d, (&w, &t)| d + w * t.as_f64())
     });
     // Checked for every sample, composited or skipped: invalid input is an error wherever it is.
-    valid &= ray.color.iter().fold(true, |ok, c| ok & c.is_finite());
-    valid &= ray.t.is_none_or(|t| t.iter().fold(true, |ok, v| ok & v.is_finite()));
+    valid &= all_finite(ray.color);
+    valid &= ray.t.is_none_or(all_finite);
     // Skipped samples are empty space behind the stop, seen through the residual T_stop.
     if let Some(ts) = out.transmittance {
         for (k, t) in ts.iter_mut().enumerate() {
