@@ -62,6 +62,7 @@
 
 mod backward;
 pub mod broadcast;
+pub mod buffer;
 mod custom;
 mod error;
 mod float;

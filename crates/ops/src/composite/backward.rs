@@ -1,11 +1,11 @@
 //! The backward kernel: one back-to-front pass per ray over `T_k` and `alpha_k` (recomputed),
 //! with "what it adds minus what it hides" carried as the recurrence `R_k` of the module docs.
 
+use fogray_tape::buffer::zeroed;
 use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::attenuation::Attenuation;
-use super::buffers::zeroed;
 use super::config::Composite;
 use super::forward::Residuals;
 use super::layout::{blocks, take_front, Flat};

@@ -1,11 +1,11 @@
 //! The forward kernel: per ray, the attenuation (vectorised) and one front-to-back pass of
 //! compositing, every running sum in f64.
 
+use fogray_tape::buffer::zeroed;
 use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::attenuation::{valid_steps, Attenuation};
-use super::buffers::zeroed;
 use super::config::Composite;
 use super::layout::{blocks, take_front, Flat};
 use super::rows::weighted_column_sums;

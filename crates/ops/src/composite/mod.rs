@@ -64,7 +64,6 @@
 
 mod attenuation;
 mod backward;
-mod buffers;
 mod config;
 mod decay;
 mod forward;

@@ -4,10 +4,11 @@
 //! [`sum_to_shape`](crate::broadcast::sum_to_shape()). At ties `maximum` and `minimum` split the
 //! gradient 0.5 / 0.5 between their inputs (as candle and tinygrad).
 
-use ndarray::{ArrayD, ArrayViewD, Ix2, IxDyn, Zip};
+use ndarray::{ArrayD, ArrayViewD, IxDyn, Zip};
 
 use super::strong_mul;
 use crate::broadcast::{broadcast_shape, sum_to_shape};
+use crate::buffer::{map1, map2};
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -117,8 +118,8 @@ impl<F: Float> CustomOp<F> for Binary {
             }
             // The common cases read only what they need; the rest go through `df`.
             let full = match (f, k) {
-                (BinaryFn::Add, _) | (BinaryFn::Sub, 0) => g.to_owned(),
-                (BinaryFn::Sub, _) => g.mapv(|g| -g),
+                (BinaryFn::Add, _) | (BinaryFn::Sub, 0) => map1(g, |g| g),
+                (BinaryFn::Sub, _) => map1(g, |g| -g),
                 (BinaryFn::Mul, 0) => map2(g, &b, strong_mul),
                 (BinaryFn::Mul, _) => map2(g, &a, strong_mul),
                 _ => Zip::from(g).and(&a).and(&b).and(&y).map_collect(|&g, &a, &b, &y| {
@@ -131,27 +132,6 @@ impl<F: Float> CustomOp<F> for Binary {
         }
         Ok(out)
     }
-}
-
-/// `f` element by element over two views of one shape; contiguous views of the same layout
-/// take a plain slice loop (which vectorises), broadcast ones go through `Zip`.
-fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F) -> F) -> ArrayD<F> {
-    if let (Some(x), Some(y)) = (a.as_slice(), b.as_slice()) {
-        if a.shape() == b.shape() {
-            let v: Vec<F> = x.iter().zip(y).map(|(&x, &y)| f(x, y)).collect();
-            if let Ok(out) = ArrayD::from_shape_vec(a.raw_dim(), v) {
-                return out;
-            }
-        }
-    }
-    // Static dimensions give `Zip` a fast inner loop; `IxDyn` indexes every element.
-    if let (Ok(x), Ok(y)) = (
-        a.view().into_dimensionality::<Ix2>(),
-        b.view().into_dimensionality::<Ix2>(),
-    ) {
-        return Zip::from(&x).and(&y).map_collect(|&x, &y| f(x, y)).into_dyn();
-    }
-    Zip::from(a).and(b).map_collect(|&x, &y| f(x, y))
 }
 
 fn broadcast_pair<'a, F: Float>(

@@ -19,6 +19,7 @@ use std::borrow::Cow;
 
 use ndarray::{ArrayD, ArrayViewD, IxDyn};
 
+use crate::buffer::zeroed;
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -124,7 +125,7 @@ impl<F: Float> CustomOp<F> for Segment {
         let out = match self.kind {
             SegmentFn::Sum => {
                 shape[0] = self.offsets.len() - 1;
-                let mut out = vec![F::zero(); shape[0] * m];
+                let mut out = zeroed(shape[0] * m);
                 for (r, seg) in self.segments().enumerate() {
                     for i in seg {
                         for c in 0..m {
@@ -135,7 +136,7 @@ impl<F: Float> CustomOp<F> for Segment {
                 out
             }
             kind => {
-                let mut out = vec![F::zero(); rows * m];
+                let mut out = zeroed(rows * m);
                 for seg in self.segments() {
                     for c in 0..m {
                         let mut acc = if kind == SegmentFn::ExclusiveCumsum {
@@ -180,7 +181,7 @@ impl<F: Float> CustomOp<F> for Segment {
         let y = ctx.output(0);
         let m = x.shape()[1..].iter().product::<usize>();
         let (gs, xs, ys) = (flat(g), flat(&x), flat(&y));
-        let mut gx = vec![F::zero(); x.len()];
+        let mut gx = zeroed(x.len());
         for (r, seg) in self.segments().enumerate() {
             for c in 0..m {
                 let at = |i: usize| i * m + c;

@@ -4,9 +4,10 @@
 //! where `lo <= x <= hi` (inclusive, as PyTorch). Derivatives follow the strong-zero rule
 //! (a zero upstream gradient contributes exactly zero).
 
-use ndarray::{ArrayD, ArrayViewD, Zip};
+use ndarray::{ArrayD, ArrayViewD};
 
 use super::strong_mul;
+use crate::buffer::{map1, map3};
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -146,7 +147,7 @@ impl<F: Float> CustomOp<F> for Unary<F> {
             }
         }
         let f = self.0;
-        Ok((vec![x.mapv(|x| f.f(x))], ()))
+        Ok((vec![map1(x, |x| f.f(x))], ()))
     }
 
     fn backward(
@@ -156,10 +157,7 @@ impl<F: Float> CustomOp<F> for Unary<F> {
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let Some(g) = &grads[0] else { return Ok(vec![None]) };
         let f = self.0;
-        let gx = Zip::from(g)
-            .and(&ctx.input(0))
-            .and(&ctx.output(0))
-            .map_collect(|&g, &x, &y| strong_mul(g, f.df(x, y)));
+        let gx = map3(g, &ctx.input(0), &ctx.output(0), |g, x, y| strong_mul(g, f.df(x, y)));
         Ok(vec![Some(gx)])
     }
 }
