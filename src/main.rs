@@ -67,7 +67,8 @@ enum Command {
     /// same rays and its peak extra memory; then the tape's own cost per recorded op and per
     /// byte.
     Bench {
-        /// One run per measurement (after a warm-up) instead of the median of five.
+        /// A single run per measurement, without warm-up, instead of the median of at least five
+        /// runs (and at least 0.3 s of them) after a warm-up run.
         #[arg(long)]
         quick: bool,
         /// Print {"results": [...], "tape_overhead": [...]} as JSON.

@@ -184,6 +184,7 @@ fn bench_reports_speed_beside_error_and_memory() {
         for field in [
             "samples_per_sec",
             "samples_per_sec_forward",
+            "samples_per_sec_spread",
             "err_color",
             "err_grad_sigma",
             "peak_extra_bytes",

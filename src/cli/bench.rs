@@ -33,8 +33,11 @@ pub struct Measurement {
     pub rays: usize,
     /// Samples per ray.
     pub samples: usize,
-    /// Forward and backward (gradients for sigma and colour).
+    /// Forward and backward (gradients for sigma and colour), from the median run.
     pub samples_per_sec: f64,
+    /// Interquartile range over the median of the forward+backward run times (0 with one run):
+    /// how far to trust `samples_per_sec` on a noisy machine.
+    pub samples_per_sec_spread: f64,
     pub samples_per_sec_forward: f64,
     /// Worst element-wise relative error of the colour.
     pub err_color: f64,
@@ -99,19 +102,45 @@ fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
     })
 }
 
-/// Median wall time of `reps` runs of `f`, after one warm-up run when `reps > 1`.
-pub fn median_secs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
+/// Wall times of repeated runs: the median, and the spread, the interquartile range over the
+/// median (robust to the odd outlier run; 0 with a single run).
+#[derive(Debug, Clone, Copy)]
+pub struct Timing {
+    pub median: f64,
+    pub spread: f64,
+}
+
+/// Runs of `f` go on past `reps` until they have taken this long (short workloads get more
+/// runs, so that their median means as much), up to [`MAX_RUNS`].
+const MIN_SECS: f64 = 0.3;
+const MAX_RUNS: usize = 200;
+
+/// Times at least `reps` runs of `f` (more for short runs when `reps > 1`, see [`MIN_SECS`]),
+/// after one warm-up run when `reps > 1`.
+pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<Timing, String> {
     if reps > 1 {
         f()?;
     }
     let mut t = Vec::with_capacity(reps);
-    for _ in 0..reps {
+    let mut total = 0.0;
+    while t.len() < reps.max(1) || (reps > 1 && total < MIN_SECS && t.len() < MAX_RUNS) {
         let start = Instant::now();
         f()?;
-        t.push(start.elapsed().as_secs_f64());
+        let secs = start.elapsed().as_secs_f64();
+        t.push(secs);
+        total += secs;
     }
     t.sort_by(f64::total_cmp);
-    Ok(t[t.len() / 2])
+    let median = t[t.len() / 2];
+    Ok(Timing {
+        median,
+        spread: (t[(3 * t.len()) / 4] - t[t.len() / 4]) / median.max(1e-12),
+    })
+}
+
+/// Median wall time of `reps` runs of `f` (see [`time_runs`]).
+pub fn median_secs(reps: usize, f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
+    Ok(time_runs(reps, f)?.median)
 }
 
 fn to_f64<F: Float>(v: ArrayViewD<'_, F>) -> Vec<f64> {
@@ -256,7 +285,7 @@ fn measure<F: Float>(
         .num_threads(1)
         .build()
         .map_err(|e| e.to_string())?;
-    let mut push = |method: &'static str, threads: usize, both: f64, fwd: f64, o: Outcome| {
+    let mut push = |method: &'static str, threads: usize, both: Timing, fwd: f64, o: Outcome| {
         let (err_color, err_color_norm) = errors(
             &o.color,
             &refs.color,
@@ -269,7 +298,8 @@ fn measure<F: Float>(
             threads,
             rays,
             samples,
-            samples_per_sec: n / both,
+            samples_per_sec: n / both.median,
+            samples_per_sec_spread: both.spread,
             samples_per_sec_forward: n / fwd,
             err_color,
             err_grad_sigma,
@@ -283,7 +313,7 @@ fn measure<F: Float>(
     let counts = if all > 1 { vec![1, all] } else { vec![1] };
     for threads in counts {
         let pool = (threads == 1).then_some(&one);
-        let both = within(pool, || median_secs(reps, || fused_step(&op, &x, true)))?;
+        let both = within(pool, || time_runs(reps, || fused_step(&op, &x, true)))?;
         let fwd = within(pool, || median_secs(reps, || fused_step(&op, &x, false)))?;
         let outcome = within(pool, || fused_run(&op, &x, mem))?;
         push("fused", threads, both, fwd, outcome);
@@ -293,15 +323,13 @@ fn measure<F: Float>(
             black_box(tape_with_inputs(&x));
             Ok(())
         })?;
-        let both = median_secs(reps, || taped_step(&op, &x, naive, true))? - setup;
+        let both = time_runs(reps, || taped_step(&op, &x, naive, true))?;
+        let both = Timing {
+            median: (both.median - setup).max(1e-9),
+            ..both
+        };
         let fwd = median_secs(reps, || taped_step(&op, &x, naive, false))? - setup;
-        push(
-            method,
-            1,
-            both.max(1e-9),
-            fwd.max(1e-9),
-            taped_run(&op, &x, naive, mem)?,
-        );
+        push(method, 1, both, fwd.max(1e-9), taped_run(&op, &x, naive, mem)?);
     }
     Ok(())
 }
@@ -349,17 +377,28 @@ pub fn parse_workload(s: &str) -> Result<(usize, usize), String> {
 /// The text report: one line per measurement, then the fused/taped ratios.
 pub fn table(results: &[Measurement]) -> String {
     let mut s = format!(
-        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
-        "method", "prec", "thr", "workload", "Ms/s f+b", "Ms/s fwd", "err C", "err dC/ds", "dC/ds norm", "peak MB"
+        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
+        "method",
+        "prec",
+        "thr",
+        "workload",
+        "Ms/s f+b",
+        "spread",
+        "Ms/s fwd",
+        "err C",
+        "err dC/ds",
+        "dC/ds norm",
+        "peak MB"
     );
     for m in results {
         s += &format!(
-            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
+            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
             m.method,
             m.precision,
             m.threads,
             format!("{}x{}", m.rays, m.samples),
             m.samples_per_sec / 1e6,
+            m.samples_per_sec_spread * 100.0,
             m.samples_per_sec_forward / 1e6,
             m.err_color,
             m.err_grad_sigma,
