@@ -1,7 +1,6 @@
 //! The backward kernel: one back-to-front pass per ray over `T_k` and `alpha_k` (recomputed),
 //! with "what it adds minus what it hides" carried as the recurrence `R_k` of the module docs.
 
-use fogray_tape::buffer::zeroed;
 use fogray_tape::Float;
 use rayon::prelude::*;
 
@@ -36,14 +35,14 @@ pub(crate) struct Wanted {
     pub t: bool,
 }
 
-/// Input gradients; a vector is empty when it was not wanted.
-pub(crate) struct InputGrads<F> {
-    pub sigma: Vec<F>,
-    pub delta: Vec<F>,
-    pub color: Vec<F>,
-    /// Per ray `[R * ch]`; the caller sums it for a shared background.
-    pub background: Vec<F>,
-    pub t: Vec<F>,
+/// Input gradients, flat; a slice is empty when it was not wanted, else of its input's length
+/// (the background's per ray, `[R * ch]`: the caller sums it for a shared background).
+pub(crate) struct InputGrads<'a, F> {
+    pub sigma: &'a mut [F],
+    pub delta: &'a mut [F],
+    pub color: &'a mut [F],
+    pub background: &'a mut [F],
+    pub t: &'a mut [F],
 }
 
 struct BlockOut<'a, F> {
@@ -54,30 +53,27 @@ struct BlockOut<'a, F> {
     t: &'a mut [F],
 }
 
-fn sized<F: Float>(want: bool, len: usize) -> Vec<F> {
-    zeroed(if want { len } else { 0 })
-}
-
+/// Every value of the wanted gradients in `out` is written (zero behind a ray's stop); a
+/// gradient may be wanted only if its upstream exists (see [`Wanted`]'s construction).
 pub(crate) fn backward<F: Float>(
     op: &Composite,
     x: &Flat<'_, F>,
     saved: &Residuals<F>,
     g: &Upstream<'_, F>,
     want: Wanted,
-) -> InputGrads<F> {
-    let (n, rays, ch) = (op.samples(), op.rays(), x.ch);
-    let mut out = InputGrads {
-        sigma: sized(want.sigma, n),
-        delta: sized(want.delta, n),
-        color: sized(want.color, n * ch),
-        background: sized(want.background, rays * ch),
-        t: sized(want.t, n),
-    };
+    out: InputGrads<'_, F>,
+) {
+    let ch = x.ch;
     let blocks = blocks(&op.offsets);
     let mut work = Vec::with_capacity(blocks.len());
     {
-        let (mut s, mut d, mut c) = (&mut out.sigma[..], &mut out.delta[..], &mut out.color[..]);
-        let (mut bg, mut t) = (&mut out.background[..], &mut out.t[..]);
+        let InputGrads {
+            sigma: mut s,
+            delta: mut d,
+            color: mut c,
+            background: mut bg,
+            mut t,
+        } = out;
         for b in &blocks {
             let (nr, ns) = (b.rays.len(), b.samples.len());
             let part = |w: bool, len: usize| if w { len } else { 0 };
@@ -106,7 +102,6 @@ pub(crate) fn backward<F: Float>(
             backward_ray(x, saved, g, want, ray, &mut scratch, &mut o);
         }
     });
-    out
 }
 
 /// Where a ray sits: its index, its global samples, and its place in its block; and the
@@ -206,6 +201,20 @@ fn backward_ray<F: Float>(
         }
     }
 
+    // Skipped samples (behind an early-termination stop) have no gradient.
+    let behind = local.end..samples.end - block_start;
+    if want.sigma {
+        o.sigma[behind.clone()].fill(F::zero());
+    }
+    if want.delta {
+        o.delta[behind.clone()].fill(F::zero());
+    }
+    if want.color {
+        o.color[behind.start * ch..behind.end * ch].fill(F::zero());
+    }
+    if want.t {
+        o.t[behind].fill(F::zero());
+    }
     if want.sigma {
         for ((out, &d), &dt) in o.sigma[local.clone()].iter_mut().zip(delta).zip(d_tau.iter()) {
             *out = F::lit(f(d) * dt);

@@ -1,7 +1,8 @@
 //! The forward kernel: per ray, the attenuation (vectorised) and one front-to-back pass of
 //! compositing, every running sum in f64.
 
-use fogray_tape::buffer::zeroed;
+use std::marker::PhantomData;
+
 use fogray_tape::Float;
 use rayon::prelude::*;
 
@@ -17,18 +18,23 @@ use super::rows::weighted_column_sums;
 /// Opaque to users, visible only through the tape's memory stats.
 #[derive(Debug, Clone)]
 pub struct Residuals<F> {
-    /// `[R * ch]`.
-    pub(crate) color: Vec<F>,
-    /// `[R]`.
-    pub(crate) opacity: Vec<F>,
-    /// `[R]`, empty without depth.
-    pub(crate) depth: Vec<F>,
-    /// `[n]`, empty unless weights were requested.
-    pub(crate) weights: Vec<F>,
-    /// `[n]`, empty unless transmittances were requested.
-    pub(crate) transmittance: Vec<F>,
-    /// Residuals: the first sample index (within its ray) that was skipped, or its length.
+    /// The first sample index (within its ray) that was skipped, or its length.
     pub(crate) stop: Vec<usize>,
+    precision: PhantomData<F>,
+}
+
+/// The forward's outputs, flat; each is empty when not configured.
+pub(crate) struct Outputs<'a, F> {
+    /// `[R * ch]`.
+    pub color: &'a mut [F],
+    /// `[R]`.
+    pub opacity: &'a mut [F],
+    /// `[R]`.
+    pub depth: &'a mut [F],
+    /// `[n]`.
+    pub weights: &'a mut [F],
+    /// `[n]`.
+    pub transmittance: &'a mut [F],
 }
 
 /// Mutable outputs of one block of rays.
@@ -43,21 +49,21 @@ struct BlockOut<'a, F> {
 
 /// Composites every ray; the flag is false if any sample value was invalid (NaN, infinite,
 /// negative density or step), checked on the fly so that valid input costs no extra pass.
-pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F>, bool) {
-    let (n, rays, ch) = (op.samples(), op.rays(), x.ch);
-    let mut out = Residuals {
-        color: zeroed(rays * ch),
-        opacity: zeroed(rays),
-        depth: zeroed(if op.depth { rays } else { 0 }),
-        weights: zeroed(if op.weights { n } else { 0 }),
-        transmittance: zeroed(if op.transmittance { n } else { 0 }),
-        stop: vec![0; rays],
-    };
+/// Every value of `out` is written (its lengths are the op's, checked by the caller).
+pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>, out: Outputs<'_, F>) -> (Residuals<F>, bool) {
+    let (rays, ch) = (op.rays(), x.ch);
+    let mut stop = vec![0; rays];
     let blocks = blocks(&op.offsets);
     let mut work = Vec::with_capacity(blocks.len());
     {
-        let (mut color, mut opacity, mut depth) = (&mut out.color[..], &mut out.opacity[..], &mut out.depth[..]);
-        let (mut weights, mut trans, mut stop) = (&mut out.weights[..], &mut out.transmittance[..], &mut out.stop[..]);
+        let Outputs {
+            mut color,
+            mut opacity,
+            mut depth,
+            mut weights,
+            transmittance: mut trans,
+        } = out;
+        let mut stop = &mut stop[..];
         for b in &blocks {
             let (nr, ns) = (b.rays.len(), b.samples.len());
             work.push((
@@ -112,7 +118,11 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>) -> (Residuals<F
             valid
         })
         .reduce(|| true, |a, b| a && b);
-    (out, valid)
+    let residuals = Residuals {
+        stop,
+        precision: PhantomData,
+    };
+    (residuals, valid)
 }
 
 /// One ray's inputs.

@@ -4,13 +4,14 @@
 
 use std::borrow::Cow;
 
+use fogray_tape::buffer::zeroed;
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
-use ndarray::{ArrayD, ArrayViewD, IxDyn};
+use ndarray::{ArrayD, ArrayViewD, ArrayViewMutD, IxDyn};
 
-use super::backward::{backward, Upstream, Wanted};
+use super::backward::{backward, InputGrads, Upstream, Wanted};
 use super::config::{Background, Composite};
-use super::forward::{forward, Residuals};
-use super::layout::{check_background, check_values, flatten};
+use super::forward::{forward, Outputs, Residuals};
+use super::layout::{check_background, check_values, flatten, Flat};
 use crate::error::CompositeError;
 
 fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, CompositeError> {
@@ -28,44 +29,212 @@ fn flat<'a, F: Float>(g: &'a Option<ArrayViewD<'_, F>>) -> Option<Cow<'a, [F]>> 
     })
 }
 
+/// The contiguous data of an output buffer of exactly `shape`, or why not.
+fn buffer<'a, F: Float>(
+    what: &'static str,
+    b: &'a mut ArrayViewMutD<'_, F>,
+    shape: &[usize],
+) -> Result<&'a mut [F], CompositeError> {
+    if b.shape() != shape {
+        return Err(CompositeError::Shape {
+            what,
+            expected: format!("shape {shape:?}"),
+            got: format!("shape {:?}", b.shape()),
+        });
+    }
+    b.as_slice_mut().ok_or_else(|| CompositeError::Shape {
+        what,
+        expected: "a contiguous array in standard (row-major) order".into(),
+        got: "a strided view".into(),
+    })
+}
+
+/// The backward's arguments, checked: upstream gradients as flat slices, and which input
+/// gradients can be non-zero.
+struct Prepared<'g, F: Float> {
+    gc: Option<Cow<'g, [F]>>,
+    go: Option<Cow<'g, [F]>>,
+    gd: Option<Cow<'g, [F]>>,
+    gw: Option<Cow<'g, [F]>>,
+    gt: Option<Cow<'g, [F]>>,
+}
+
+impl<F: Float> Prepared<'_, F> {
+    fn upstream(&self) -> Upstream<'_, F> {
+        Upstream {
+            color: self.gc.as_deref(),
+            opacity: self.go.as_deref(),
+            depth: self.gd.as_deref(),
+            weights: self.gw.as_deref(),
+            transmittance: self.gt.as_deref(),
+        }
+    }
+
+    /// Which gradients the backward computes, given which are asked for (in input order);
+    /// one asked for but not computed is zero (no upstream reaches it).
+    fn wanted(&self, op: &Composite, asked: &[bool]) -> Wanted {
+        let has_bg = op.background != Background::None;
+        let t_at = 3 + usize::from(has_bg);
+        Wanted {
+            sigma: asked[0],
+            delta: asked[1],
+            color: asked[2] && self.gc.is_some(),
+            background: has_bg && asked[3] && self.gc.is_some(),
+            t: op.depth && asked[t_at] && self.gd.is_some(),
+        }
+    }
+}
+
 impl Composite {
+    /// The output shapes, in the order of [`Composite::apply`].
+    fn output_shapes(&self, ch: usize) -> Vec<Vec<usize>> {
+        let (n, rays) = (self.samples(), self.rays());
+        let mut shapes = vec![vec![rays, ch], vec![rays]];
+        if self.depth {
+            shapes.push(vec![rays]);
+        }
+        if self.weights {
+            shapes.push(vec![n]);
+        }
+        if self.transmittance {
+            shapes.push(vec![n]);
+        }
+        shapes
+    }
+
+    /// The forward into checked output slices (in the order of [`Composite::output_shapes`]).
+    fn forward_into<F: Float>(&self, x: &Flat<'_, F>, outs: Vec<&mut [F]>) -> Result<Residuals<F>, CompositeError> {
+        let mut outs = outs.into_iter();
+        let mut next = |on: bool| {
+            if on {
+                outs.next().unwrap_or_default()
+            } else {
+                Default::default()
+            }
+        };
+        let (color, opacity) = (next(true), next(true));
+        let (depth, weights, transmittance) = (next(self.depth), next(self.weights), next(self.transmittance));
+        let (residuals, valid) = forward(
+            self,
+            x,
+            Outputs {
+                color,
+                opacity,
+                depth,
+                weights,
+                transmittance,
+            },
+        );
+        if !valid {
+            // Find and name the first offending value.
+            check_values(self, x)?;
+        }
+        Ok(residuals)
+    }
+
     /// The forward pass without a tape: the outputs in the order of [`Composite::apply`]
     /// (colour, opacity, then depth, weights, transmittance as configured) and the residuals
     /// that [`Composite::vjp`] needs.
     ///
     /// `inputs` are sigma `[n]`, delta `[n]`, color `[n, ch]`, then the background unless
-    /// [`Background::None`], then t with depth. Errors name the ray and sample at fault.
+    /// [`Background::None`], then t with depth. Errors name the ray and sample at fault; no
+    /// output is returned then.
     pub fn evaluate<F: Float>(
         &self,
         inputs: &[ArrayViewD<'_, F>],
     ) -> Result<(Vec<ArrayD<F>>, Residuals<F>), CompositeError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
-        let (mut fwd, valid) = forward(self, &x);
-        if !valid {
-            // Find and name the first offending value; no output is returned.
-            check_values(self, &x)?;
+        let shapes = self.output_shapes(x.ch);
+        let mut data: Vec<Vec<F>> = shapes.iter().map(|s| zeroed(s.iter().product())).collect();
+        let residuals = self.forward_into(&x, data.iter_mut().map(|d| &mut d[..]).collect())?;
+        let outs = shapes
+            .iter()
+            .zip(data)
+            .map(|(shape, d)| array(shape, d))
+            .collect::<Result<_, _>>()?;
+        Ok((outs, residuals))
+    }
+
+    /// [`Composite::evaluate`] into caller-owned buffers, one per output in the same order
+    /// and of exactly its shape (contiguous, row-major), every value overwritten: a training
+    /// loop that keeps its buffers allocates nothing per step but the residuals (one index
+    /// per ray), and the kernel does not clear fresh pages for it.
+    ///
+    /// Errors in shapes (inputs or buffers) leave the buffers untouched; on an invalid input
+    /// value (named in the error, as for [`Composite::evaluate`]) their contents are
+    /// unspecified. The inputs are never modified.
+    pub fn evaluate_into<F: Float>(
+        &self,
+        inputs: &[ArrayViewD<'_, F>],
+        outputs: &mut [ArrayViewMutD<'_, F>],
+    ) -> Result<Residuals<F>, CompositeError> {
+        let x = flatten(self, inputs)?;
+        check_background(&x)?;
+        let shapes = self.output_shapes(x.ch);
+        if outputs.len() != shapes.len() {
+            return Err(CompositeError::Shape {
+                what: "output buffers",
+                expected: format!("{} buffers", shapes.len()),
+                got: format!("{}", outputs.len()),
+            });
         }
-        let (n, rays) = (self.samples(), self.rays());
-        let mut outs = vec![
-            array(&[rays, x.ch], std::mem::take(&mut fwd.color))?,
-            array(&[rays], std::mem::take(&mut fwd.opacity))?,
+        let slices = outputs
+            .iter_mut()
+            .zip(&shapes)
+            .map(|(b, shape)| buffer("output buffer", b, shape))
+            .collect::<Result<Vec<_>, _>>()?;
+        self.forward_into(&x, slices)
+    }
+
+    /// Checks the backward's arguments and returns the upstream gradients flat.
+    fn prepare<'g, F: Float>(
+        &self,
+        x: &Flat<'_, F>,
+        residuals: &Residuals<F>,
+        grads: &'g [Option<ArrayViewD<'_, F>>],
+    ) -> Result<Prepared<'g, F>, CompositeError> {
+        let outputs = self.output_shapes(x.ch).len();
+        let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
+        if grads.len() != outputs || residuals.stop.len() != rays {
+            return Err(CompositeError::Shape {
+                what: "vjp arguments",
+                expected: format!("{outputs} upstream gradients, residuals of {rays} rays"),
+                got: format!("{} gradients, residuals of {} rays", grads.len(), residuals.stop.len()),
+            });
+        }
+        let mut slot = 2..grads.len();
+        let mut next = |on: bool| if on { slot.next() } else { None };
+        let (depth_at, weights_at, trans_at) = (next(self.depth), next(self.weights), next(self.transmittance));
+        let pick = |at: Option<usize>| at.and_then(|i| flat(&grads[i]));
+        let p = Prepared {
+            gc: flat(&grads[0]),
+            go: flat(&grads[1]),
+            gd: pick(depth_at),
+            gw: pick(weights_at),
+            gt: pick(trans_at),
+        };
+        let expect = [
+            (p.gc.as_deref(), rays * ch),
+            (p.go.as_deref(), rays),
+            (p.gd.as_deref(), rays),
+            (p.gw.as_deref(), n),
+            (p.gt.as_deref(), n),
         ];
-        if self.depth {
-            outs.push(array(&[rays], std::mem::take(&mut fwd.depth))?);
+        if let Some((g, len)) = expect.iter().find(|(g, len)| g.is_some_and(|g| g.len() != *len)) {
+            return Err(CompositeError::Shape {
+                what: "upstream gradient",
+                expected: format!("{len} values"),
+                got: format!("{}", g.map_or(0, <[F]>::len)),
+            });
         }
-        if self.weights {
-            outs.push(array(&[n], std::mem::take(&mut fwd.weights))?);
-        }
-        if self.transmittance {
-            outs.push(array(&[n], std::mem::take(&mut fwd.transmittance))?);
-        }
-        Ok((outs, fwd))
+        Ok(p)
     }
 
     /// The backward pass without a tape: gradients of the inputs (in the order of
     /// [`Composite::evaluate`]) from upstream gradients of the outputs (`None` for an unused
-    /// output), for the inputs whose `needs` entry is true.
+    /// output), for the inputs whose `needs` entry is true (`None` where no upstream reaches
+    /// an input: its gradient is zero).
     ///
     /// `inputs` and `residuals` must be those of the matching [`Composite::evaluate`] call;
     /// shapes are checked, values are not checked again.
@@ -77,90 +246,131 @@ impl Composite {
         needs: &[bool],
     ) -> Result<Vec<Option<ArrayD<F>>>, CompositeError> {
         let x = flatten(self, inputs)?;
-        let outputs = 2 + usize::from(self.depth) + usize::from(self.weights) + usize::from(self.transmittance);
+        if needs.len() != inputs.len() {
+            return Err(CompositeError::Shape {
+                what: "needs",
+                expected: format!("{} flags", inputs.len()),
+                got: format!("{}", needs.len()),
+            });
+        }
+        let p = self.prepare(&x, residuals, grads)?;
+        let want = p.wanted(self, needs);
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
-        if grads.len() != outputs || needs.len() != inputs.len() || residuals.stop.len() != rays {
-            return Err(CompositeError::Shape {
-                what: "vjp arguments",
-                expected: format!(
-                    "{outputs} upstream gradients, {} needs, residuals of {rays} rays",
-                    inputs.len()
-                ),
-                got: format!(
-                    "{} gradients, {} needs, residuals of {} rays",
-                    grads.len(),
-                    needs.len(),
-                    residuals.stop.len()
-                ),
-            });
-        }
-        let mut slot = 2..grads.len();
-        let mut next = |on: bool| if on { slot.next() } else { None };
-        let (depth_at, weights_at, trans_at) = (next(self.depth), next(self.weights), next(self.transmittance));
-        let (gc, go) = (flat(&grads[0]), flat(&grads[1]));
-        let pick = |at: Option<usize>| at.and_then(|i| flat(&grads[i]));
-        let (gd, gw, gt) = (pick(depth_at), pick(weights_at), pick(trans_at));
-        let expect = [
-            (gc.as_deref(), rays * ch),
-            (go.as_deref(), rays),
-            (gd.as_deref(), rays),
-            (gw.as_deref(), n),
-            (gt.as_deref(), n),
-        ];
-        if let Some((g, len)) = expect.iter().find(|(g, len)| g.is_some_and(|g| g.len() != *len)) {
-            return Err(CompositeError::Shape {
-                what: "upstream gradient",
-                expected: format!("{len} values"),
-                got: format!("{}", g.map_or(0, <[F]>::len)),
-            });
-        }
-        let has_bg = self.background != Background::None;
-        let bg_at = 3;
-        let t_at = 3 + usize::from(has_bg);
-        let want = Wanted {
-            sigma: needs[0],
-            delta: needs[1],
-            color: needs[2] && gc.is_some(),
-            background: has_bg && needs[bg_at] && gc.is_some(),
-            t: self.depth && needs[t_at] && gd.is_some(),
+        let sized = |on: bool, len: usize| zeroed::<F>(if on { len } else { 0 });
+        let (mut gs, mut gd, mut gc) = (sized(want.sigma, n), sized(want.delta, n), sized(want.color, n * ch));
+        let (mut gb, mut gt) = (sized(want.background, rays * ch), sized(want.t, n));
+        let out = InputGrads {
+            sigma: &mut gs,
+            delta: &mut gd,
+            color: &mut gc,
+            background: &mut gb,
+            t: &mut gt,
         };
-        let upstream = Upstream {
-            color: gc.as_deref(),
-            opacity: go.as_deref(),
-            depth: gd.as_deref(),
-            weights: gw.as_deref(),
-            transmittance: gt.as_deref(),
-        };
-        let g = backward(self, &x, residuals, &upstream, want);
+        backward(self, &x, residuals, &p.upstream(), want, out);
         let mut out: Vec<Option<ArrayD<F>>> = vec![
-            want.sigma.then(|| array(&[n], g.sigma)).transpose()?,
-            want.delta.then(|| array(&[n], g.delta)).transpose()?,
-            want.color.then(|| array(&[n, ch], g.color)).transpose()?,
+            want.sigma.then(|| array(&[n], gs)).transpose()?,
+            want.delta.then(|| array(&[n], gd)).transpose()?,
+            want.color.then(|| array(&[n, ch], gc)).transpose()?,
         ];
-        if has_bg {
+        if self.background != Background::None {
             let bg = match self.background {
-                Background::PerRay => want.background.then(|| array(&[rays, ch], g.background)).transpose()?,
-                _ => want
-                    .background
-                    .then(|| {
-                        // Summed in ray order, so the result does not depend on the thread count.
-                        let mut total = vec![0.0f64; ch];
-                        for row in g.background.chunks_exact(ch) {
-                            for (t, &v) in total.iter_mut().zip(row) {
-                                *t += v.as_f64();
-                            }
-                        }
-                        array(&[ch], total.into_iter().map(F::lit).collect())
-                    })
-                    .transpose()?,
+                Background::PerRay => want.background.then(|| array(&[rays, ch], gb)).transpose()?,
+                _ => want.background.then(|| array(&[ch], sum_rows(&gb, ch))).transpose()?,
             };
             out.push(bg);
         }
         if self.depth {
-            out.push(want.t.then(|| array(&[n], g.t)).transpose()?);
+            out.push(want.t.then(|| array(&[n], gt)).transpose()?);
         }
         Ok(out)
     }
+
+    /// [`Composite::vjp`] into caller-owned buffers: `out` has one entry per input (in the
+    /// order of [`Composite::evaluate`]), `Some` with a buffer of exactly that input's shape
+    /// (contiguous, row-major) for each gradient wanted, every value overwritten (with zeros
+    /// where no upstream reaches the input), `None` for the others.
+    ///
+    /// `inputs` and `residuals` must be those of the matching forward call. On error nothing
+    /// is written.
+    pub fn vjp_into<F: Float>(
+        &self,
+        inputs: &[ArrayViewD<'_, F>],
+        residuals: &Residuals<F>,
+        grads: &[Option<ArrayViewD<'_, F>>],
+        out: &mut [Option<ArrayViewMutD<'_, F>>],
+    ) -> Result<(), CompositeError> {
+        let x = flatten(self, inputs)?;
+        if out.len() != inputs.len() {
+            return Err(CompositeError::Shape {
+                what: "gradient buffers",
+                expected: format!("{} entries (one per input)", inputs.len()),
+                got: format!("{}", out.len()),
+            });
+        }
+        let p = self.prepare(&x, residuals, grads)?;
+        let asked: Vec<bool> = out.iter().map(Option::is_some).collect();
+        let want = p.wanted(self, &asked);
+        let mut slices = Vec::with_capacity(out.len());
+        for (b, input) in out.iter_mut().zip(inputs) {
+            slices.push(match b {
+                Some(b) => buffer("gradient buffer", b, input.shape())?,
+                None => Default::default(),
+            });
+        }
+        let mut slices = slices.into_iter();
+        let mut next = || slices.next().unwrap_or_default();
+        let (gs, gd, gc) = (next(), next(), next());
+        let has_bg = self.background != Background::None;
+        let gb = if has_bg { next() } else { Default::default() };
+        let gt = if self.depth { next() } else { Default::default() };
+        // The backward writes a per-ray background gradient; a shared one is its sum.
+        let rays = self.rays();
+        let mut per_ray_bg = Vec::new();
+        let background: &mut [F] = match self.background {
+            Background::PerRay if want.background => &mut gb[..],
+            _ if want.background => {
+                per_ray_bg = zeroed(rays * x.ch);
+                &mut per_ray_bg
+            }
+            _ => &mut [],
+        };
+        let computed = [want.sigma, want.delta, want.color];
+        let not_reached = |on: bool, g: &mut [F]| {
+            if !on {
+                g.fill(F::zero());
+            }
+        };
+        let out = InputGrads {
+            sigma: if computed[0] { &mut gs[..] } else { &mut [] },
+            delta: if computed[1] { &mut gd[..] } else { &mut [] },
+            color: if computed[2] { &mut gc[..] } else { &mut [] },
+            background,
+            t: if want.t { &mut gt[..] } else { &mut [] },
+        };
+        backward(self, &x, residuals, &p.upstream(), want, out);
+        not_reached(want.color, gc);
+        not_reached(want.t, gt);
+        if self.background == Background::Shared && want.background {
+            for (g, v) in gb.iter_mut().zip(sum_rows(&per_ray_bg, x.ch)) {
+                *g = v;
+            }
+        } else if !want.background {
+            gb.fill(F::zero());
+        }
+        Ok(())
+    }
+}
+
+/// Column sums of `[rows][ch]`, in row order (so the result does not depend on the thread
+/// count), in f64.
+fn sum_rows<F: Float>(rows: &[F], ch: usize) -> Vec<F> {
+    let mut total = vec![0.0f64; ch];
+    for row in rows.chunks_exact(ch) {
+        for (t, &v) in total.iter_mut().zip(row) {
+            *t += v.as_f64();
+        }
+    }
+    total.into_iter().map(F::lit).collect()
 }
 
 fn op_error(e: CompositeError) -> OpError {
