@@ -1,7 +1,8 @@
 //! Criterion benches: the fused composite against its taped twins, forward and backward
 //! (gradients for sigma and colour), on the workloads of `fogray bench`.
 //!
-//! `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
+//! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
+//! iterations. `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
 //! selects. `fogray bench` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
@@ -51,6 +52,29 @@ fn fused<F: Float>(x: &Inputs<F>) {
     black_box((outs, g));
 }
 
+/// Output and gradient buffers kept across iterations (a training loop's steady state).
+struct Buffers<F: Float> {
+    color: ArrayD<F>,
+    opacity: ArrayD<F>,
+    grad_sigma: ArrayD<F>,
+    grad_color: ArrayD<F>,
+}
+
+fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
+    let views = [
+        x.sigma.view().into_dyn(),
+        x.delta.view().into_dyn(),
+        x.color.view().into_dyn(),
+        x.background.view().into_dyn(),
+    ];
+    let res =
+        x.op.evaluate_into(&views, &mut [b.color.view_mut(), b.opacity.view_mut()])
+            .unwrap();
+    let mut grads = [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None];
+    x.op.vjp_into(&views, &res, &[Some(x.grad.view()), None], &mut grads)
+        .unwrap();
+}
+
 fn taped<F: Float>(x: &Inputs<F>, naive: bool) {
     let mut tape = Tape::new();
     let inputs = CompositeInputs {
@@ -77,6 +101,16 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
         group.throughput(Throughput::Elements((rays * samples) as u64));
         group.sample_size(10);
         group.bench_with_input(BenchmarkId::new("fused", &id), &x, |b, x| b.iter(|| fused(x)));
+        let n = rays * samples;
+        let mut buffers = Buffers {
+            color: ArrayD::zeros(vec![rays, 3]),
+            opacity: ArrayD::zeros(vec![rays]),
+            grad_sigma: ArrayD::zeros(vec![n]),
+            grad_color: ArrayD::zeros(vec![n, 3]),
+        };
+        group.bench_with_input(BenchmarkId::new("fused-into", &id), &x, |b, x| {
+            b.iter(|| fused_into(x, &mut buffers))
+        });
         group.bench_with_input(BenchmarkId::new("taped", &id), &x, |b, x| b.iter(|| taped(x, false)));
         group.bench_with_input(BenchmarkId::new("taped-naive", &id), &x, |b, x| {
             b.iter(|| taped(x, true))

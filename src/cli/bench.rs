@@ -38,6 +38,10 @@ pub struct Measurement {
     /// Interquartile range over the median of the forward+backward run times (0 with one run):
     /// how far to trust `samples_per_sec` on a noisy machine.
     pub samples_per_sec_spread: f64,
+    /// Fused only: forward and backward through `evaluate_into` / `vjp_into` into output and
+    /// gradient buffers kept across runs (a training loop's steady state; the same bits).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub samples_per_sec_reused: Option<f64>,
     pub samples_per_sec_forward: f64,
     /// Worst element-wise relative error of the colour.
     pub err_color: f64,
@@ -203,6 +207,48 @@ fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<
     Ok(())
 }
 
+/// Output and gradient buffers kept across fused runs (colour, opacity; dL/dsigma, dL/dcolour).
+struct Buffers<F: Float> {
+    color: ArrayD<F>,
+    opacity: ArrayD<F>,
+    grad_sigma: ArrayD<F>,
+    grad_color: ArrayD<F>,
+}
+
+impl<F: Float> Buffers<F> {
+    fn new(x: &Typed<F>) -> Self {
+        let (n, rays) = (x.sigma.len(), x.grad_color.shape()[0]);
+        Buffers {
+            color: ArrayD::zeros(vec![rays, 3]),
+            opacity: ArrayD::zeros(vec![rays]),
+            grad_sigma: ArrayD::zeros(vec![n]),
+            grad_color: ArrayD::zeros(vec![n, 3]),
+        }
+    }
+}
+
+/// [`fused_step`] through the `_into` API, forward and backward, into `b`.
+fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), String> {
+    let views = [
+        x.sigma.view().into_dyn(),
+        x.delta.view().into_dyn(),
+        x.color.view().into_dyn(),
+        x.background.view().into_dyn(),
+    ];
+    let res = op
+        .evaluate_into(&views, &mut [b.color.view_mut(), b.opacity.view_mut()])
+        .map_err(|e| e.to_string())?;
+    op.vjp_into(
+        &views,
+        &res,
+        &[Some(x.grad_color.view()), None],
+        &mut [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None],
+    )
+    .map_err(|e| e.to_string())?;
+    black_box(&b.grad_sigma);
+    Ok(())
+}
+
 /// Puts the inputs on a new tape (sigma and colour as params): the part of a taped run that is
 /// the same for every method, timed separately and subtracted.
 fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, CompositeInputs) {
@@ -285,7 +331,7 @@ fn measure<F: Float>(
         .num_threads(1)
         .build()
         .map_err(|e| e.to_string())?;
-    let mut push = |method: &'static str, threads: usize, both: Timing, fwd: f64, o: Outcome| {
+    let mut push = |method: &'static str, threads: usize, both: Timing, reused: Option<f64>, fwd: f64, o: Outcome| {
         let (err_color, err_color_norm) = errors(
             &o.color,
             &refs.color,
@@ -300,6 +346,7 @@ fn measure<F: Float>(
             samples,
             samples_per_sec: n / both.median,
             samples_per_sec_spread: both.spread,
+            samples_per_sec_reused: reused.map(|t| n / t),
             samples_per_sec_forward: n / fwd,
             err_color,
             err_grad_sigma,
@@ -315,8 +362,10 @@ fn measure<F: Float>(
         let pool = (threads == 1).then_some(&one);
         let both = within(pool, || time_runs(reps, || fused_step(&op, &x, true)))?;
         let fwd = within(pool, || median_secs(reps, || fused_step(&op, &x, false)))?;
+        let mut buffers = Buffers::new(&x);
+        let reused = within(pool, || median_secs(reps, || fused_step_into(&op, &x, &mut buffers)))?;
         let outcome = within(pool, || fused_run(&op, &x, mem))?;
-        push("fused", threads, both, fwd, outcome);
+        push("fused", threads, both, Some(reused), fwd, outcome);
     }
     for (method, naive) in [("taped", false), ("taped-naive", true)] {
         let setup = median_secs(reps, || {
@@ -329,7 +378,7 @@ fn measure<F: Float>(
             ..both
         };
         let fwd = median_secs(reps, || taped_step(&op, &x, naive, false))? - setup;
-        push(method, 1, both, fwd.max(1e-9), taped_run(&op, &x, naive, mem)?);
+        push(method, 1, both, None, fwd.max(1e-9), taped_run(&op, &x, naive, mem)?);
     }
     Ok(())
 }
@@ -377,13 +426,14 @@ pub fn parse_workload(s: &str) -> Result<(usize, usize), String> {
 /// The text report: one line per measurement, then the fused/taped ratios.
 pub fn table(results: &[Measurement]) -> String {
     let mut s = format!(
-        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
+        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
         "method",
         "prec",
         "thr",
         "workload",
         "Ms/s f+b",
         "spread",
+        "reused",
         "Ms/s fwd",
         "err C",
         "err dC/ds",
@@ -392,13 +442,15 @@ pub fn table(results: &[Measurement]) -> String {
     );
     for m in results {
         s += &format!(
-            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
+            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
             m.method,
             m.precision,
             m.threads,
             format!("{}x{}", m.rays, m.samples),
             m.samples_per_sec / 1e6,
             m.samples_per_sec_spread * 100.0,
+            m.samples_per_sec_reused
+                .map_or("-".into(), |r| format!("{:.1}", r / 1e6)),
             m.samples_per_sec_forward / 1e6,
             m.err_color,
             m.err_grad_sigma,
@@ -416,11 +468,12 @@ pub fn table(results: &[Measurement]) -> String {
             .find(|t| t.method == "taped" && t.precision == m.precision && t.rays == m.rays && t.samples == m.samples);
         if let Some(t) = twin {
             s += &format!(
-                "  {} {}x{}: {:.1}x faster, {:.2}x the peak extra memory\n",
+                "  {} {}x{}: {:.1}x faster ({:.1}x into reused buffers), {:.2}x the peak extra memory\n",
                 m.precision,
                 m.rays,
                 m.samples,
                 m.samples_per_sec / t.samples_per_sec,
+                m.samples_per_sec_reused.unwrap_or(m.samples_per_sec) / t.samples_per_sec,
                 m.peak_extra_bytes as f64 / t.peak_extra_bytes.max(1) as f64
             );
         }
