@@ -31,6 +31,7 @@ const CHUNK: usize = 32;
 /// group are off the chain, which carries one addition per group instead of one per sample
 /// (each `out[k]` is then the running total plus at most three terms, as accurate as the
 /// one-at-a-time sum).
+#[inline(always)]
 fn exclusive_prefix_sums(x: &[f64], out: &mut [f64], mut running: f64) -> f64 {
     let mut groups = out.chunks_exact_mut(4);
     let mut terms = x.chunks_exact(4);
@@ -53,6 +54,7 @@ fn exclusive_prefix_sums(x: &[f64], out: &mut [f64], mut running: f64) -> f64 {
 
 /// Whether every sigma and delta is finite and non-negative (a fold, not a search, so that it
 /// vectorises: valid input, the common case, is read once at full speed).
+#[inline(always)]
 pub(crate) fn valid_steps<F: Float>(sigma: &[F], delta: &[F]) -> bool {
     // Two comparisons and no branch: NaN fails both, infinity the second.
     let (zero, max) = (F::zero(), F::max_value());
@@ -67,6 +69,7 @@ impl Attenuation {
     /// taken [`CHUNK`] at a time and nothing is computed past the chunk where the transmittance
     /// first falls below it (so early termination saves the work it promises). Values outside
     /// the domain (see [`valid_steps`]) give meaningless results, never a panic.
+    #[inline(always)]
     pub(crate) fn compute<F: Float>(&mut self, sigma: &[F], delta: &[F], min_transmittance: f64) {
         let len = sigma.len();
         self.tau.resize(len, 0.0);

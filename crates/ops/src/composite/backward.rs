@@ -2,12 +2,13 @@
 //! with "what it adds minus what it hides" carried as the recurrence `R_k` of the module docs.
 
 use fogray_tape::Float;
+use multiversion::multiversion;
 use rayon::prelude::*;
 
 use super::attenuation::Attenuation;
 use super::config::Composite;
 use super::forward::Residuals;
-use super::layout::{blocks, take_front, Flat};
+use super::layout::{blocks, take_front, Block, Flat};
 use super::rows::{add_row_dots, outer_product};
 use super::suffix::adds_minus_hides;
 
@@ -89,19 +90,33 @@ pub(crate) fn backward<F: Float>(
             ));
         }
     }
-    work.into_par_iter().for_each(|(block, mut o)| {
-        let mut scratch = Scratch::default();
-        for (j, r) in block.rays.clone().enumerate() {
-            let ray = Ray {
-                index: r,
-                samples: op.offsets[r]..op.offsets[r + 1],
-                block_start: block.samples.start,
-                in_block: j,
-                min_transmittance: op.min_transmittance,
-            };
-            backward_ray(x, saved, g, want, ray, &mut scratch, &mut o);
-        }
-    });
+    work.into_par_iter()
+        .for_each(|(block, o)| backward_block(op, x, saved, g, want, &block, o));
+}
+
+/// The backward of one block of rays into `o`, compiled for the vector units this machine has
+/// (see the forward's `forward_block`).
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn backward_block<'a, F: Float>(
+    op: &Composite,
+    x: &Flat<'a, F>,
+    saved: &Residuals<F>,
+    g: &Upstream<'a, F>,
+    want: Wanted,
+    block: &Block,
+    mut o: BlockOut<'a, F>,
+) {
+    let mut scratch = Scratch::default();
+    for (j, r) in block.rays.clone().enumerate() {
+        let ray = Ray {
+            index: r,
+            samples: op.offsets[r]..op.offsets[r + 1],
+            block_start: block.samples.start,
+            in_block: j,
+            min_transmittance: op.min_transmittance,
+        };
+        backward_ray(x, saved, g, want, ray, &mut scratch, &mut o);
+    }
 }
 
 /// Where a ray sits: its index, its global samples, and its place in its block; and the
@@ -126,6 +141,7 @@ struct Scratch {
     g_color: Vec<f64>,
 }
 
+#[inline(always)]
 fn backward_ray<F: Float>(
     x: &Flat<'_, F>,
     saved: &Residuals<F>,

@@ -4,11 +4,12 @@
 use std::marker::PhantomData;
 
 use fogray_tape::Float;
+use multiversion::multiversion;
 use rayon::prelude::*;
 
 use super::attenuation::{valid_steps, Attenuation};
 use super::config::Composite;
-use super::layout::{blocks, take_front, Flat};
+use super::layout::{blocks, take_front, Block, Flat};
 use super::rows::weighted_column_sums;
 
 /// What the composite's forward keeps for its backward: the stop index of each ray (its
@@ -81,48 +82,55 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>, out: Outputs<'_
     }
     let valid = work
         .into_par_iter()
-        .map(|(block, o)| {
-            let mut acc = vec![0.0f64; ch];
-            let mut att = Attenuation::default();
-            let mut valid = true;
-            let s0 = block.samples.start;
-            for (j, r) in block.rays.clone().enumerate() {
-                let samples = op.offsets[r]..op.offsets[r + 1];
-                let local = samples.start - s0..samples.end - s0;
-                let result = forward_ray(
-                    RayIn {
-                        sigma: &x.sigma[samples.clone()],
-                        delta: &x.delta[samples.clone()],
-                        color: &x.color[samples.start * ch..samples.end * ch],
-                        t: x.t.as_ref().map(|t| &t[samples.clone()]),
-                        background: x.background_of(r),
-                    },
-                    op.min_transmittance,
-                    &mut att,
-                    &mut acc,
-                    RayOut {
-                        transmittance: op.transmittance.then(|| &mut o.transmittance[local.clone()]),
-                        weights: op.weights.then(|| &mut o.weights[local]),
-                    },
-                );
-                for (c, &a) in acc.iter().enumerate() {
-                    o.color[j * ch + c] = F::lit(a);
-                }
-                o.opacity[j] = F::lit(result.opacity);
-                if op.depth {
-                    o.depth[j] = F::lit(result.depth);
-                }
-                o.stop[j] = result.stop;
-                valid &= result.valid;
-            }
-            valid
-        })
+        .map(|(block, o)| forward_block(op, x, &block, o))
         .reduce(|| true, |a, b| a && b);
     let residuals = Residuals {
         stop,
         precision: PhantomData,
     };
     (residuals, valid)
+}
+
+/// Composites one block of rays into `o`; false if any value was invalid. Compiled for the
+/// vector units this machine has (chosen at run time), with the per-ray helpers inlined into
+/// it: the crate itself is built for the baseline instruction set.
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn forward_block<'a, F: Float>(op: &Composite, x: &Flat<'a, F>, block: &Block, o: BlockOut<'a, F>) -> bool {
+    let ch = x.ch;
+    let mut acc = vec![0.0f64; ch];
+    let mut att = Attenuation::default();
+    let mut valid = true;
+    let s0 = block.samples.start;
+    for (j, r) in block.rays.clone().enumerate() {
+        let samples = op.offsets[r]..op.offsets[r + 1];
+        let local = samples.start - s0..samples.end - s0;
+        let result = forward_ray(
+            RayIn {
+                sigma: &x.sigma[samples.clone()],
+                delta: &x.delta[samples.clone()],
+                color: &x.color[samples.start * ch..samples.end * ch],
+                t: x.t.as_ref().map(|t| &t[samples.clone()]),
+                background: x.background_of(r),
+            },
+            op.min_transmittance,
+            &mut att,
+            &mut acc,
+            RayOut {
+                transmittance: op.transmittance.then(|| &mut o.transmittance[local.clone()]),
+                weights: op.weights.then(|| &mut o.weights[local]),
+            },
+        );
+        for (c, &a) in acc.iter().enumerate() {
+            o.color[j * ch + c] = F::lit(a);
+        }
+        o.opacity[j] = F::lit(result.opacity);
+        if op.depth {
+            o.depth[j] = F::lit(result.depth);
+        }
+        o.stop[j] = result.stop;
+        valid &= result.valid;
+    }
+    valid
 }
 
 /// One ray's inputs.
@@ -137,6 +145,7 @@ pub(crate) struct RayIn<'a, F> {
 }
 
 /// Whether no value is NaN or infinite, without a branch per value (so that it vectorises).
+#[inline(always)]
 fn all_finite<F: Float>(v: &[F]) -> bool {
     let max = F::max_value();
     v.iter().fold(true, |ok, &x| ok & (x.abs() <= max))
@@ -158,6 +167,7 @@ pub(crate) struct RayResult {
 }
 
 /// Composites one ray front to back. `color` (the f64 accumulator, `[ch]`) receives the pixel.
+#[inline(always)]
 pub(crate) fn forward_ray<F: Float>(
     ray: RayIn<'_, F>,
     min_transmittance: f64,

@@ -28,56 +28,61 @@ fn count<const CH: usize>(ch: usize) -> usize {
     }
 }
 
+/// Interleaved partial sums per channel in [`weighted_column_sums`].
+const LANES: usize = 4;
+
 /// `acc[c] += sum_k w[k] color[k][c]` over `k < w.len()`; `color` is `[>= w.len()][acc.len()]`.
-/// Even and odd samples are summed apart and then added, which halves the chain of dependent
-/// additions (the loop's bound) and rounds no worse.
+/// Sample `k` goes to partial sum `k % 4` by a fused multiply-add, and the partial sums are
+/// added pairwise at the end: the chain of dependent operations (the loop's bound) is a
+/// quarter of the ray, and the sum rounds no worse than the one-at-a-time sum.
+#[inline(always)]
 pub(crate) fn weighted_column_sums<F: Float>(color: &[F], w: &[f64], acc: &mut [f64]) {
     by_channels!(acc.len(), column_sums::<F>(color, w, acc));
 }
 
+#[inline(always)]
 fn column_sums<F: Float, const CH: usize>(color: &[F], w: &[f64], acc: &mut [f64]) {
     let ch = count::<CH>(acc.len());
     if ch == 0 {
         return;
     }
-    let mut even = [0.0f64; 4];
-    let mut odd = [0.0f64; 4];
+    let full = w.len() - w.len() % LANES;
     if ch > 4 {
-        // The general case keeps one sum per channel; the order is still even, odd, total.
+        // The general case, one channel at a time, in the same order.
         for c in 0..ch {
-            let (mut e, mut o) = (0.0, 0.0);
-            for (pair, wk) in color.chunks_exact(2 * ch).zip(w.chunks_exact(2)) {
-                e += wk[0] * pair[c].as_f64();
-                o += wk[1] * pair[ch + c].as_f64();
+            let mut part = [0.0f64; LANES];
+            for (k, &wk) in w.iter().enumerate() {
+                part[k % LANES] = wk.mul_add(color[k * ch + c].as_f64(), part[k % LANES]);
             }
-            acc[c] += finish(e, o, color, w, ch, c);
+            acc[c] += (part[0] + part[1]) + (part[2] + part[3]);
         }
         return;
     }
-    for (pair, wk) in color.chunks_exact(2 * ch).zip(w.chunks_exact(2)) {
+    let mut part = [[0.0f64; 4]; LANES];
+    for (rows, wk) in color.chunks_exact(LANES * ch).zip(w[..full].chunks_exact(LANES)) {
+        for (i, p) in part.iter_mut().enumerate() {
+            for c in 0..ch {
+                p[c] = wk[i].mul_add(rows[i * ch + c].as_f64(), p[c]);
+            }
+        }
+    }
+    for (i, &wk) in w[full..].iter().enumerate() {
         for c in 0..ch {
-            even[c] += wk[0] * pair[c].as_f64();
-            odd[c] += wk[1] * pair[ch + c].as_f64();
+            part[i][c] = wk.mul_add(color[(full + i) * ch + c].as_f64(), part[i][c]);
         }
     }
     for c in 0..ch {
-        acc[c] += finish(even[c], odd[c], color, w, ch, c);
+        acc[c] += (part[0][c] + part[1][c]) + (part[2][c] + part[3][c]);
     }
 }
 
-/// `even + odd`, plus the last sample when the count is odd.
-#[inline(always)]
-fn finish<F: Float>(even: f64, odd: f64, color: &[F], w: &[f64], ch: usize, c: usize) -> f64 {
-    let last = w.len() - w.len() % 2;
-    let tail = w.get(last).map_or(0.0, |&wk| wk * color[last * ch + c].as_f64());
-    (even + tail) + odd
-}
-
 /// `out[k] += sum_c g[c] color[k][c]` for `k < out.len()`; `color` is `[>= out.len()][g.len()]`.
+#[inline(always)]
 pub(crate) fn add_row_dots<F: Float>(color: &[F], g: &[f64], out: &mut [f64]) {
     by_channels!(g.len(), row_dots::<F>(color, g, out));
 }
 
+#[inline(always)]
 fn row_dots<F: Float, const CH: usize>(color: &[F], g: &[f64], out: &mut [f64]) {
     let ch = count::<CH>(g.len());
     if ch == 0 {
@@ -93,10 +98,12 @@ fn row_dots<F: Float, const CH: usize>(color: &[F], g: &[f64], out: &mut [f64]) 
 }
 
 /// `out[k][c] = w[k] g[c]` for `k < w.len()`; `out` is `[>= w.len()][g.len()]`.
+#[inline(always)]
 pub(crate) fn outer_product<F: Float>(w: &[f64], g: &[f64], out: &mut [F]) {
     by_channels!(g.len(), outer::<F>(w, g, out));
 }
 
+#[inline(always)]
 fn outer<F: Float, const CH: usize>(w: &[f64], g: &[f64], out: &mut [F]) {
     let ch = count::<CH>(g.len());
     if ch == 0 {
@@ -117,32 +124,36 @@ mod tests {
     #[test]
     fn every_channel_count_matches_the_plain_loops() {
         for ch in 0..7 {
-            let len = 5;
-            let color: Vec<f64> = (0..len * ch).map(|i| (i as f64 * 0.37).sin()).collect();
-            let w: Vec<f64> = (0..len).map(|k| 0.1 + k as f64).collect();
-            let g: Vec<f64> = (0..ch).map(|c| 1.0 - c as f64 * 0.5).collect();
+            for len in [0, 1, 3, 5, 8, 11] {
+                let color: Vec<f64> = (0..len * ch).map(|i| (i as f64 * 0.37).sin()).collect();
+                let w: Vec<f64> = (0..len).map(|k| 0.1 + k as f64).collect();
+                let g: Vec<f64> = (0..ch).map(|c| 1.0 - c as f64 * 0.5).collect();
 
-            let mut acc = vec![0.5; ch];
-            weighted_column_sums(&color, &w, &mut acc);
-            for (c, &a) in acc.iter().enumerate() {
-                let term = |k: usize| w[k] * color[k * ch + c];
-                let even: f64 = (0..len).step_by(2).map(term).sum();
-                let odd: f64 = (1..len).step_by(2).map(term).sum();
-                assert_eq!(a, 0.5 + (even + odd), "ch {ch} column {c}");
-            }
+                let mut acc = vec![0.5; ch];
+                weighted_column_sums(&color, &w, &mut acc);
+                for (c, &a) in acc.iter().enumerate() {
+                    let lane = |i: usize| {
+                        (i..len)
+                            .step_by(4)
+                            .fold(0.0f64, |s, k| w[k].mul_add(color[k * ch + c], s))
+                    };
+                    let want = 0.5 + ((lane(0) + lane(1)) + (lane(2) + lane(3)));
+                    assert_eq!(a, want, "ch {ch} column {c}");
+                }
 
-            let mut dots = vec![1.0; len];
-            add_row_dots(&color, &g, &mut dots);
-            for (k, &d) in dots.iter().enumerate() {
-                let want = 1.0 + (0..ch).map(|c| g[c] * color[k * ch + c]).sum::<f64>();
-                assert_eq!(d, want, "ch {ch} row {k}");
-            }
+                let mut dots = vec![1.0; len];
+                add_row_dots(&color, &g, &mut dots);
+                for (k, &d) in dots.iter().enumerate() {
+                    let want = 1.0 + (0..ch).map(|c| g[c] * color[k * ch + c]).sum::<f64>();
+                    assert_eq!(d, want, "ch {ch} row {k}");
+                }
 
-            let mut out = vec![0.0f32; len * ch];
-            outer_product(&w, &g, &mut out);
-            for k in 0..len {
-                for c in 0..ch {
-                    assert_eq!(out[k * ch + c], (w[k] * g[c]) as f32);
+                let mut out = vec![0.0f32; len * ch];
+                outer_product(&w, &g, &mut out);
+                for k in 0..len {
+                    for c in 0..ch {
+                        assert_eq!(out[k * ch + c], (w[k] * g[c]) as f32);
+                    }
                 }
             }
         }
