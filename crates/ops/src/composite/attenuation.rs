@@ -3,7 +3,7 @@
 
 use fogray_tape::Float;
 
-use super::decay::{exp_neg_slice, one_minus_exp_neg_slice};
+use super::decay::{exp_neg, exp_neg_slice, one_minus_exp_neg, one_minus_exp_neg_slice};
 
 /// Reusable buffers for one ray at a time (one per block of rays, so allocation is amortised).
 #[derive(Debug, Default)]
@@ -21,6 +21,9 @@ pub(crate) struct Attenuation {
     weights: Vec<f64>,
     /// See [`Attenuation::stop`].
     stop: usize,
+    /// The exponentials' tier of the last [`Attenuation::compute`]: f32 data (see
+    /// `decay::exp_neg`).
+    single: bool,
 }
 
 /// Samples per step when early termination may stop a ray: a multiple of the prefix sums'
@@ -78,6 +81,9 @@ impl Attenuation {
         self.depth.resize(len + 1, 0.0);
         self.trans.resize(len + 1, 0.0);
         self.stop = len;
+        // f32 data take the shorter series: its error is far below an f32 rounding.
+        let single = std::mem::size_of::<F>() < std::mem::size_of::<f64>();
+        self.single = single;
         let chunk = if min_transmittance > 0.0 { CHUNK } else { len.max(1) };
         let mut running = 0.0f64;
         let mut start = 0;
@@ -92,8 +98,13 @@ impl Attenuation {
                 *t = s.as_f64() * d.as_f64();
             }
             running = exclusive_prefix_sums(&self.tau[part.clone()], &mut self.depth[part.clone()], running);
-            exp_neg_slice(&self.depth[part.clone()], &mut self.trans[part.clone()]);
-            one_minus_exp_neg_slice(&self.tau[part.clone()], &mut self.alpha[part.clone()]);
+            if single {
+                exp_neg_slice::<true>(&self.depth[part.clone()], &mut self.trans[part.clone()]);
+                one_minus_exp_neg_slice::<true>(&self.tau[part.clone()], &mut self.alpha[part.clone()]);
+            } else {
+                exp_neg_slice::<false>(&self.depth[part.clone()], &mut self.trans[part.clone()]);
+                one_minus_exp_neg_slice::<false>(&self.tau[part.clone()], &mut self.alpha[part.clone()]);
+            }
             for ((w, &t), &a) in self.weights[part.clone()]
                 .iter_mut()
                 .zip(&self.trans[part.clone()])
@@ -111,7 +122,11 @@ impl Attenuation {
             start = end;
         }
         self.depth[len] = running;
-        exp_neg_slice(&self.depth[len..], &mut self.trans[len..]);
+        self.trans[len] = if single {
+            exp_neg::<true>(running)
+        } else {
+            exp_neg::<false>(running)
+        };
     }
 
     /// The first sample whose transmittance is below the `min_transmittance` of the last
@@ -138,9 +153,11 @@ impl Attenuation {
     /// `-expm1(-depth)` of the optical depth before sample `k` (`k = stop`: the ray's opacity,
     /// not `1 - T`, which is 0 for a faint ray), by the vectorised kernel's code.
     pub(crate) fn opacity_before(&self, k: usize) -> f64 {
-        let mut out = [0.0];
-        one_minus_exp_neg_slice(&self.depth[k..=k], &mut out);
-        out[0]
+        if self.single {
+            one_minus_exp_neg::<true>(self.depth[k])
+        } else {
+            one_minus_exp_neg::<false>(self.depth[k])
+        }
     }
 }
 
