@@ -250,15 +250,17 @@ where
         .x_label_area_size(40)
         .y_label_area_size(70)
         // Empty decades on top leave room for the legend.
-        .build_cartesian_2d((tmin..tmax).log_scale(), (floor..ceiling).log_scale())
+        .build_cartesian_2d(
+            (tmin..tmax).log_scale().with_key_points(one_two_five(tmin, tmax)),
+            (floor..ceiling).log_scale(),
+        )
         .map_err(e)?;
     chart
         .configure_mesh()
         .x_desc("forward + backward time per sample (ns, log)")
         .y_desc("worst |C - C_exact| over all pixels (log)")
         .y_label_formatter(&|v| format!("{v:.0e}"))
-        .x_labels(12)
-        .x_label_formatter(&|v| format!("{v:.0}"))
+        .x_label_formatter(&|v| format!("{v}"))
         .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(e)?;
@@ -300,4 +302,15 @@ where
         .map_err(e)?;
     root.present().map_err(e)?;
     Ok(())
+}
+
+/// 1, 2, 5 times the powers of ten within `lo..=hi` (tick labels for a log axis that spans
+/// little more than a decade, where powers of ten alone give one or two labels).
+fn one_two_five(lo: f64, hi: f64) -> Vec<f64> {
+    let first = lo.log10().floor() as i32;
+    let last = hi.log10().ceil() as i32;
+    (first..=last)
+        .flat_map(|e| [1.0, 2.0, 5.0].map(|m| m * 10f64.powi(e)))
+        .filter(|&v| (lo..=hi).contains(&v))
+        .collect()
 }
