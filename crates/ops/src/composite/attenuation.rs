@@ -151,7 +151,9 @@ impl Attenuation {
     }
 
     /// `-expm1(-depth)` of the optical depth before sample `k` (`k = stop`: the ray's opacity,
-    /// not `1 - T`, which is 0 for a faint ray), by the vectorised kernel's code.
+    /// not `1 - T`, which is 0 for a faint ray), by the vectorised kernel's code (inlined, so
+    /// that its fused multiply-adds are the caller's instructions, not library calls).
+    #[inline(always)]
     pub(crate) fn opacity_before(&self, k: usize) -> f64 {
         if self.single {
             one_minus_exp_neg::<true>(self.depth[k])

@@ -205,7 +205,7 @@ fn backward_ray<F: Float>(
 
     // R: expected value of what lies behind, given the ray reaches it; starts at the background.
     let behind: f64 = g_color.iter().zip(bg).map(|(&g, &b)| g * f(b)).sum();
-    d_tau.clear();
+    // Every entry is written below: no need to clear it first.
     d_tau.resize(stop, 0.0);
     adds_minus_hides(trans, alpha, value, behind, d_tau);
     if let Some(gt) = g.transmittance.map(|gt| &gt[samples.clone()]) {
