@@ -164,6 +164,35 @@ impl Composite {
     /// Errors in shapes (inputs or buffers) leave the buffers untouched; on an invalid input
     /// value (named in the error, as for [`Composite::evaluate`]) their contents are
     /// unspecified. The inputs are never modified.
+    ///
+    /// A training step that keeps its buffers (here two rays, RGB, a shared background, and
+    /// gradients wanted for sigma and colour):
+    ///
+    /// ```
+    /// use fogray_ops::{Background, Composite};
+    /// use ndarray::{arr1, ArrayD};
+    ///
+    /// let op = Composite::new(&[0, 3, 5])?.background(Background::Shared);
+    /// let sigma = arr1(&[0.5f32, 2.0, 8.0, 1.0, 0.0]).into_dyn();
+    /// let delta = ArrayD::from_elem(vec![5], 0.5f32);
+    /// let color = ArrayD::from_elem(vec![5, 3], 0.25f32);
+    /// let background = arr1(&[1.0f32, 1.0, 1.0]).into_dyn();
+    /// let inputs = [sigma.view(), delta.view(), color.view(), background.view()];
+    /// let (mut c, mut opacity) = (ArrayD::zeros(vec![2, 3]), ArrayD::zeros(vec![2]));
+    /// let (mut g_sigma, mut g_color) = (ArrayD::zeros(vec![5]), ArrayD::zeros(vec![5, 3]));
+    /// let upstream = ArrayD::from_elem(vec![2, 3], 1.0f32); // dL/dC
+    /// for _step in 0..3 {
+    ///     let res = op.evaluate_into(&inputs, &mut [c.view_mut(), opacity.view_mut()])?;
+    ///     let mut grads = [Some(g_sigma.view_mut()), None, Some(g_color.view_mut()), None];
+    ///     op.vjp_into(&inputs, &res, &[Some(upstream.view()), None], &mut grads)?;
+    /// }
+    /// // The same numbers as the allocating calls.
+    /// let (outs, res) = op.evaluate(&inputs)?;
+    /// assert_eq!(outs[0], c);
+    /// let g = op.vjp(&inputs, &res, &[Some(upstream.view()), None], &[true, false, true, false])?;
+    /// assert_eq!(g[0].as_ref().unwrap(), &g_sigma);
+    /// # Ok::<(), fogray_ops::CompositeError>(())
+    /// ```
     pub fn evaluate_into<F: Float>(
         &self,
         inputs: &[ArrayViewD<'_, F>],
