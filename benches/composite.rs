@@ -10,7 +10,7 @@ use std::hint::black_box;
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use fogray::ops::{twins, Background, Composite, CompositeInputs};
 use fogray::tape::{Float, Tape};
-use ndarray::{Array1, Array2, ArrayD};
+use ndarray::{Array1, Array2, ArrayD, ArrayViewD};
 use rand::{Rng, SeedableRng};
 
 struct Inputs<F: Float> {
@@ -20,6 +20,18 @@ struct Inputs<F: Float> {
     color: Array2<F>,
     background: Array1<F>,
     grad: ArrayD<F>,
+}
+
+impl<F: Float> Inputs<F> {
+    /// The op's inputs: sigma, delta, colour, the shared background.
+    fn views(&self) -> [ArrayViewD<'_, F>; 4] {
+        [
+            self.sigma.view().into_dyn(),
+            self.delta.view().into_dyn(),
+            self.color.view().into_dyn(),
+            self.background.view().into_dyn(),
+        ]
+    }
 }
 
 /// sigma ~ U[0, 5], delta = 2 / samples (total optical depth ~5), RGB in [0, 1].
@@ -39,12 +51,7 @@ fn inputs<F: Float>(rays: usize, samples: usize) -> Inputs<F> {
 }
 
 fn fused<F: Float>(x: &Inputs<F>) {
-    let views = [
-        x.sigma.view().into_dyn(),
-        x.delta.view().into_dyn(),
-        x.color.view().into_dyn(),
-        x.background.view().into_dyn(),
-    ];
+    let views = x.views();
     let (outs, res) = x.op.evaluate(&views).unwrap();
     let g =
         x.op.vjp(&views, &res, &[Some(x.grad.view()), None], &[true, false, true, false])
@@ -61,12 +68,7 @@ struct Buffers<F: Float> {
 }
 
 fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
-    let views = [
-        x.sigma.view().into_dyn(),
-        x.delta.view().into_dyn(),
-        x.color.view().into_dyn(),
-        x.background.view().into_dyn(),
-    ];
+    let views = x.views();
     let res =
         x.op.evaluate_into(&views, &mut [b.color.view_mut(), b.opacity.view_mut()])
             .unwrap();

@@ -94,6 +94,18 @@ struct Typed<F: Float> {
     grad_color: ArrayD<F>,
 }
 
+impl<F: Float> Typed<F> {
+    /// The op's inputs: sigma, delta, colour, the shared background.
+    fn views(&self) -> [ArrayViewD<'_, F>; 4] {
+        [
+            self.sigma.view().into_dyn(),
+            self.delta.view().into_dyn(),
+            self.color.view().into_dyn(),
+            self.background.view().into_dyn(),
+        ]
+    }
+}
+
 fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
     let n = d.sigma.len();
     let rays = d.offsets.len() - 1;
@@ -159,12 +171,7 @@ struct Outcome {
 }
 
 fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result<Outcome, String> {
-    let views = [
-        x.sigma.view().into_dyn(),
-        x.delta.view().into_dyn(),
-        x.color.view().into_dyn(),
-        x.background.view().into_dyn(),
-    ];
+    let views = x.views();
     mem.reset();
     let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
     let grads = op
@@ -185,12 +192,7 @@ fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result
 }
 
 fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), String> {
-    let views = [
-        x.sigma.view().into_dyn(),
-        x.delta.view().into_dyn(),
-        x.color.view().into_dyn(),
-        x.background.view().into_dyn(),
-    ];
+    let views = x.views();
     let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
     if backward {
         let g = op
@@ -229,12 +231,7 @@ impl<F: Float> Buffers<F> {
 
 /// [`fused_step`] through the `_into` API, forward and backward, into `b`.
 fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), String> {
-    let views = [
-        x.sigma.view().into_dyn(),
-        x.delta.view().into_dyn(),
-        x.color.view().into_dyn(),
-        x.background.view().into_dyn(),
-    ];
+    let views = x.views();
     let res = op
         .evaluate_into(&views, &mut [b.color.view_mut(), b.opacity.view_mut()])
         .map_err(|e| e.to_string())?;

@@ -3,7 +3,7 @@
 
 use fogray_tape::Float;
 
-use super::decay::{exp_neg, exp_neg_slice, one_minus_exp_neg, one_minus_exp_neg_slice};
+use super::decay::{exp_neg, exp_neg_slice, one_minus_exp_neg, one_minus_exp_neg_slice, single_tier};
 
 /// Reusable buffers for one ray at a time (one per block of rays, so allocation is amortised).
 #[derive(Debug, Default)]
@@ -21,9 +21,6 @@ pub(crate) struct Attenuation {
     weights: Vec<f64>,
     /// See [`Attenuation::stop`].
     stop: usize,
-    /// The exponentials' tier of the last [`Attenuation::compute`]: f32 data (see
-    /// `decay::exp_neg`).
-    single: bool,
 }
 
 /// Samples per step when early termination may stop a ray: a multiple of the prefix sums'
@@ -81,9 +78,7 @@ impl Attenuation {
         self.depth.resize(len + 1, 0.0);
         self.trans.resize(len + 1, 0.0);
         self.stop = len;
-        // f32 data take the shorter series: its error is far below an f32 rounding.
-        let single = std::mem::size_of::<F>() < std::mem::size_of::<f64>();
-        self.single = single;
+        let single = single_tier::<F>();
         let chunk = if min_transmittance > 0.0 { CHUNK } else { len.max(1) };
         let mut running = 0.0f64;
         let mut start = 0;
@@ -154,8 +149,8 @@ impl Attenuation {
     /// not `1 - T`, which is 0 for a faint ray), by the vectorised kernel's code (inlined, so
     /// that its fused multiply-adds are the caller's instructions, not library calls).
     #[inline(always)]
-    pub(crate) fn opacity_before(&self, k: usize) -> f64 {
-        if self.single {
+    pub(crate) fn opacity_before<F: Float>(&self, k: usize) -> f64 {
+        if single_tier::<F>() {
             one_minus_exp_neg::<true>(self.depth[k])
         } else {
             one_minus_exp_neg::<false>(self.depth[k])

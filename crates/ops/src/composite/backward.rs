@@ -26,7 +26,8 @@ pub(crate) struct Upstream<'a, F> {
     pub transmittance: Option<&'a [F]>,
 }
 
-/// Which input gradients to produce.
+/// Which input gradients to produce: colour and background only with an upstream colour
+/// gradient, t only with an upstream depth gradient (`Prepared::wanted` builds it so).
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct Wanted {
     pub sigma: bool,
@@ -36,22 +37,15 @@ pub(crate) struct Wanted {
     pub t: bool,
 }
 
-/// Input gradients, flat; a slice is empty when it was not wanted, else of its input's length
-/// (the background's per ray, `[R * ch]`: the caller sums it for a shared background).
+/// Input gradients, flat, of all rays or of one block; a slice is empty when it was not wanted,
+/// else of its input's length (the background's per ray, `[R * ch]`: the caller sums it for a
+/// shared background).
 pub(crate) struct InputGrads<'a, F> {
     pub sigma: &'a mut [F],
     pub delta: &'a mut [F],
     pub color: &'a mut [F],
     pub background: &'a mut [F],
     pub t: &'a mut [F],
-}
-
-struct BlockOut<'a, F> {
-    sigma: &'a mut [F],
-    delta: &'a mut [F],
-    color: &'a mut [F],
-    background: &'a mut [F],
-    t: &'a mut [F],
 }
 
 /// Every value of the wanted gradients in `out` is written (zero behind a ray's stop); a
@@ -80,7 +74,7 @@ pub(crate) fn backward<F: Float>(
             let part = |w: bool, len: usize| if w { len } else { 0 };
             work.push((
                 b.clone(),
-                BlockOut {
+                InputGrads {
                     sigma: take_front(&mut s, part(want.sigma, ns)),
                     delta: take_front(&mut d, part(want.delta, ns)),
                     color: take_front(&mut c, part(want.color, ns * ch)),
@@ -104,7 +98,7 @@ fn backward_block<'a, F: Float>(
     g: &Upstream<'a, F>,
     want: Wanted,
     block: &Block,
-    mut o: BlockOut<'a, F>,
+    mut o: InputGrads<'a, F>,
 ) {
     let mut scratch = Scratch::default();
     for (j, r) in block.rays.clone().enumerate() {
@@ -149,7 +143,7 @@ fn backward_ray<F: Float>(
     want: Wanted,
     ray: Ray,
     scratch: &mut Scratch,
-    o: &mut BlockOut<'_, F>,
+    o: &mut InputGrads<'_, F>,
 ) {
     let Ray {
         index: r,
@@ -181,7 +175,7 @@ fn backward_ray<F: Float>(
     let t_end = trans[stop];
     let local = samples.start - block_start..samples.start - block_start + stop;
 
-    if want.background && gc.is_some() {
+    if want.background {
         for (out, &g) in o.background[j * ch..(j + 1) * ch].iter_mut().zip(g_color.iter()) {
             *out = F::lit(t_end * g);
         }
@@ -217,40 +211,32 @@ fn backward_ray<F: Float>(
         }
     }
 
-    // Skipped samples (behind an early-termination stop) have no gradient.
-    let behind = local.end..samples.end - block_start;
-    if want.sigma {
-        o.sigma[behind.clone()].fill(F::zero());
-    }
-    if want.delta {
-        o.delta[behind.clone()].fill(F::zero());
-    }
-    if want.color {
-        o.color[behind.start * ch..behind.end * ch].fill(F::zero());
-    }
-    if want.t {
-        o.t[behind].fill(F::zero());
-    }
+    // Samples skipped behind an early-termination stop have no gradient.
+    let skipped = local.end..samples.end - block_start;
     if want.sigma {
         for ((out, &d), &dt) in o.sigma[local.clone()].iter_mut().zip(delta).zip(d_tau.iter()) {
             *out = F::lit(f(d) * dt);
         }
+        o.sigma[skipped.clone()].fill(F::zero());
     }
     if want.delta {
         for ((out, &s), &dt) in o.delta[local.clone()].iter_mut().zip(sigma).zip(d_tau.iter()) {
             *out = F::lit(f(s) * dt);
         }
+        o.delta[skipped.clone()].fill(F::zero());
     }
-    if want.color && gc.is_some() {
+    if want.color {
         outer_product(
             &weights[..stop],
             g_color,
             &mut o.color[local.start * ch..local.end * ch],
         );
+        o.color[skipped.start * ch..skipped.end * ch].fill(F::zero());
     }
     if want.t {
         for (out, &w) in o.t[local].iter_mut().zip(weights) {
             *out = F::lit(w * g_depth);
         }
+        o.t[skipped].fill(F::zero());
     }
 }

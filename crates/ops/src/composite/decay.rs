@@ -106,6 +106,13 @@ pub(crate) fn one_minus_exp_neg<const SINGLE: bool>(x: f64) -> f64 {
     (-scale).mul_add(p, 1.0 - scale)
 }
 
+/// Whether data of type `F` take the `SINGLE` tier (f32: its error is far below an f32
+/// rounding); known at compile time.
+#[inline(always)]
+pub(crate) fn single_tier<F>() -> bool {
+    std::mem::size_of::<F>() < std::mem::size_of::<f64>()
+}
+
 /// `out[k] = exp(-x[k])` for every `k`; the slices have equal lengths. Inlined into the
 /// composite's kernels, which are compiled for the vector units (FMA, AVX2 or AVX-512).
 #[inline(always)]

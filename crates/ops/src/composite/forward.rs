@@ -24,7 +24,7 @@ pub struct Residuals<F> {
     precision: PhantomData<F>,
 }
 
-/// The forward's outputs, flat; each is empty when not configured.
+/// The forward's outputs, flat, of all rays or of one block; each is empty when not configured.
 pub(crate) struct Outputs<'a, F> {
     /// `[R * ch]`.
     pub color: &'a mut [F],
@@ -36,16 +36,6 @@ pub(crate) struct Outputs<'a, F> {
     pub weights: &'a mut [F],
     /// `[n]`.
     pub transmittance: &'a mut [F],
-}
-
-/// Mutable outputs of one block of rays.
-struct BlockOut<'a, F> {
-    color: &'a mut [F],
-    opacity: &'a mut [F],
-    depth: &'a mut [F],
-    weights: &'a mut [F],
-    transmittance: &'a mut [F],
-    stop: &'a mut [usize],
 }
 
 /// Composites every ray; the flag is false if any sample value was invalid (NaN, infinite,
@@ -69,20 +59,20 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>, out: Outputs<'_
             let (nr, ns) = (b.rays.len(), b.samples.len());
             work.push((
                 b.clone(),
-                BlockOut {
+                Outputs {
                     color: take_front(&mut color, nr * ch),
                     opacity: take_front(&mut opacity, nr),
                     depth: take_front(&mut depth, if op.depth { nr } else { 0 }),
                     weights: take_front(&mut weights, if op.weights { ns } else { 0 }),
                     transmittance: take_front(&mut trans, if op.transmittance { ns } else { 0 }),
-                    stop: take_front(&mut stop, nr),
                 },
+                take_front(&mut stop, nr),
             ));
         }
     }
     let valid = work
         .into_par_iter()
-        .map(|(block, o)| forward_block(op, x, &block, o))
+        .map(|(block, o, stop)| forward_block(op, x, &block, o, stop))
         .reduce(|| true, |a, b| a && b);
     let residuals = Residuals {
         stop,
@@ -91,11 +81,17 @@ pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>, out: Outputs<'_
     (residuals, valid)
 }
 
-/// Composites one block of rays into `o`; false if any value was invalid. Compiled for the
+/// Composites one block of rays into `o` and `stop`; false if any value was invalid. Compiled for the
 /// vector units this machine has (chosen at run time), with the per-ray helpers inlined into
 /// it: the crate itself is built for the baseline instruction set.
 #[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
-fn forward_block<'a, F: Float>(op: &Composite, x: &Flat<'a, F>, block: &Block, o: BlockOut<'a, F>) -> bool {
+fn forward_block<'a, F: Float>(
+    op: &Composite,
+    x: &Flat<'a, F>,
+    block: &Block,
+    o: Outputs<'a, F>,
+    stop: &'a mut [usize],
+) -> bool {
     let ch = x.ch;
     let mut acc = vec![0.0f64; ch];
     let mut att = Attenuation::default();
@@ -127,7 +123,7 @@ fn forward_block<'a, F: Float>(op: &Composite, x: &Flat<'a, F>, block: &Block, o
         if op.depth {
             o.depth[j] = F::lit(result.depth);
         }
-        o.stop[j] = result.stop;
+        stop[j] = result.stop;
         valid &= result.valid;
     }
     valid
@@ -209,7 +205,7 @@ pub(crate) fn forward_ray<F: Float>(
     debug_assert!(stop <= len);
     RayResult {
         // Not 1 - T_end, which is 0 for a faint ray.
-        opacity: att.opacity_before(stop),
+        opacity: att.opacity_before::<F>(stop),
         depth,
         stop,
         valid,

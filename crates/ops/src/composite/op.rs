@@ -363,22 +363,22 @@ impl Composite {
             }
             _ => &mut [],
         };
-        let computed = [want.sigma, want.delta, want.color];
-        let not_reached = |on: bool, g: &mut [F]| {
-            if !on {
-                g.fill(F::zero());
-            }
-        };
+        // sigma and delta are computed whenever asked; colour and t may be asked for with no
+        // upstream to reach them, and are zero then.
         let out = InputGrads {
-            sigma: if computed[0] { &mut gs[..] } else { &mut [] },
-            delta: if computed[1] { &mut gd[..] } else { &mut [] },
-            color: if computed[2] { &mut gc[..] } else { &mut [] },
+            sigma: &mut gs[..],
+            delta: &mut gd[..],
+            color: if want.color { &mut gc[..] } else { &mut [] },
             background,
             t: if want.t { &mut gt[..] } else { &mut [] },
         };
         backward(self, &x, residuals, &p.upstream(), want, out);
-        not_reached(want.color, gc);
-        not_reached(want.t, gt);
+        if !want.color {
+            gc.fill(F::zero());
+        }
+        if !want.t {
+            gt.fill(F::zero());
+        }
         if self.background == Background::Shared && want.background {
             for (g, v) in gb.iter_mut().zip(sum_rows(&per_ray_bg, x.ch)) {
                 *g = v;
