@@ -5,6 +5,7 @@ use ndarray::{ArrayD, ArrayViewD};
 use crate::error::{Result, TapeError};
 use crate::float::Float;
 use crate::gradients::Gradients;
+use crate::pool;
 use crate::tape::Tape;
 use crate::var::Var;
 
@@ -43,6 +44,8 @@ impl<F: Float> Tape<F> {
             return Ok(grads);
         }
         grads.grads[top] = Some(seed);
+        // Ops take their gradients' buffers from the pool; spent gradients go back to it.
+        let _pooled = pool::install(&self.pool);
         for record in self.records.iter().rev() {
             if record.outputs.start as usize > top {
                 continue;
@@ -110,13 +113,19 @@ impl<F: Float> Tape<F> {
                     grads.accumulate(record.inputs[k] as usize, g);
                 }
             }
+            drop(grad_views);
+            for g in upstream.into_iter().flatten() {
+                pool::give(g.into_raw_vec_and_offset().0);
+            }
         }
         // Keep only what the caller may read: params and retained values.
         for (j, slot) in grads.grads.iter_mut().enumerate() {
             let v = &self.values[j];
             let readable = v.retain || (v.is_leaf && v.needs_grad);
             if !readable {
-                *slot = None;
+                if let Some(g) = slot.take() {
+                    pool::give(g.into_raw_vec_and_offset().0);
+                }
             }
         }
         Ok(grads)

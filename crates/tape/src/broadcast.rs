@@ -1,9 +1,11 @@
 //! Broadcasting: the shape rule, and the one place where a broadcast is undone in backward.
 
-use ndarray::{ArrayD, Axis};
+use ndarray::{ArrayD, Axis, Dimension, Zip};
 
+use crate::buffer::zeroed;
 use crate::error::OpError;
 use crate::float::Float;
+use crate::pool;
 
 /// The numpy broadcast of two shapes: aligned from the right, each pair equal or one of them 1.
 pub fn broadcast_shape(a: &[usize], b: &[usize]) -> Result<Vec<usize>, OpError> {
@@ -32,14 +34,31 @@ pub fn sum_to_shape<F: Float>(g: ArrayD<F>, shape: &[usize]) -> ArrayD<F> {
     }
     let mut g = g;
     while g.ndim() > shape.len() {
-        g = g.sum_axis(Axis(0));
+        g = sum_axis(g, 0).remove_axis(Axis(0));
     }
     for (k, &s) in shape.iter().enumerate() {
         if s == 1 && g.shape()[k] != 1 {
-            g = g.sum_axis(Axis(k)).insert_axis(Axis(k));
+            g = sum_axis(g, k);
         }
     }
     g
+}
+
+/// `g` summed along `axis`, kept as an axis of length 1, in a [`zeroed`] buffer (from the
+/// tape's pool inside a backward); `g`'s own buffer goes back to that pool.
+fn sum_axis<F: Float>(g: ArrayD<F>, axis: usize) -> ArrayD<F> {
+    let mut dim = g.raw_dim();
+    dim[axis] = 1;
+    let len = dim.size();
+    let Ok(mut out) = ArrayD::from_shape_vec(dim, zeroed(len)) else {
+        return g.sum_axis(Axis(axis)).insert_axis(Axis(axis));
+    };
+    let mut acc = out.index_axis_mut(Axis(axis), 0);
+    for lane in g.axis_iter(Axis(axis)) {
+        Zip::from(&mut acc).and(&lane).for_each(|a, &x| *a += x);
+    }
+    pool::give(g.into_raw_vec_and_offset().0);
+    out
 }
 
 #[cfg(test)]

@@ -50,7 +50,10 @@ impl<F: Float> Gradients<F> {
     pub(crate) fn accumulate(&mut self, index: usize, g: ArrayD<F>) {
         match &mut self.grads[index] {
             slot @ None => *slot = Some(g),
-            Some(acc) => Zip::from(acc).and(&g).for_each(|a, &b| *a += b),
+            Some(acc) => {
+                Zip::from(acc).and(&g).for_each(|a, &b| *a += b);
+                crate::pool::give(g.into_raw_vec_and_offset().0);
+            }
         }
     }
 }

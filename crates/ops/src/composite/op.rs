@@ -4,7 +4,7 @@
 
 use std::borrow::Cow;
 
-use fogray_tape::buffer::zeroed;
+use fogray_tape::buffer::{scratch, zeroed};
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
 use ndarray::{ArrayD, ArrayViewD, ArrayViewMutD, IxDyn};
 
@@ -146,7 +146,8 @@ impl Composite {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
         let shapes = self.output_shapes(x.ch);
-        let mut data: Vec<Vec<F>> = shapes.iter().map(|s| zeroed(s.iter().product())).collect();
+        // forward_into overwrites every value (what evaluate_into promises), so no zeros first.
+        let mut data: Vec<Vec<F>> = shapes.iter().map(|s| scratch(s.iter().product())).collect();
         let residuals = self.forward_into(&x, data.iter_mut().map(|d| &mut d[..]).collect())?;
         let outs = shapes
             .iter()
@@ -285,7 +286,8 @@ impl Composite {
         let p = self.prepare(&x, residuals, grads)?;
         let want = p.wanted(self, needs);
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
-        let sized = |on: bool, len: usize| zeroed::<F>(if on { len } else { 0 });
+        // The backward overwrites every value of a wanted gradient (vjp_into's promise).
+        let sized = |on: bool, len: usize| scratch::<F>(if on { len } else { 0 });
         let (mut gs, mut gd, mut gc) = (sized(want.sigma, n), sized(want.delta, n), sized(want.color, n * ch));
         let (mut gb, mut gt) = (sized(want.background, rays * ch), sized(want.t, n));
         let out = InputGrads {

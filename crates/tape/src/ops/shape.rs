@@ -1,6 +1,8 @@
 //! Shape ops: `reshape` (row-major), `slice` along one axis, `concat` along one axis.
 
-use ndarray::{concatenate, ArrayD, ArrayViewD, Axis, IxDyn, Slice};
+use ndarray::{concatenate, ArrayD, ArrayViewD, Axis, Dimension, IxDyn, Slice};
+
+use crate::buffer::{map1, zeroed};
 
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
@@ -28,12 +30,17 @@ pub struct SliceAxis {
 pub struct Concat(pub usize);
 
 fn reshaped<F: Float>(x: &ArrayViewD<'_, F>, shape: &[usize]) -> Result<ArrayD<F>, OpError> {
-    x.to_shape(IxDyn(shape))
-        .map(|c| c.into_owned())
-        .map_err(|_| OpError::ShapeMismatch {
-            lhs: x.shape().to_vec(),
-            rhs: shape.to_vec(),
-        })
+    let c = x.to_shape(IxDyn(shape)).map_err(|_| OpError::ShapeMismatch {
+        lhs: x.shape().to_vec(),
+        rhs: shape.to_vec(),
+    })?;
+    // A view (the usual, contiguous case) is copied into a pooled buffer; a copy is kept.
+    Ok(if c.is_view() { copied(&c.view()) } else { c.into_owned() })
+}
+
+/// An owned copy of `x` in a pooled or fresh buffer (see [`crate::buffer`]).
+fn copied<F: Float>(x: &ArrayViewD<'_, F>) -> ArrayD<F> {
+    map1(x, |v| v)
 }
 
 impl<F: Float> CustomOp<F> for Reshape {
@@ -73,7 +80,7 @@ impl<F: Float> CustomOp<F> for SliceAxis {
                 x.shape()
             )));
         }
-        Ok((vec![x.slice_axis(Axis(axis), Slice::from(start..end)).to_owned()], ()))
+        Ok((vec![copied(&x.slice_axis(Axis(axis), Slice::from(start..end)))], ()))
     }
     fn backward(
         &self,
@@ -81,7 +88,9 @@ impl<F: Float> CustomOp<F> for SliceAxis {
         grads: &[Option<ArrayViewD<'_, F>>],
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let Some(g) = &grads[0] else { return Ok(vec![None]) };
-        let mut gx = ArrayD::zeros(ctx.input(0).shape());
+        let shape = ctx.input(0).raw_dim();
+        let mut gx = ArrayD::from_shape_vec(shape.clone(), zeroed(shape.size()))
+            .map_err(|e| OpError::InvalidArgument(e.to_string()))?;
         gx.slice_axis_mut(Axis(self.axis), Slice::from(self.start..self.end))
             .assign(g);
         Ok(vec![Some(gx)])
@@ -128,7 +137,7 @@ impl<F: Float> CustomOp<F> for Concat {
         for i in 0..n {
             let len = ctx.input(i).shape()[self.0];
             let part = g.slice_axis(Axis(self.0), Slice::from(start..start + len));
-            out.push(ctx.needs_input_grad(i).then(|| part.to_owned()));
+            out.push(ctx.needs_input_grad(i).then(|| copied(&part)));
             start += len;
         }
         Ok(out)
