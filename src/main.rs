@@ -61,8 +61,9 @@ enum Command {
         input: PathBuf,
     },
     /// Samples per second (forward+backward with the spread of the runs, and forward alone) of
-    /// the fused op on 1 and all threads (also into output and gradient buffers kept across
-    /// runs: "reused") and of the stable and naive taped twins, in f32 and f64, on the
+    /// the fused op on 1 and all threads and of the stable and naive taped twins, also in a
+    /// training loop's steady state ("reused": the fused op into output and gradient buffers
+    /// kept across runs, the twins on one tape cleared between runs), in f32 and f64, on the
     /// workloads 4096x64, 65536x64, 16384x256 and 1024x4096 (RGB; sigma ~ U[0,5], total
     /// optical depth ~5), each beside its error against an independent compensated f64
     /// reference on the same rays and its peak extra memory; then the tape's own cost per

@@ -185,6 +185,7 @@ fn bench_reports_speed_beside_error_and_memory() {
             "samples_per_sec",
             "samples_per_sec_forward",
             "samples_per_sec_spread",
+            "samples_per_sec_reused",
             "err_color",
             "err_grad_sigma",
             "peak_extra_bytes",
@@ -193,8 +194,6 @@ fn bench_reports_speed_beside_error_and_memory() {
             assert!(r[field].is_number(), "{field} in {r}");
         }
         assert_eq!((r["rays"].as_u64(), r["samples"].as_u64()), (Some(64), Some(32)));
-        // Only the fused op has an `_into` path to measure.
-        assert_eq!(r["samples_per_sec_reused"].is_number(), r["method"] == "fused", "{r}");
         // Accuracy is asserted, never speed: the fused op in f32 stays within 1e-5 element-wise.
         if r["method"] == "fused" {
             let tol = if r["precision"] == "f32" { 1e-5 } else { 1e-12 };

@@ -195,4 +195,22 @@ mod tests {
         }
         assert!(zeroed::<f64>(1 << 20).iter().all(|&x| x == 0.0));
     }
+
+    #[test]
+    fn pooled_buffers_have_the_asked_length_and_zeroed_ones_are_zero() {
+        use crate::pool::{install, Home};
+        let big = crate::pool::WORTH_POOLING; // elements: above the threshold for f32
+        let home: Home<f32> = std::cell::RefCell::new(Some(Box::default()));
+        let _on = install(&home);
+        for len in [big, big + 1000, big - 1000] {
+            crate::pool::give(vec![7.0f32; big]);
+            let v = zeroed::<f32>(len);
+            assert_eq!(v.len(), len);
+            assert!(v.iter().all(|&x| x == 0.0), "stale values left in a zeroed buffer");
+            crate::pool::give(v);
+            let w = scratch::<f32>(len);
+            assert_eq!(w.len(), len);
+            crate::pool::give(w);
+        }
+    }
 }

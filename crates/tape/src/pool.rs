@@ -5,7 +5,8 @@
 //! buffer above 32 MiB back to the system when it is freed: the stable taped composite on 65536
 //! rays of 64 samples (1 thread, forward and backward) runs at 16.6 M samples/s in f32 and 12.4
 //! in f64 on a new tape each step, and at 20.5 and 16.2 on one tape reused with its pool. The pool is what a caching allocator would give, held by the
-//! tape that filled it (released with it, or by [`Tape::release_buffers`](crate::Tape)).
+//! tape that filled it (released with it, or by [`Tape::release_buffers`](crate::Tape)), and
+//! started by the tape's first `clear()`: a tape used once holds no buffer beyond its values.
 //!
 //! Ops reach the pool without a parameter: the tape installs its pool on the calling thread
 //! while an op's forward or the backward sweep runs, and [`buffer`](crate::buffer)'s helpers
@@ -84,7 +85,8 @@ thread_local! {
     static INSTALLED: RefCell<Option<Box<dyn Any>>> = const { RefCell::new(None) };
 }
 
-/// Where a tape keeps its pool; empty while the pool is installed.
+/// Where a tape keeps its pool: empty until the tape is first cleared (a one-shot tape keeps
+/// nothing), and while the pool is installed.
 pub(crate) type Home<F> = RefCell<Option<Box<Pool<F>>>>;
 
 /// Puts the pool of `home` on this thread until dropped, then back home (also if an op panics),

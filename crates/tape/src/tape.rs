@@ -75,7 +75,7 @@ impl<F: Float> Tape<F> {
             records: Vec::new(),
             epoch: fresh_epoch(),
             grad_enabled: true,
-            pool: Home::new(Some(Box::default())),
+            pool: Home::new(None),
         }
     }
 
@@ -142,10 +142,12 @@ impl<F: Float> Tape<F> {
 
     /// Drops every value and record but keeps the allocations, for reuse in a training loop:
     /// the values' buffers of 256 KiB and more go to the tape's pool, from which the ops of the
-    /// next step take their outputs and gradients instead of fresh pages from the system (which
-    /// would cost a page fault and the kernel's clearing of each page: a fifth of a taped
-    /// composite's time). Kept buffers that no op of the step before took are freed, so the
-    /// pool holds about one step's worth; see [`Tape::stats`] and [`Tape::release_buffers`].
+    /// next step take their outputs and gradients (and the backward its spent gradients) instead
+    /// of fresh pages from the system, which would cost a page fault and the kernel's clearing
+    /// of each page (a fifth of a taped composite's time). Kept buffers that no op of the step
+    /// before took are freed, so the pool holds about one step's worth; see [`Tape::stats`] and
+    /// [`Tape::release_buffers`]. A tape that is never cleared keeps no buffer: one-shot use
+    /// has the smallest peak memory.
     ///
     /// Every handle made before is invalidated: using one is [`TapeError::StaleVar`].
     pub fn clear(&mut self) {
@@ -158,8 +160,9 @@ impl<F: Float> Tape<F> {
         self.epoch = fresh_epoch();
     }
 
-    /// Hands the buffers of a backward's gradients to the pool, once the step has used them.
-    /// Gradients of another tape are taken as well (their buffers are just memory).
+    /// Hands the buffers of a backward's gradients to the pool, once the step has used them
+    /// (and starts the pool, as [`Tape::clear`] does). Gradients of another tape are taken as
+    /// well: their buffers are just memory.
     pub fn recycle(&mut self, grads: Gradients<F>) {
         let pool = self.pool.get_mut().get_or_insert_with(Box::default);
         for g in grads.grads.into_iter().flatten() {
@@ -167,7 +170,8 @@ impl<F: Float> Tape<F> {
         }
     }
 
-    /// Frees the buffers the pool keeps (after a large step that will not come again, say).
+    /// Frees the buffers the pool keeps (after a large step that will not come again, say);
+    /// the next steps fill it again.
     pub fn release_buffers(&mut self) {
         *self.pool.get_mut() = Some(Box::default());
     }

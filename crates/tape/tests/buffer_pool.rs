@@ -96,3 +96,22 @@ fn the_next_step_draws_on_the_pool_and_the_pool_stays_one_step_large() {
     t.release_buffers();
     assert_eq!(t.stats().pooled_bytes, 0);
 }
+
+#[test]
+fn a_tape_that_is_never_cleared_keeps_no_buffer() {
+    let mut once = Tape::<f32>::new();
+    let s = build(&mut once, 0);
+    let g = once.backward(s.loss).unwrap();
+    assert!(g.get(s.x).is_some());
+    assert_eq!(
+        once.stats().pooled_bytes,
+        0,
+        "a one-shot backward kept its spent gradients"
+    );
+    // Once reused, the backward keeps what it spent for the next step.
+    once.clear();
+    let s = build(&mut once, 1);
+    let before = once.stats().pooled_bytes;
+    once.backward(s.loss).unwrap();
+    assert!(once.stats().pooled_bytes > before);
+}
