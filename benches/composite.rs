@@ -2,7 +2,8 @@
 //! (gradients for sigma and colour), on the workloads of `fogray bench`.
 //!
 //! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
-//! iterations. `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
+//! iterations; `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
+//! each time, its buffer pool reused). `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
 //! selects. `fogray bench` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
@@ -77,8 +78,11 @@ fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
         .unwrap();
 }
 
-fn taped<F: Float>(x: &Inputs<F>, naive: bool) {
-    let mut tape = Tape::new();
+/// One forward and backward of a taped twin on `tape`, which is cleared first; its gradients
+/// go back to it. With a new tape each time that is a one-shot use; with one tape kept, a
+/// training loop's (its pool lends the ops the buffers of the iteration before).
+fn taped<F: Float>(x: &Inputs<F>, naive: bool, tape: &mut Tape<F>) {
+    tape.clear();
     let inputs = CompositeInputs {
         sigma: tape.param(x.sigma.clone()),
         delta: tape.constant(x.delta.clone()),
@@ -87,12 +91,14 @@ fn taped<F: Float>(x: &Inputs<F>, naive: bool) {
         t: None,
     };
     let out = if naive {
-        twins::naive(&mut tape, &x.op, &inputs)
+        twins::naive(tape, &x.op, &inputs)
     } else {
-        twins::stable(&mut tape, &x.op, &inputs)
+        twins::stable(tape, &x.op, &inputs)
     }
     .unwrap();
-    black_box(tape.backward_with(out.color, x.grad.clone()).unwrap());
+    let g = tape.backward_with(out.color, x.grad.clone()).unwrap();
+    black_box(g.get(inputs.sigma));
+    tape.recycle(g);
 }
 
 fn bench_precision<F: Float>(c: &mut Criterion) {
@@ -113,10 +119,15 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
         group.bench_with_input(BenchmarkId::new("fused-into", &id), &x, |b, x| {
             b.iter(|| fused_into(x, &mut buffers))
         });
-        group.bench_with_input(BenchmarkId::new("taped", &id), &x, |b, x| b.iter(|| taped(x, false)));
-        group.bench_with_input(BenchmarkId::new("taped-naive", &id), &x, |b, x| {
-            b.iter(|| taped(x, true))
-        });
+        for (name, naive) in [("taped", false), ("taped-naive", true)] {
+            group.bench_with_input(BenchmarkId::new(name, &id), &x, |b, x| {
+                b.iter(|| taped(x, naive, &mut Tape::new()))
+            });
+            let mut kept = Tape::new();
+            group.bench_with_input(BenchmarkId::new(format!("{name}-reused"), &id), &x, |b, x| {
+                b.iter(|| taped(x, naive, &mut kept))
+            });
+        }
         group.finish();
     }
 }
