@@ -96,10 +96,12 @@ pub(crate) struct Installed<'a, F: Float> {
     previous: Option<Box<dyn Any>>,
 }
 
-pub(crate) fn install<F: Float>(home: &Home<F>) -> Installed<'_, F> {
-    let mine = home.borrow_mut().take().map(|p| p as Box<dyn Any>);
-    let previous = INSTALLED.with(|slot| slot.replace(mine));
-    Installed { home, previous }
+/// `None` when the tape has no pool yet: nothing to lend, and nothing spent per op (a tape of
+/// a million one-element ops pays for this on each).
+pub(crate) fn install<F: Float>(home: &Home<F>) -> Option<Installed<'_, F>> {
+    let mine = home.borrow_mut().take()? as Box<dyn Any>;
+    let previous = INSTALLED.with(|slot| slot.replace(Some(mine)));
+    Some(Installed { home, previous })
 }
 
 impl<F: Float> Drop for Installed<'_, F> {
@@ -111,11 +113,17 @@ impl<F: Float> Drop for Installed<'_, F> {
 
 /// A buffer with capacity for `len` elements from the installed pool, holding what it held.
 pub(crate) fn take<F: Float>(len: usize) -> Option<Vec<F>> {
+    if len * std::mem::size_of::<F>() < WORTH_POOLING / 2 {
+        return None; // before the thread-local: small buffers are most of a small graph's
+    }
     INSTALLED.with(|slot| slot.borrow_mut().as_mut()?.downcast_mut::<Pool<F>>()?.take(len))
 }
 
 /// Gives `v` to the installed pool; drops it if there is none.
 pub(crate) fn give<F: Float>(v: Vec<F>) {
+    if v.capacity() * std::mem::size_of::<F>() < WORTH_POOLING {
+        return;
+    }
     INSTALLED.with(|slot| {
         if let Some(pool) = slot.borrow_mut().as_mut().and_then(|p| p.downcast_mut::<Pool<F>>()) {
             pool.put(v);
