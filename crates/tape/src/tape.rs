@@ -150,6 +150,35 @@ impl<F: Float> Tape<F> {
     /// has the smallest peak memory.
     ///
     /// Every handle made before is invalidated: using one is [`TapeError::StaleVar`].
+    ///
+    /// A training loop that keeps one tape (gradient descent on `sum((w x - y)^2)`):
+    ///
+    /// ```
+    /// use fogray_tape::Tape;
+    /// use ndarray::Array1;
+    ///
+    /// let n = 100_000; // 400 KB per value: large enough to be pooled
+    /// let x = Array1::from_shape_fn(n, |i| (i % 7) as f32 / 7.0);
+    /// let y = x.mapv(|v| 3.0 * v);
+    /// let mut w = 0.0f32;
+    /// let mut tape = Tape::<f32>::new();
+    /// for _ in 0..20 {
+    ///     tape.clear(); // last step's buffers go to the pool, its handles go stale
+    ///     let wv = tape.param(ndarray::arr0(w));
+    ///     let xv = tape.constant(x.clone());
+    ///     let yv = tape.constant(y.clone());
+    ///     let wx = tape.mul(xv, wv)?; // broadcast: the output comes from the pool
+    ///     let r = tape.sub(wx, yv)?;
+    ///     let sq = tape.square(r)?;
+    ///     let loss = tape.mean(sq)?;
+    ///     let grads = tape.backward(loss)?;
+    ///     w -= 1.5 * grads.get(wv).unwrap()[[]];
+    ///     tape.recycle(grads); // and the gradients' buffers too
+    /// }
+    /// assert!((w - 3.0).abs() < 1e-3);
+    /// assert!(tape.stats().pooled_bytes > 0);
+    /// # Ok::<(), fogray_tape::TapeError>(())
+    /// ```
     pub fn clear(&mut self) {
         let pool = self.pool.get_mut().get_or_insert_with(Box::default);
         pool.next_step();
