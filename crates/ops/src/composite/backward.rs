@@ -26,6 +26,32 @@ pub(crate) struct Upstream<'a, F> {
     pub transmittance: Option<&'a [F]>,
 }
 
+impl<F: Float> Upstream<'_, F> {
+    /// Ray `r`'s share (`samples` are its global sample indices).
+    #[inline(always)]
+    fn of_ray(&self, r: usize, samples: std::ops::Range<usize>, ch: usize) -> RayUpstream<'_, F> {
+        RayUpstream {
+            color: self.color.map(|g| &g[r * ch..(r + 1) * ch]),
+            opacity: self.opacity.map_or(0.0, |v| v[r].as_f64()),
+            depth: self.depth.map_or(0.0, |v| v[r].as_f64()),
+            weights: self.weights.map(|g| &g[samples.clone()]),
+            transmittance: self.transmittance.map(|g| &g[samples]),
+        }
+    }
+}
+
+/// One ray's upstream gradients.
+pub(crate) struct RayUpstream<'a, F> {
+    /// `[ch]`.
+    pub color: Option<&'a [F]>,
+    pub opacity: f64,
+    pub depth: f64,
+    /// `[len]`.
+    pub weights: Option<&'a [F]>,
+    /// `[len]`.
+    pub transmittance: Option<&'a [F]>,
+}
+
 /// Which input gradients to produce: colour and background only with an upstream colour
 /// gradient, t only with an upstream depth gradient (`Prepared::wanted` builds it so).
 #[derive(Debug, Clone, Copy)]
@@ -48,6 +74,33 @@ pub(crate) struct InputGrads<'a, F> {
     pub t: &'a mut [F],
 }
 
+impl<'a, F> InputGrads<'a, F> {
+    /// One `InputGrads` per block, in block order (each empty where not wanted).
+    pub(crate) fn split(self, blocks: &[Block], want: Wanted, ch: usize) -> Vec<InputGrads<'a, F>> {
+        let InputGrads {
+            sigma: mut s,
+            delta: mut d,
+            color: mut c,
+            background: mut bg,
+            mut t,
+        } = self;
+        let part = |w: bool, len: usize| if w { len } else { 0 };
+        blocks
+            .iter()
+            .map(|b| {
+                let (nr, ns) = (b.rays.len(), b.samples.len());
+                InputGrads {
+                    sigma: take_front(&mut s, part(want.sigma, ns)),
+                    delta: take_front(&mut d, part(want.delta, ns)),
+                    color: take_front(&mut c, part(want.color, ns * ch)),
+                    background: take_front(&mut bg, part(want.background, nr * ch)),
+                    t: take_front(&mut t, part(want.t, ns)),
+                }
+            })
+            .collect()
+    }
+}
+
 /// Every value of the wanted gradients in `out` is written (zero behind a ray's stop); a
 /// gradient may be wanted only if its upstream exists (see [`Wanted`]'s construction).
 pub(crate) fn backward<F: Float>(
@@ -58,32 +111,8 @@ pub(crate) fn backward<F: Float>(
     want: Wanted,
     out: InputGrads<'_, F>,
 ) {
-    let ch = x.ch;
     let blocks = blocks(&op.offsets);
-    let mut work = Vec::with_capacity(blocks.len());
-    {
-        let InputGrads {
-            sigma: mut s,
-            delta: mut d,
-            color: mut c,
-            background: mut bg,
-            mut t,
-        } = out;
-        for b in &blocks {
-            let (nr, ns) = (b.rays.len(), b.samples.len());
-            let part = |w: bool, len: usize| if w { len } else { 0 };
-            work.push((
-                b.clone(),
-                InputGrads {
-                    sigma: take_front(&mut s, part(want.sigma, ns)),
-                    delta: take_front(&mut d, part(want.delta, ns)),
-                    color: take_front(&mut c, part(want.color, ns * ch)),
-                    background: take_front(&mut bg, part(want.background, nr * ch)),
-                    t: take_front(&mut t, part(want.t, ns)),
-                },
-            ));
-        }
-    }
+    let work: Vec<_> = blocks.iter().cloned().zip(out.split(&blocks, want, x.ch)).collect();
     work.into_par_iter()
         .for_each(|(block, o)| backward_block(op, x, saved, g, want, &block, o));
 }
@@ -101,32 +130,34 @@ fn backward_block<'a, F: Float>(
     mut o: InputGrads<'a, F>,
 ) {
     let mut scratch = Scratch::default();
+    let mut att = Attenuation::default();
     for (j, r) in block.rays.clone().enumerate() {
         let ray = Ray {
             index: r,
             samples: op.offsets[r]..op.offsets[r + 1],
             block_start: block.samples.start,
             in_block: j,
-            min_transmittance: op.min_transmittance,
         };
-        backward_ray(x, saved, g, want, ray, &mut scratch, &mut o);
+        // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
+        let (sigma, delta) = (&x.sigma[ray.samples.clone()], &x.delta[ray.samples.clone()]);
+        att.compute(sigma, delta, op.min_transmittance);
+        debug_assert_eq!(saved.stop[r], att.stop(), "the same code gives the same stop");
+        let up = g.of_ray(r, ray.samples.clone(), x.ch);
+        backward_ray(x, want, ray, &att, up, &mut scratch, &mut o);
     }
 }
 
-/// Where a ray sits: its index, its global samples, and its place in its block; and the
-/// early-termination threshold it was composited with.
-struct Ray {
-    index: usize,
-    samples: std::ops::Range<usize>,
-    block_start: usize,
-    in_block: usize,
-    min_transmittance: f64,
+/// Where a ray sits: its index, its global samples, and its place in its block.
+pub(crate) struct Ray {
+    pub index: usize,
+    pub samples: std::ops::Range<usize>,
+    pub block_start: usize,
+    pub in_block: usize,
 }
 
 /// Per-block buffers of the backward, reused ray after ray.
 #[derive(Default)]
-struct Scratch {
-    att: Attenuation,
+pub(crate) struct Scratch {
     /// What sample k is worth if the ray stops there: `g_C . c_k + g_O + g_D t_k + g_w_k`.
     value: Vec<f64>,
     /// `dL/dtau_k`.
@@ -135,13 +166,15 @@ struct Scratch {
     g_color: Vec<f64>,
 }
 
+/// One ray's input gradients into `o` (its block's), from the ray's attenuation as the forward
+/// computed it and its upstream gradients.
 #[inline(always)]
-fn backward_ray<F: Float>(
+pub(crate) fn backward_ray<F: Float>(
     x: &Flat<'_, F>,
-    saved: &Residuals<F>,
-    g: &Upstream<'_, F>,
     want: Wanted,
     ray: Ray,
+    att: &Attenuation,
+    g: RayUpstream<'_, F>,
     scratch: &mut Scratch,
     o: &mut InputGrads<'_, F>,
 ) {
@@ -150,27 +183,17 @@ fn backward_ray<F: Float>(
         samples,
         block_start,
         in_block: j,
-        min_transmittance,
     } = ray;
     let ch = x.ch;
     let f = |v: F| v.as_f64();
-    let Scratch {
-        att,
-        value,
-        d_tau,
-        g_color,
-    } = scratch;
-    let gc: Option<&[F]> = g.color.map(|gc| &gc[r * ch..(r + 1) * ch]);
+    let Scratch { value, d_tau, g_color } = scratch;
+    let gc: Option<&[F]> = g.color;
     g_color.clear();
     g_color.extend(gc.into_iter().flatten().map(|&v| f(v)));
-    let g_opacity = g.opacity.map_or(0.0, |v| f(v[r]));
-    let g_depth = g.depth.map_or(0.0, |v| f(v[r]));
+    let (g_opacity, g_depth) = (g.opacity, g.depth);
     let bg = x.background_of(r);
-    // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
     let (sigma, delta) = (&x.sigma[samples.clone()], &x.delta[samples.clone()]);
-    att.compute(sigma, delta, min_transmittance);
-    let stop = saved.stop[r];
-    debug_assert_eq!(stop, att.stop(), "the same code gives the same stop");
+    let stop = att.stop();
     let (trans, alpha, weights) = (att.transmittance(), att.alpha(), att.weights());
     let t_end = trans[stop];
     let local = samples.start - block_start..samples.start - block_start + stop;
@@ -189,7 +212,7 @@ fn backward_ray<F: Float>(
         }
     }
     if let Some(gw) = g.weights {
-        for (v, &gw) in value.iter_mut().zip(&gw[samples.clone()]) {
+        for (v, &gw) in value.iter_mut().zip(gw) {
             *v += f(gw);
         }
     }
@@ -202,7 +225,7 @@ fn backward_ray<F: Float>(
     // Every entry is written below: no need to clear it first.
     d_tau.resize(stop, 0.0);
     adds_minus_hides(trans, alpha, value, behind, d_tau);
-    if let Some(gt) = g.transmittance.map(|gt| &gt[samples.clone()]) {
+    if let Some(gt) = g.transmittance {
         // U: sum over later samples of gT_i T_i (skipped samples all see T_stop), a suffix sum.
         let mut hidden_t: f64 = gt[stop..].iter().map(|&v| f(v) * t_end).sum();
         for k in (0..stop).rev() {

@@ -38,36 +38,45 @@ pub(crate) struct Outputs<'a, F> {
     pub transmittance: &'a mut [F],
 }
 
-/// Composites every ray; the flag is false if any sample value was invalid (NaN, infinite,
-/// negative density or step), checked on the fly so that valid input costs no extra pass.
-/// Every value of `out` is written (its lengths are the op's, checked by the caller).
-pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>, out: Outputs<'_, F>) -> (Residuals<F>, bool) {
-    let (rays, ch) = (op.rays(), x.ch);
-    let mut stop = vec![0; rays];
-    let blocks = blocks(&op.offsets);
-    let mut work = Vec::with_capacity(blocks.len());
-    {
+impl<'a, F> Outputs<'a, F> {
+    /// One `Outputs` per block, in block order (each empty where the op does not produce it).
+    pub(crate) fn split(self, op: &Composite, blocks: &[Block], ch: usize) -> Vec<Outputs<'a, F>> {
         let Outputs {
             mut color,
             mut opacity,
             mut depth,
             mut weights,
             transmittance: mut trans,
-        } = out;
-        let mut stop = &mut stop[..];
-        for b in &blocks {
-            let (nr, ns) = (b.rays.len(), b.samples.len());
-            work.push((
-                b.clone(),
+        } = self;
+        let part = |on: bool, len: usize| if on { len } else { 0 };
+        blocks
+            .iter()
+            .map(|b| {
+                let (nr, ns) = (b.rays.len(), b.samples.len());
                 Outputs {
                     color: take_front(&mut color, nr * ch),
                     opacity: take_front(&mut opacity, nr),
-                    depth: take_front(&mut depth, if op.depth { nr } else { 0 }),
-                    weights: take_front(&mut weights, if op.weights { ns } else { 0 }),
-                    transmittance: take_front(&mut trans, if op.transmittance { ns } else { 0 }),
-                },
-                take_front(&mut stop, nr),
-            ));
+                    depth: take_front(&mut depth, part(op.depth, nr)),
+                    weights: take_front(&mut weights, part(op.weights, ns)),
+                    transmittance: take_front(&mut trans, part(op.transmittance, ns)),
+                }
+            })
+            .collect()
+    }
+}
+
+/// Composites every ray; the flag is false if any sample value was invalid (NaN, infinite,
+/// negative density or step), checked on the fly so that valid input costs no extra pass.
+/// Every value of `out` is written (its lengths are the op's, checked by the caller).
+pub(crate) fn forward<F: Float>(op: &Composite, x: &Flat<'_, F>, out: Outputs<'_, F>) -> (Residuals<F>, bool) {
+    let rays = op.rays();
+    let mut stop = vec![0; rays];
+    let blocks = blocks(&op.offsets);
+    let mut work = Vec::with_capacity(blocks.len());
+    {
+        let mut stop = &mut stop[..];
+        for (b, o) in blocks.iter().zip(out.split(op, &blocks, x.ch)) {
+            work.push((b.clone(), o, take_front(&mut stop, b.rays.len())));
         }
     }
     let valid = work
@@ -89,44 +98,59 @@ fn forward_block<'a, F: Float>(
     op: &Composite,
     x: &Flat<'a, F>,
     block: &Block,
-    o: Outputs<'a, F>,
+    mut o: Outputs<'a, F>,
     stop: &'a mut [usize],
 ) -> bool {
-    let ch = x.ch;
-    let mut acc = vec![0.0f64; ch];
+    let mut acc = vec![0.0f64; x.ch];
     let mut att = Attenuation::default();
     let mut valid = true;
-    let s0 = block.samples.start;
     for (j, r) in block.rays.clone().enumerate() {
-        let samples = op.offsets[r]..op.offsets[r + 1];
-        let local = samples.start - s0..samples.end - s0;
-        let result = forward_ray(
-            RayIn {
-                sigma: &x.sigma[samples.clone()],
-                delta: &x.delta[samples.clone()],
-                color: &x.color[samples.start * ch..samples.end * ch],
-                t: x.t.as_ref().map(|t| &t[samples.clone()]),
-                background: x.background_of(r),
-            },
-            op.min_transmittance,
-            &mut att,
-            &mut acc,
-            RayOut {
-                transmittance: op.transmittance.then(|| &mut o.transmittance[local.clone()]),
-                weights: op.weights.then(|| &mut o.weights[local]),
-            },
-        );
-        for (c, &a) in acc.iter().enumerate() {
-            o.color[j * ch + c] = F::lit(a);
-        }
-        o.opacity[j] = F::lit(result.opacity);
-        if op.depth {
-            o.depth[j] = F::lit(result.depth);
-        }
+        let result = composite_ray_into(op, x, block, (j, r), &mut att, &mut acc, &mut o);
         stop[j] = result.stop;
         valid &= result.valid;
     }
     valid
+}
+
+/// Composites ray `r`, the `j`-th of `block`, into the block's outputs `o`; `att` keeps its
+/// attenuation (for a backward that follows at once), `acc` is scratch of `ch` values.
+#[inline(always)]
+pub(crate) fn composite_ray_into<F: Float>(
+    op: &Composite,
+    x: &Flat<'_, F>,
+    block: &Block,
+    (j, r): (usize, usize),
+    att: &mut Attenuation,
+    acc: &mut [f64],
+    o: &mut Outputs<'_, F>,
+) -> RayResult {
+    let ch = x.ch;
+    let samples = op.offsets[r]..op.offsets[r + 1];
+    let local = samples.start - block.samples.start..samples.end - block.samples.start;
+    let result = forward_ray(
+        RayIn {
+            sigma: &x.sigma[samples.clone()],
+            delta: &x.delta[samples.clone()],
+            color: &x.color[samples.start * ch..samples.end * ch],
+            t: x.t.as_ref().map(|t| &t[samples.clone()]),
+            background: x.background_of(r),
+        },
+        op.min_transmittance,
+        att,
+        acc,
+        RayOut {
+            transmittance: op.transmittance.then(|| &mut o.transmittance[local.clone()]),
+            weights: op.weights.then(|| &mut o.weights[local]),
+        },
+    );
+    for (c, &a) in acc.iter().enumerate() {
+        o.color[j * ch + c] = F::lit(a);
+    }
+    o.opacity[j] = F::lit(result.opacity);
+    if op.depth {
+        o.depth[j] = F::lit(result.depth);
+    }
+    result
 }
 
 /// One ray's inputs.
