@@ -2,7 +2,7 @@
 //! (gradients for sigma and colour), on the workloads of `fogray bench`.
 //!
 //! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
-//! iterations; `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
+//! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them; `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
 //! each time, its buffer pool reused). `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
 //! selects. `fogray bench` gives the same speeds beside each method's error and memory.
 
@@ -78,6 +78,20 @@ fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
         .unwrap();
 }
 
+/// [`fused_into`] in one pass per ray, each ray's upstream gradient handed over by the callback.
+fn fused_one_pass<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
+    let views = x.views();
+    let upstream = x.grad.as_slice().unwrap();
+    let mut grads = [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None];
+    x.op.evaluate_vjp_into(
+        &views,
+        |r, _, d: &mut [F]| d.copy_from_slice(&upstream[r * d.len()..(r + 1) * d.len()]),
+        &mut [b.color.view_mut(), b.opacity.view_mut()],
+        &mut grads,
+    )
+    .unwrap();
+}
+
 /// One forward and backward of a taped twin on `tape`, which is cleared first; its gradients
 /// go back to it. With a new tape each time that is a one-shot use; with one tape kept, a
 /// training loop's (its pool lends the ops the buffers of the iteration before).
@@ -118,6 +132,9 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
         };
         group.bench_with_input(BenchmarkId::new("fused-into", &id), &x, |b, x| {
             b.iter(|| fused_into(x, &mut buffers))
+        });
+        group.bench_with_input(BenchmarkId::new("fused-one-pass", &id), &x, |b, x| {
+            b.iter(|| fused_one_pass(x, &mut buffers))
         });
         for (name, naive) in [("taped", false), ("taped-naive", true)] {
             group.bench_with_input(BenchmarkId::new(name, &id), &x, |b, x| {

@@ -194,6 +194,8 @@ fn bench_reports_speed_beside_error_and_memory() {
             assert!(r[field].is_number(), "{field} in {r}");
         }
         assert_eq!((r["rays"].as_u64(), r["samples"].as_u64()), (Some(64), Some(32)));
+        // Only the fused op has a one-pass path.
+        assert_eq!(r["samples_per_sec_one_pass"].is_number(), r["method"] == "fused", "{r}");
         // Accuracy is asserted, never speed: the fused op in f32 stays within 1e-5 element-wise.
         if r["method"] == "fused" {
             let tol = if r["precision"] == "f32" { 1e-5 } else { 1e-12 };

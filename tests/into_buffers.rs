@@ -201,3 +201,113 @@ fn an_invalid_value_is_named_as_by_evaluate_and_the_inputs_stay_unchanged() {
     );
     assert_eq!(c.inputs, before);
 }
+
+/// `L = sum over rays and channels of w_rc (C_rc - p_rc)^2`: each ray's gradient depends on
+/// its own colour only, as `evaluate_vjp_into` requires.
+struct Photometric {
+    target: Vec<f32>,
+    weight: Vec<f32>,
+    ch: usize,
+}
+
+impl Photometric {
+    fn grad(&self, ray: usize, c: &[f32], d: &mut [f32]) {
+        for (k, (d, &c)) in d.iter_mut().zip(c).enumerate() {
+            let i = ray * self.ch + k;
+            *d = 2.0 * self.weight[i] * (c - self.target[i]);
+        }
+    }
+}
+
+#[test]
+fn evaluate_vjp_into_gives_the_bits_of_evaluate_into_then_vjp_into() {
+    for background in [Background::None, Background::Shared, Background::PerRay] {
+        for threshold in [0.0, 1e-2] {
+            let mut c = case(background, 13);
+            c.op = c.op.clone().min_transmittance(threshold).unwrap();
+            let x = views(&c.inputs);
+            let mut rng = rand::rngs::StdRng::seed_from_u64(17);
+            let len = c.op.rays() * 3;
+            let loss = Photometric {
+                target: (0..len).map(|_| rng.gen_range(0.0..1.0)).collect(),
+                weight: (0..len).map(|_| rng.gen_range(0.5..2.0)).collect(),
+                ch: 3,
+            };
+            // The two calls, with the upstream computed from the forward's colour.
+            let (outs, res) = c.op.evaluate(&x).unwrap();
+            let mut upstream = garbage(outs[0].shape());
+            for (r, (row, d)) in outs[0]
+                .as_slice()
+                .unwrap()
+                .chunks(3)
+                .zip(upstream.as_slice_mut().unwrap().chunks_mut(3))
+                .enumerate()
+            {
+                loss.grad(r, row, d);
+            }
+            let mut g: Vec<Option<ArrayViewD<'_, f32>>> = vec![None; outs.len()];
+            g[0] = Some(upstream.view());
+            for skip in 0..=x.len() {
+                // Every gradient wanted, then all but one in turn.
+                let needs: Vec<bool> = (0..x.len()).map(|i| i != skip).collect();
+                let want = c.op.vjp(&x, &res, &g, &needs).unwrap();
+                let mut out_bufs: Vec<ArrayD<f32>> = outs.iter().map(|o| garbage(o.shape())).collect();
+                let mut grad_bufs: Vec<Option<ArrayD<f32>>> =
+                    (0..x.len()).map(|i| needs[i].then(|| garbage(x[i].shape()))).collect();
+                let mut o: Vec<ArrayViewMutD<'_, f32>> = out_bufs.iter_mut().map(|b| b.view_mut()).collect();
+                let mut gb: Vec<Option<ArrayViewMutD<'_, f32>>> =
+                    grad_bufs.iter_mut().map(|b| b.as_mut().map(|b| b.view_mut())).collect();
+                c.op.evaluate_vjp_into(&x, |r, col, d| loss.grad(r, col, d), &mut o, &mut gb)
+                    .unwrap();
+                drop((o, gb));
+                let what = format!("{background:?} threshold {threshold} skip {skip}");
+                for (k, (got, w)) in out_bufs.iter().zip(&outs).enumerate() {
+                    same_bits(got, w, &format!("{what}: output {k}"));
+                }
+                for i in 0..x.len() {
+                    match (&grad_bufs[i], &want[i]) {
+                        (None, _) => assert!(!needs[i]),
+                        (Some(got), Some(w)) => same_bits(got, w, &format!("{what}: gradient {i}")),
+                        // t: no upstream reaches it (depth has none here).
+                        (Some(got), None) => assert!(got.iter().all(|&v| v.to_bits() == 0), "{what}: {i} zeros"),
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn evaluate_vjp_into_refuses_bad_buffers_untouched_and_names_bad_values() {
+    let c = case(Background::Shared, 19);
+    let x = views(&c.inputs);
+    let (outs, _) = c.op.evaluate(&x).unwrap();
+    let never = |_: usize, _: &[f32], _: &mut [f32]| panic!("called before the shapes were checked");
+    let mut out_bufs: Vec<ArrayD<f32>> = outs.iter().map(|o| garbage(o.shape())).collect();
+    let mut short = garbage(&[c.op.samples() - 1]);
+    {
+        let mut o: Vec<ArrayViewMutD<'_, f32>> = out_bufs.iter_mut().map(|b| b.view_mut()).collect();
+        let mut gb = vec![Some(short.view_mut()), None, None, None, None];
+        let err = c.op.evaluate_vjp_into(&x, never, &mut o, &mut gb).unwrap_err();
+        assert!(matches!(err, CompositeError::Shape { .. }), "{err}");
+        let mut gb: Vec<Option<ArrayViewMutD<'_, f32>>> = (1..x.len()).map(|_| None).collect();
+        let err = c.op.evaluate_vjp_into(&x, never, &mut o, &mut gb).unwrap_err();
+        assert!(matches!(err, CompositeError::Shape { .. }), "{err}");
+        let mut gb: Vec<Option<ArrayViewMutD<'_, f32>>> = (0..x.len()).map(|_| None).collect();
+        o.pop();
+        let err = c.op.evaluate_vjp_into(&x, never, &mut o, &mut gb).unwrap_err();
+        assert!(matches!(err, CompositeError::Shape { .. }), "{err}");
+    }
+    assert!(out_bufs.iter().chain([&short]).all(|b| b.iter().all(|v| v.is_nan())));
+    // An invalid value: the same error as evaluate's, the inputs unchanged.
+    let mut bad = c.inputs.clone();
+    bad[0][[44]] = -1.0;
+    let before = bad.clone();
+    let xb = views(&bad);
+    let want_err = c.op.evaluate(&xb).unwrap_err().to_string();
+    let mut o: Vec<ArrayViewMutD<'_, f32>> = out_bufs.iter_mut().map(|b| b.view_mut()).collect();
+    let mut gb: Vec<Option<ArrayViewMutD<'_, f32>>> = (0..x.len()).map(|_| None).collect();
+    let err = c.op.evaluate_vjp_into(&xb, |_, _, _| {}, &mut o, &mut gb).unwrap_err();
+    assert_eq!(err.to_string(), want_err);
+    assert_eq!(bad, before);
+}

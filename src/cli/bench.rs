@@ -42,6 +42,10 @@ pub struct Measurement {
     /// `evaluate_into` / `vjp_into` into output and gradient buffers kept across runs; taped on
     /// one tape cleared before each run, whose pool lends the ops the buffers of the run before.
     pub samples_per_sec_reused: f64,
+    /// Fused only: forward, upstream gradient and backward in one pass per ray
+    /// (`evaluate_vjp_into`, into kept buffers; the same bits as the two calls).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub samples_per_sec_one_pass: Option<f64>,
     pub samples_per_sec_forward: f64,
     /// Worst element-wise relative error of the colour.
     pub err_color: f64,
@@ -246,6 +250,22 @@ fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -
     Ok(())
 }
 
+/// [`fused_step_into`] in one pass per ray (`evaluate_vjp_into`), the upstream gradient of
+/// each ray handed over by the callback.
+fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), String> {
+    let views = x.views();
+    let upstream = x.grad_color.as_slice().ok_or("upstream gradient not contiguous")?;
+    op.evaluate_vjp_into(
+        &views,
+        |r, _, d: &mut [F]| d.copy_from_slice(&upstream[r * d.len()..(r + 1) * d.len()]),
+        &mut [b.color.view_mut(), b.opacity.view_mut()],
+        &mut [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None],
+    )
+    .map_err(|e| e.to_string())?;
+    black_box(&b.grad_sigma);
+    Ok(())
+}
+
 /// Puts the inputs on a new tape (sigma and colour as params): the part of a taped run that is
 /// the same for every method, timed separately and subtracted.
 fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, CompositeInputs) {
@@ -345,7 +365,12 @@ fn measure<F: Float>(
         .num_threads(1)
         .build()
         .map_err(|e| e.to_string())?;
-    let mut push = |method: &'static str, threads: usize, both: Timing, reused: f64, fwd: f64, o: Outcome| {
+    let mut push = |method: &'static str,
+                    threads: usize,
+                    both: Timing,
+                    (reused, one_pass): (f64, Option<f64>),
+                    fwd: f64,
+                    o: Outcome| {
         let (err_color, err_color_norm) = errors(
             &o.color,
             &refs.color,
@@ -361,6 +386,7 @@ fn measure<F: Float>(
             samples_per_sec: n / both.median,
             samples_per_sec_spread: both.spread,
             samples_per_sec_reused: n / reused,
+            samples_per_sec_one_pass: one_pass.map(|t| n / t),
             samples_per_sec_forward: n / fwd,
             err_color,
             err_grad_sigma,
@@ -382,8 +408,11 @@ fn measure<F: Float>(
             fused_step_into(&op, &x, &mut buffers)?;
             median_secs(reps, || fused_step_into(&op, &x, &mut buffers))
         })?;
+        let one_pass = within(pool, || {
+            median_secs(reps, || fused_step_one_pass(&op, &x, &mut buffers))
+        })?;
         let outcome = within(pool, || fused_run(&op, &x, mem))?;
-        push("fused", threads, both, reused, fwd, outcome);
+        push("fused", threads, both, (reused, Some(one_pass)), fwd, outcome);
     }
     for (method, naive) in [("taped", false), ("taped-naive", true)] {
         let setup = median_secs(reps, || {
@@ -404,7 +433,7 @@ fn measure<F: Float>(
             method,
             1,
             both,
-            reused.max(1e-9),
+            (reused.max(1e-9), None),
             fwd.max(1e-9),
             taped_run(&op, &x, naive, mem)?,
         );
@@ -455,7 +484,7 @@ pub fn parse_workload(s: &str) -> Result<(usize, usize), String> {
 /// The text report: one line per measurement, then the fused/taped ratios.
 pub fn table(results: &[Measurement]) -> String {
     let mut s = format!(
-        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
+        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
         "method",
         "prec",
         "thr",
@@ -463,6 +492,7 @@ pub fn table(results: &[Measurement]) -> String {
         "Ms/s f+b",
         "spread",
         "reused",
+        "1-pass",
         "Ms/s fwd",
         "err C",
         "err dC/ds",
@@ -471,7 +501,7 @@ pub fn table(results: &[Measurement]) -> String {
     );
     for m in results {
         s += &format!(
-            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10.1} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
+            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10.1} {:>10} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
             m.method,
             m.precision,
             m.threads,
@@ -479,6 +509,8 @@ pub fn table(results: &[Measurement]) -> String {
             m.samples_per_sec / 1e6,
             m.samples_per_sec_spread * 100.0,
             m.samples_per_sec_reused / 1e6,
+            m.samples_per_sec_one_pass
+                .map_or("-".into(), |r| format!("{:.1}", r / 1e6)),
             m.samples_per_sec_forward / 1e6,
             m.err_color,
             m.err_grad_sigma,
@@ -496,12 +528,13 @@ pub fn table(results: &[Measurement]) -> String {
             .find(|t| t.method == "taped" && t.precision == m.precision && t.rays == m.rays && t.samples == m.samples);
         if let Some(t) = twin {
             s += &format!(
-                "  {} {}x{}: {:.1}x faster ({:.1}x when both reuse their buffers), {:.2}x the peak extra memory\n",
+                "  {} {}x{}: {:.1}x faster ({:.1}x when both reuse their buffers, {:.1}x in one pass), {:.2}x the peak extra memory\n",
                 m.precision,
                 m.rays,
                 m.samples,
                 m.samples_per_sec / t.samples_per_sec,
                 m.samples_per_sec_reused / t.samples_per_sec_reused,
+                m.samples_per_sec_one_pass.unwrap_or(m.samples_per_sec_reused) / t.samples_per_sec_reused,
                 m.peak_extra_bytes as f64 / t.peak_extra_bytes.max(1) as f64
             );
         }

@@ -78,6 +78,7 @@ mod forward;
 mod layout;
 
 pub(crate) use layout::{locate, validate};
+mod one_pass;
 mod op;
 mod rows;
 mod suffix;

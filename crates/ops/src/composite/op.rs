@@ -12,6 +12,7 @@ use super::backward::{backward, InputGrads, Upstream, Wanted};
 use super::config::{Background, Composite};
 use super::forward::{forward, Outputs, Residuals};
 use super::layout::{check_background, check_values, flatten, Flat};
+use super::one_pass::one_pass;
 use crate::error::CompositeError;
 
 fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, CompositeError> {
@@ -73,15 +74,21 @@ impl<F: Float> Prepared<'_, F> {
     /// Which gradients the backward computes, given which are asked for (in input order);
     /// one asked for but not computed is zero (no upstream reaches it).
     fn wanted(&self, op: &Composite, asked: &[bool]) -> Wanted {
-        let has_bg = op.background != Background::None;
-        let t_at = 3 + usize::from(has_bg);
-        Wanted {
-            sigma: asked[0],
-            delta: asked[1],
-            color: asked[2] && self.gc.is_some(),
-            background: has_bg && asked[3] && self.gc.is_some(),
-            t: op.depth && asked[t_at] && self.gd.is_some(),
-        }
+        wanted(op, asked, self.gc.is_some(), self.gd.is_some())
+    }
+}
+
+/// Which gradients a backward computes, given which are asked for (in input order) and
+/// whether the colour and the depth have an upstream gradient.
+fn wanted(op: &Composite, asked: &[bool], color_upstream: bool, depth_upstream: bool) -> Wanted {
+    let has_bg = op.background != Background::None;
+    let t_at = 3 + usize::from(has_bg);
+    Wanted {
+        sigma: asked[0],
+        delta: asked[1],
+        color: asked[2] && color_upstream,
+        background: has_bg && asked[3] && color_upstream,
+        t: op.depth && asked[t_at] && depth_upstream,
     }
 }
 
@@ -104,6 +111,16 @@ impl Composite {
 
     /// The forward into checked output slices (in the order of [`Composite::output_shapes`]).
     fn forward_into<F: Float>(&self, x: &Flat<'_, F>, outs: Vec<&mut [F]>) -> Result<Residuals<F>, CompositeError> {
+        let (residuals, valid) = forward(self, x, self.outputs(outs));
+        if !valid {
+            // Find and name the first offending value.
+            check_values(self, x)?;
+        }
+        Ok(residuals)
+    }
+
+    /// The output buffers (one per output, in order) as the kernels take them.
+    fn outputs<'a, F: Float>(&self, outs: Vec<&'a mut [F]>) -> Outputs<'a, F> {
         let mut outs = outs.into_iter();
         let mut next = |on: bool| {
             if on {
@@ -114,22 +131,13 @@ impl Composite {
         };
         let (color, opacity) = (next(true), next(true));
         let (depth, weights, transmittance) = (next(self.depth), next(self.weights), next(self.transmittance));
-        let (residuals, valid) = forward(
-            self,
-            x,
-            Outputs {
-                color,
-                opacity,
-                depth,
-                weights,
-                transmittance,
-            },
-        );
-        if !valid {
-            // Find and name the first offending value.
-            check_values(self, x)?;
+        Outputs {
+            color,
+            opacity,
+            depth,
+            weights,
+            transmittance,
         }
-        Ok(residuals)
     }
 
     /// The forward pass without a tape: the outputs in the order of [`Composite::apply`]
@@ -201,19 +209,7 @@ impl Composite {
     ) -> Result<Residuals<F>, CompositeError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
-        let shapes = self.output_shapes(x.ch);
-        if outputs.len() != shapes.len() {
-            return Err(CompositeError::Shape {
-                what: "output buffers",
-                expected: format!("{} buffers", shapes.len()),
-                got: format!("{}", outputs.len()),
-            });
-        }
-        let slices = outputs
-            .iter_mut()
-            .zip(&shapes)
-            .map(|(b, shape)| buffer("output buffer", b, shape))
-            .collect::<Result<Vec<_>, _>>()?;
+        let slices = output_buffers(outputs, &self.output_shapes(x.ch))?;
         self.forward_into(&x, slices)
     }
 
@@ -331,30 +327,34 @@ impl Composite {
         out: &mut [Option<ArrayViewMutD<'_, F>>],
     ) -> Result<(), CompositeError> {
         let x = flatten(self, inputs)?;
-        if out.len() != inputs.len() {
-            return Err(CompositeError::Shape {
-                what: "gradient buffers",
-                expected: format!("{} entries (one per input)", inputs.len()),
-                got: format!("{}", out.len()),
-            });
-        }
         let p = self.prepare(&x, residuals, grads)?;
         let asked: Vec<bool> = out.iter().map(Option::is_some).collect();
+        let slices = gradient_buffers(out, inputs)?;
         let want = p.wanted(self, &asked);
-        let mut slices = Vec::with_capacity(out.len());
-        for (b, input) in out.iter_mut().zip(inputs) {
-            slices.push(match b {
-                Some(b) => buffer("gradient buffer", b, input.shape())?,
-                None => Default::default(),
-            });
-        }
+        self.gradients_into(&x, want, slices, |g| {
+            backward(self, &x, residuals, &p.upstream(), want, g)
+        });
+        Ok(())
+    }
+
+    /// Runs `kernel` on the gradient buffers of `slices` (one per input, empty where not asked
+    /// for) as the kernel wants them, then completes them: zeros where asked for but not
+    /// wanted (no upstream reaches the input), and a shared background's gradient as the sum
+    /// of the per-ray ones the kernel writes.
+    fn gradients_into<F: Float>(
+        &self,
+        x: &Flat<'_, F>,
+        want: Wanted,
+        slices: Vec<&mut [F]>,
+        kernel: impl FnOnce(InputGrads<'_, F>),
+    ) {
         let mut slices = slices.into_iter();
         let mut next = || slices.next().unwrap_or_default();
         let (gs, gd, gc) = (next(), next(), next());
         let has_bg = self.background != Background::None;
         let gb = if has_bg { next() } else { Default::default() };
         let gt = if self.depth { next() } else { Default::default() };
-        // The backward writes a per-ray background gradient; a shared one is its sum.
+        // The kernel writes a per-ray background gradient; a shared one is its sum.
         let rays = self.rays();
         let mut per_ray_bg = Vec::new();
         let background: &mut [F] = match self.background {
@@ -367,14 +367,13 @@ impl Composite {
         };
         // sigma and delta are computed whenever asked; colour and t may be asked for with no
         // upstream to reach them, and are zero then.
-        let out = InputGrads {
+        kernel(InputGrads {
             sigma: &mut gs[..],
             delta: &mut gd[..],
             color: if want.color { &mut gc[..] } else { &mut [] },
             background,
             t: if want.t { &mut gt[..] } else { &mut [] },
-        };
-        backward(self, &x, residuals, &p.upstream(), want, out);
+        });
         if !want.color {
             gc.fill(F::zero());
         }
@@ -388,8 +387,121 @@ impl Composite {
         } else if !want.background {
             gb.fill(F::zero());
         }
+    }
+
+    /// [`Composite::evaluate_into`], the gradient of a loss that sums a function of each ray's
+    /// colour, and [`Composite::vjp_into`], in one pass per ray: what a training step with a
+    /// photometric loss needs, faster than the two calls because the backward takes the
+    /// attenuation the forward has just computed (no exponential is recomputed) and reads each
+    /// ray's inputs while they are in cache.
+    ///
+    /// `upstream(ray, color, d_color)` receives a ray's index and its colour (`[ch]`, as
+    /// written to the colour output) and writes `dL/dC` for it into `d_color` (zeros on entry);
+    /// it is called once per ray, from several threads, in no particular order. The other
+    /// outputs have no upstream gradient (their gradients are zero). `outputs` and `grads` are
+    /// as for [`Composite::evaluate_into`] and [`Composite::vjp_into`], and the results are
+    /// bitwise those of the two calls with the same upstream gradients.
+    ///
+    /// Errors in shapes leave the buffers untouched; on an invalid input value (named in the
+    /// error, as for [`Composite::evaluate`]) `upstream` may have been called and the
+    /// buffers' contents are unspecified. The inputs are never modified.
+    ///
+    /// ```
+    /// use fogray_ops::{Background, Composite};
+    /// use ndarray::{arr1, arr2, ArrayD};
+    ///
+    /// let op = Composite::new(&[0, 3, 5])?.background(Background::Shared);
+    /// let sigma = arr1(&[0.5f32, 2.0, 8.0, 1.0, 0.0]).into_dyn();
+    /// let delta = ArrayD::from_elem(vec![5], 0.5f32);
+    /// let color = ArrayD::from_elem(vec![5, 3], 0.25f32);
+    /// let background = arr1(&[1.0f32, 1.0, 1.0]).into_dyn();
+    /// let photo = arr2(&[[0.3f32, 0.3, 0.3], [0.9, 0.9, 0.9]]);
+    /// let inputs = [sigma.view(), delta.view(), color.view(), background.view()];
+    /// let (mut c, mut opacity) = (ArrayD::zeros(vec![2, 3]), ArrayD::zeros(vec![2]));
+    /// let (mut g_sigma, mut g_color) = (ArrayD::zeros(vec![5]), ArrayD::zeros(vec![5, 3]));
+    /// // L = sum over rays and channels of (C - photo)^2.
+    /// let upstream = |ray: usize, c: &[f32], d: &mut [f32]| {
+    ///     for ((d, &c), &p) in d.iter_mut().zip(c).zip(photo.row(ray)) {
+    ///         *d = 2.0 * (c - p);
+    ///     }
+    /// };
+    /// op.evaluate_vjp_into(
+    ///     &inputs,
+    ///     upstream,
+    ///     &mut [c.view_mut(), opacity.view_mut()],
+    ///     &mut [Some(g_sigma.view_mut()), None, Some(g_color.view_mut()), None],
+    /// )?;
+    /// // The same numbers as the forward, then the backward with dL/dC = 2 (C - photo).
+    /// let (outs, res) = op.evaluate(&inputs)?;
+    /// assert_eq!(outs[0], c);
+    /// let dl_dc = ((&outs[0] - &photo.into_dyn()) * 2.0f32).into_dyn();
+    /// let g = op.vjp(&inputs, &res, &[Some(dl_dc.view()), None], &[true, false, true, false])?;
+    /// assert_eq!(g[0].as_ref().unwrap(), &g_sigma);
+    /// # Ok::<(), fogray_ops::CompositeError>(())
+    /// ```
+    pub fn evaluate_vjp_into<F: Float>(
+        &self,
+        inputs: &[ArrayViewD<'_, F>],
+        upstream: impl Fn(usize, &[F], &mut [F]) + Sync,
+        outputs: &mut [ArrayViewMutD<'_, F>],
+        grads: &mut [Option<ArrayViewMutD<'_, F>>],
+    ) -> Result<(), CompositeError> {
+        let x = flatten(self, inputs)?;
+        check_background(&x)?;
+        let outs = output_buffers(outputs, &self.output_shapes(x.ch))?;
+        let asked: Vec<bool> = grads.iter().map(Option::is_some).collect();
+        let slices = gradient_buffers(grads, inputs)?;
+        let want = wanted(self, &asked, true, false);
+        let mut valid = true;
+        self.gradients_into(&x, want, slices, |g| {
+            valid = one_pass(self, &x, self.outputs(outs), g, want, &upstream);
+        });
+        if !valid {
+            check_values(self, &x)?;
+        }
         Ok(())
     }
+}
+
+/// The contiguous data of one output buffer per output, each of exactly its shape.
+fn output_buffers<'a, F: Float>(
+    outputs: &'a mut [ArrayViewMutD<'_, F>],
+    shapes: &[Vec<usize>],
+) -> Result<Vec<&'a mut [F]>, CompositeError> {
+    if outputs.len() != shapes.len() {
+        return Err(CompositeError::Shape {
+            what: "output buffers",
+            expected: format!("{} buffers", shapes.len()),
+            got: format!("{}", outputs.len()),
+        });
+    }
+    outputs
+        .iter_mut()
+        .zip(shapes)
+        .map(|(b, shape)| buffer("output buffer", b, shape))
+        .collect()
+}
+
+/// The contiguous data of each gradient buffer asked for (one entry per input, of its shape),
+/// empty where `None`.
+fn gradient_buffers<'a, F: Float>(
+    out: &'a mut [Option<ArrayViewMutD<'_, F>>],
+    inputs: &[ArrayViewD<'_, F>],
+) -> Result<Vec<&'a mut [F]>, CompositeError> {
+    if out.len() != inputs.len() {
+        return Err(CompositeError::Shape {
+            what: "gradient buffers",
+            expected: format!("{} entries (one per input)", inputs.len()),
+            got: format!("{}", out.len()),
+        });
+    }
+    out.iter_mut()
+        .zip(inputs)
+        .map(|(b, input)| match b {
+            Some(b) => buffer("gradient buffer", b, input.shape()),
+            None => Ok(Default::default()),
+        })
+        .collect()
 }
 
 /// Column sums of `[rows][ch]`, in row order (so the result does not depend on the thread

@@ -1,0 +1,80 @@
+//! Forward, loss gradient and backward in one pass per ray, for a loss that sums a function of
+//! each ray's colour (a photometric loss): the backward takes the attenuation the forward has
+//! just computed, instead of recomputing its two exponentials per sample, and reads the ray's
+//! inputs while they are still in cache, instead of from memory a second time.
+
+use fogray_tape::Float;
+use multiversion::multiversion;
+use rayon::prelude::*;
+
+use super::attenuation::Attenuation;
+use super::backward::{backward_ray, InputGrads, Ray, RayUpstream, Scratch, Wanted};
+use super::config::Composite;
+use super::forward::{composite_ray_into, Outputs};
+use super::layout::{blocks, Block, Flat};
+
+/// `upstream(ray, colour, d_colour)` writes `dL/dC` of a ray from its colour as written to the
+/// outputs.
+pub(crate) trait ColorLoss<F>: Fn(usize, &[F], &mut [F]) + Sync {}
+impl<F, U: Fn(usize, &[F], &mut [F]) + Sync> ColorLoss<F> for U {}
+
+/// Composites every ray into `out` and writes the wanted input gradients into `grads`, with
+/// the colour's upstream gradient from `upstream` (the other outputs have none); false if any
+/// input value was invalid. Every value of the outputs and of the wanted gradients is written.
+pub(crate) fn one_pass<F: Float>(
+    op: &Composite,
+    x: &Flat<'_, F>,
+    out: Outputs<'_, F>,
+    grads: InputGrads<'_, F>,
+    want: Wanted,
+    upstream: &impl ColorLoss<F>,
+) -> bool {
+    let blocks = blocks(&op.offsets);
+    let outs = out.split(op, &blocks, x.ch);
+    let grads = grads.split(&blocks, want, x.ch);
+    let work: Vec<_> = blocks.iter().cloned().zip(outs).zip(grads).collect();
+    work.into_par_iter()
+        .map(|((block, o), g)| one_pass_block(op, x, &block, o, g, want, upstream))
+        .reduce(|| true, |a, b| a && b)
+}
+
+/// One block of [`one_pass`], compiled for the vector units this machine has (as the forward's
+/// and the backward's blocks are).
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
+    op: &Composite,
+    x: &Flat<'a, F>,
+    block: &Block,
+    mut o: Outputs<'a, F>,
+    mut g: InputGrads<'a, F>,
+    want: Wanted,
+    upstream: &U,
+) -> bool {
+    let ch = x.ch;
+    let mut acc = vec![0.0f64; ch];
+    let mut d_color = vec![F::zero(); ch];
+    let mut att = Attenuation::default();
+    let mut scratch = Scratch::default();
+    let mut valid = true;
+    for (j, r) in block.rays.clone().enumerate() {
+        let result = composite_ray_into(op, x, block, (j, r), &mut att, &mut acc, &mut o);
+        valid &= result.valid;
+        d_color.fill(F::zero());
+        upstream(r, &o.color[j * ch..(j + 1) * ch], &mut d_color);
+        let ray = Ray {
+            index: r,
+            samples: op.offsets[r]..op.offsets[r + 1],
+            block_start: block.samples.start,
+            in_block: j,
+        };
+        let up = RayUpstream {
+            color: Some(&d_color),
+            opacity: 0.0,
+            depth: 0.0,
+            weights: None,
+            transmittance: None,
+        };
+        backward_ray(x, want, ray, &att, up, &mut scratch, &mut g);
+    }
+    valid
+}
