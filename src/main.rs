@@ -63,7 +63,8 @@ enum Command {
     /// Samples per second (forward+backward with the spread of the runs, and forward alone) of
     /// the fused op on 1 and all threads and of the stable and naive taped twins, also in a
     /// training loop's steady state ("reused": the fused op into output and gradient buffers
-    /// kept across runs, the twins on one tape cleared between runs), in f32 and f64, on the
+    /// kept across runs, the twins on one tape cleared between runs) and, for the fused op, in
+    /// one pass per ray ("1-pass": `evaluate_vjp_into`, the same bits), in f32 and f64, on the
     /// workloads 4096x64, 65536x64, 16384x256 and 1024x4096 (RGB; sigma ~ U[0,5], total
     /// optical depth ~5), each beside its error against an independent compensated f64
     /// reference on the same rays and its peak extra memory; then the tape's own cost per
