@@ -14,6 +14,9 @@ use serde::Serialize;
 use super::reference::{errors, reference, Rays};
 
 /// The workloads of the issue: rays x samples per ray.
+/// Colour channels of every workload (RGB).
+const CHANNELS: usize = 3;
+
 pub const WORKLOADS: [(usize, usize); 4] = [(4096, 64), (65536, 64), (16384, 256), (1024, 4096)];
 
 /// How the bench counts bytes: the binary's global allocator.
@@ -78,9 +81,9 @@ fn data(rays: usize, samples: usize) -> Data {
     Data {
         sigma: (0..n).map(|_| u(0.0, 5.0)).collect(),
         delta: vec![f64::from((2.0 / samples as f64) as f32); n],
-        color: (0..n * 3).map(|_| u(0.0, 1.0)).collect(),
-        background: (0..3).map(|_| u(0.0, 1.0)).collect(),
-        grad_color: (0..rays * 3).map(|_| u(-1.0, 1.0)).collect(),
+        color: (0..n * CHANNELS).map(|_| u(0.0, 1.0)).collect(),
+        background: (0..CHANNELS).map(|_| u(0.0, 1.0)).collect(),
+        grad_color: (0..rays * CHANNELS).map(|_| u(-1.0, 1.0)).collect(),
         offsets: (0..=rays).map(|r| r * samples).collect(),
     }
 }
@@ -116,9 +119,10 @@ fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
     Ok(Typed {
         sigma: Array1::from(cast::<F>(&d.sigma)),
         delta: Array1::from(cast::<F>(&d.delta)),
-        color: Array2::from_shape_vec((n, 3), cast::<F>(&d.color)).map_err(|e| e.to_string())?,
+        color: Array2::from_shape_vec((n, CHANNELS), cast::<F>(&d.color)).map_err(|e| e.to_string())?,
         background: Array1::from(cast::<F>(&d.background)),
-        grad_color: ArrayD::from_shape_vec(vec![rays, 3], cast::<F>(&d.grad_color)).map_err(|e| e.to_string())?,
+        grad_color: ArrayD::from_shape_vec(vec![rays, CHANNELS], cast::<F>(&d.grad_color))
+            .map_err(|e| e.to_string())?,
     })
 }
 
@@ -225,10 +229,10 @@ impl<F: Float> Buffers<F> {
     fn new(x: &Typed<F>) -> Self {
         let (n, rays) = (x.sigma.len(), x.grad_color.shape()[0]);
         Buffers {
-            color: ArrayD::zeros(vec![rays, 3]),
+            color: ArrayD::zeros(vec![rays, CHANNELS]),
             opacity: ArrayD::zeros(vec![rays]),
             grad_sigma: ArrayD::zeros(vec![n]),
-            grad_color: ArrayD::zeros(vec![n, 3]),
+            grad_color: ArrayD::zeros(vec![n, CHANNELS]),
         }
     }
 }
@@ -456,7 +460,7 @@ pub fn run(
             sigma: &d.sigma,
             delta: &d.delta,
             color: &d.color,
-            ch: 3,
+            ch: CHANNELS,
             offsets: &d.offsets,
             background: &d.background,
             grad_color: &d.grad_color,
@@ -527,15 +531,19 @@ pub fn table(results: &[Measurement]) -> String {
             .iter()
             .find(|t| t.method == "taped" && t.precision == m.precision && t.rays == m.rays && t.samples == m.samples);
         if let Some(t) = twin {
+            // dL/dsigma and dL/dcolour, which any op must return: the floor of the memory ratio.
+            let value_bytes = if m.precision == "f32" { 4 } else { 8 };
+            let gradient_bytes = m.rays * m.samples * (1 + CHANNELS) * value_bytes;
             s += &format!(
-                "  {} {}x{}: {:.1}x faster ({:.1}x when both reuse their buffers, {:.1}x in one pass), {:.2}x the peak extra memory\n",
+                "  {} {}x{}: {:.1}x faster ({:.1}x when both reuse their buffers, {:.1}x in one pass), {:.3}x the peak extra memory (the gradients returned alone: {:.3}x)\n",
                 m.precision,
                 m.rays,
                 m.samples,
                 m.samples_per_sec / t.samples_per_sec,
                 m.samples_per_sec_reused / t.samples_per_sec_reused,
                 m.samples_per_sec_one_pass.unwrap_or(m.samples_per_sec_reused) / t.samples_per_sec_reused,
-                m.peak_extra_bytes as f64 / t.peak_extra_bytes.max(1) as f64
+                m.peak_extra_bytes as f64 / t.peak_extra_bytes.max(1) as f64,
+                gradient_bytes as f64 / t.peak_extra_bytes.max(1) as f64
             );
         }
     }
