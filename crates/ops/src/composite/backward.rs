@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use super::attenuation::Attenuation;
 use super::config::Composite;
 use super::forward::Residuals;
-use super::layout::{blocks, take_front, Block, Flat};
+use super::layout::{blocks, take_front, Block, Flat, Ray};
 use super::rows::{add_row_dots, outer_product};
 use super::suffix::adds_minus_hides;
 
@@ -131,28 +131,14 @@ fn backward_block<'a, F: Float>(
 ) {
     let mut scratch = Scratch::default();
     let mut att = Attenuation::default();
-    for (j, r) in block.rays.clone().enumerate() {
-        let ray = Ray {
-            index: r,
-            samples: op.offsets[r]..op.offsets[r + 1],
-            block_start: block.samples.start,
-            in_block: j,
-        };
+    for ray in block.each_ray(&op.offsets) {
         // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
         let (sigma, delta) = (&x.sigma[ray.samples.clone()], &x.delta[ray.samples.clone()]);
         att.compute(sigma, delta, op.min_transmittance);
-        debug_assert_eq!(saved.stop[r], att.stop(), "the same code gives the same stop");
-        let up = g.of_ray(r, ray.samples.clone(), x.ch);
-        backward_ray(x, want, ray, &att, up, &mut scratch, &mut o);
+        debug_assert_eq!(saved.stop[ray.index], att.stop(), "the same code gives the same stop");
+        let up = g.of_ray(ray.index, ray.samples.clone(), x.ch);
+        backward_ray(x, want, &ray, &att, up, &mut scratch, &mut o);
     }
-}
-
-/// Where a ray sits: its index, its global samples, and its place in its block.
-pub(crate) struct Ray {
-    pub index: usize,
-    pub samples: std::ops::Range<usize>,
-    pub block_start: usize,
-    pub in_block: usize,
 }
 
 /// Per-block buffers of the backward, reused ray after ray.
@@ -172,18 +158,13 @@ pub(crate) struct Scratch {
 pub(crate) fn backward_ray<F: Float>(
     x: &Flat<'_, F>,
     want: Wanted,
-    ray: Ray,
+    ray: &Ray,
     att: &Attenuation,
     g: RayUpstream<'_, F>,
     scratch: &mut Scratch,
     o: &mut InputGrads<'_, F>,
 ) {
-    let Ray {
-        index: r,
-        samples,
-        block_start,
-        in_block: j,
-    } = ray;
+    let (r, j, samples) = (ray.index, ray.in_block, ray.samples.clone());
     let ch = x.ch;
     let f = |v: F| v.as_f64();
     let Scratch { value, d_tau, g_color } = scratch;
@@ -196,7 +177,7 @@ pub(crate) fn backward_ray<F: Float>(
     let stop = att.stop();
     let (trans, alpha, weights) = (att.transmittance(), att.alpha(), att.weights());
     let t_end = trans[stop];
-    let local = samples.start - block_start..samples.start - block_start + stop;
+    let local = ray.local.start..ray.local.start + stop;
 
     if want.background {
         for (out, &g) in o.background[j * ch..(j + 1) * ch].iter_mut().zip(g_color.iter()) {
@@ -235,7 +216,7 @@ pub(crate) fn backward_ray<F: Float>(
     }
 
     // Samples skipped behind an early-termination stop have no gradient.
-    let skipped = local.end..samples.end - block_start;
+    let skipped = local.end..ray.local.end;
     if want.sigma {
         for ((out, &d), &dt) in o.sigma[local.clone()].iter_mut().zip(delta).zip(d_tau.iter()) {
             *out = F::lit(f(d) * dt);

@@ -9,7 +9,7 @@ use rayon::prelude::*;
 
 use super::attenuation::{valid_steps, Attenuation};
 use super::config::Composite;
-use super::layout::{blocks, take_front, Block, Flat};
+use super::layout::{blocks, take_front, Block, Flat, Ray};
 use super::rows::weighted_column_sums;
 
 /// What the composite's forward keeps for its backward: the stop index of each ray (its
@@ -104,29 +104,27 @@ fn forward_block<'a, F: Float>(
     let mut acc = vec![0.0f64; x.ch];
     let mut att = Attenuation::default();
     let mut valid = true;
-    for (j, r) in block.rays.clone().enumerate() {
-        let result = composite_ray_into(op, x, block, (j, r), &mut att, &mut acc, &mut o);
-        stop[j] = result.stop;
+    for ray in block.each_ray(&op.offsets) {
+        let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
+        stop[ray.in_block] = result.stop;
         valid &= result.valid;
     }
     valid
 }
 
-/// Composites ray `r`, the `j`-th of `block`, into the block's outputs `o`; `att` keeps its
-/// attenuation (for a backward that follows at once), `acc` is scratch of `ch` values.
+/// Composites `ray` into its block's outputs `o`; `att` keeps its attenuation (for a backward
+/// that follows at once), `acc` is scratch of `ch` values.
 #[inline(always)]
 pub(crate) fn composite_ray_into<F: Float>(
     op: &Composite,
     x: &Flat<'_, F>,
-    block: &Block,
-    (j, r): (usize, usize),
+    ray: &Ray,
     att: &mut Attenuation,
     acc: &mut [f64],
     o: &mut Outputs<'_, F>,
 ) -> RayResult {
-    let ch = x.ch;
-    let samples = op.offsets[r]..op.offsets[r + 1];
-    let local = samples.start - block.samples.start..samples.end - block.samples.start;
+    let (ch, r, j) = (x.ch, ray.index, ray.in_block);
+    let (samples, local) = (ray.samples.clone(), ray.local.clone());
     let result = forward_ray(
         RayIn {
             sigma: &x.sigma[samples.clone()],

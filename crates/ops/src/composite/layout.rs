@@ -179,6 +179,28 @@ pub(crate) struct Block {
     pub samples: Range<usize>,
 }
 
+impl Block {
+    /// The block's rays in order, each placed in the op (`offsets` as [`Composite`]'s) and in
+    /// the block.
+    pub(crate) fn each_ray<'a>(&'a self, offsets: &'a [usize]) -> impl Iterator<Item = Ray> + 'a {
+        self.rays.clone().enumerate().map(move |(j, r)| Ray {
+            index: r,
+            samples: offsets[r]..offsets[r + 1],
+            local: offsets[r] - self.samples.start..offsets[r + 1] - self.samples.start,
+            in_block: j,
+        })
+    }
+}
+
+/// Where a ray sits: its index, its samples in the op and in its block, and its place among
+/// its block's rays.
+pub(crate) struct Ray {
+    pub index: usize,
+    pub samples: Range<usize>,
+    pub local: Range<usize>,
+    pub in_block: usize,
+}
+
 /// Cuts the rays into blocks of a fixed number of rays.
 pub(crate) fn blocks(offsets: &[usize]) -> Vec<Block> {
     let rays = offsets.len() - 1;

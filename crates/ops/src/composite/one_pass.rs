@@ -8,7 +8,7 @@ use multiversion::multiversion;
 use rayon::prelude::*;
 
 use super::attenuation::Attenuation;
-use super::backward::{backward_ray, InputGrads, Ray, RayUpstream, Scratch, Wanted};
+use super::backward::{backward_ray, InputGrads, RayUpstream, Scratch, Wanted};
 use super::config::Composite;
 use super::forward::{composite_ray_into, Outputs};
 use super::layout::{blocks, Block, Flat};
@@ -56,17 +56,12 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
     let mut att = Attenuation::default();
     let mut scratch = Scratch::default();
     let mut valid = true;
-    for (j, r) in block.rays.clone().enumerate() {
-        let result = composite_ray_into(op, x, block, (j, r), &mut att, &mut acc, &mut o);
+    for ray in block.each_ray(&op.offsets) {
+        let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
         valid &= result.valid;
         d_color.fill(F::zero());
-        upstream(r, &o.color[j * ch..(j + 1) * ch], &mut d_color);
-        let ray = Ray {
-            index: r,
-            samples: op.offsets[r]..op.offsets[r + 1],
-            block_start: block.samples.start,
-            in_block: j,
-        };
+        let j = ray.in_block;
+        upstream(ray.index, &o.color[j * ch..(j + 1) * ch], &mut d_color);
         let up = RayUpstream {
             color: Some(&d_color),
             opacity: 0.0,
@@ -74,7 +69,7 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
             weights: None,
             transmittance: None,
         };
-        backward_ray(x, want, ray, &att, up, &mut scratch, &mut g);
+        backward_ray(x, want, &ray, &att, up, &mut scratch, &mut g);
     }
     valid
 }
