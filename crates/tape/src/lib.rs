@@ -77,7 +77,7 @@ mod tape;
 mod var;
 
 pub use custom::{grad_or_zeros, BackwardCtx, CustomOp};
-pub use error::{OpError, Result, TapeError};
+pub use error::{OpError, Result, TapeError, TypedError};
 pub use float::Float;
 pub use gradcheck::{gradcheck, GradcheckEntry, GradcheckOptions, GradcheckReport};
 pub use gradients::Gradients;
