@@ -1,6 +1,6 @@
 //! Errors of the volume-rendering ops: each names the ray and sample at fault.
 
-use fogray_tape::{OpError, TapeError};
+use fogray_tape::{OffsetsError, OpError, TapeError};
 use thiserror::Error;
 
 /// Why a composite's input was rejected. Nothing is computed when one is returned.
@@ -14,7 +14,7 @@ use thiserror::Error;
 pub enum CompositeError {
     /// The offsets are not a valid packing (must start at 0 and never decrease).
     #[error("offsets: {0}")]
-    Offsets(String),
+    Offsets(#[from] OffsetsError),
     /// An array's length or shape does not fit the packing.
     #[error("{what}: expected {expected}, got {got}")]
     Shape {

@@ -77,7 +77,7 @@ mod decay;
 mod forward;
 mod layout;
 
-pub(crate) use layout::{locate, validate};
+pub(crate) use layout::validate;
 mod one_pass;
 mod op;
 mod rows;
