@@ -2,6 +2,8 @@
 
 use thiserror::Error;
 
+use crate::params::ParamError;
+
 /// An error raised by an op's forward or backward (built-in or custom).
 ///
 /// The tape wraps it into a [`TapeError`] that carries the op's name.
@@ -90,6 +92,10 @@ pub enum TapeError {
         /// What the op reported.
         source: OpError,
     },
+    /// A parameter store or an optimiser rejected the call (see [`ParamError`]); it converts
+    /// with `?`, so a training loop can return one error type.
+    #[error(transparent)]
+    Param(#[from] ParamError),
 }
 
 impl TapeError {

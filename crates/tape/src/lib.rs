@@ -73,7 +73,10 @@ mod float;
 pub mod gradcheck;
 mod gradients;
 pub mod ops;
+pub mod optim;
+pub mod params;
 mod pool;
+mod storage;
 mod tape;
 mod var;
 
