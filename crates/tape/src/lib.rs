@@ -61,6 +61,14 @@
 //! 65536 rays of 64 samples went from 110-150 to 81-86 ns per sample with it) and, in a
 //! training loop that reuses one tape through [`Tape::clear`], hands out the buffers of the
 //! step before instead of fresh pages (see [`Tape::clear`] and [`Tape::recycle`]).
+//!
+//! Training: parameters that live across steps belong in a [`params::Params`] store, which
+//! lends each to a tape in O(1) ([`Tape::param_from`]: the tape shares the array, whatever its
+//! size, and gives it back on [`Tape::clear`]); constants that live across steps are lent the
+//! same way ([`Tape::constant_shared`]). The optimisers of [`optim`] ([`optim::Sgd`] with
+//! momentum, [`optim::Adam`]) update the store's arrays in place from a backward's
+//! [`Gradients`], which know which parameter each gradient belongs to. The module docs of
+//! [`optim`] show a training loop.
 
 #![warn(missing_docs)]
 
