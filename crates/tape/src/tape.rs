@@ -166,22 +166,26 @@ impl<F: Float> Tape<F> {
     /// lent by a [`Params`](crate::params::Params) store are given back, so an optimiser can
     /// update them in place.
     ///
-    /// A training loop that keeps one tape (gradient descent on `sum((w x - y)^2)`):
+    /// A training loop that keeps one tape (gradient descent on `sum((w x - y)^2)`; the data
+    /// `x` and `y` live across steps, so they are lent with [`Tape::constant_shared`] instead
+    /// of copied onto the tape each step):
     ///
     /// ```
+    /// use std::sync::Arc;
+    ///
     /// use fogray_tape::Tape;
     /// use ndarray::Array1;
     ///
     /// let n = 100_000; // 400 KB per value: large enough to be pooled
-    /// let x = Array1::from_shape_fn(n, |i| (i % 7) as f32 / 7.0);
-    /// let y = x.mapv(|v| 3.0 * v);
+    /// let x = Arc::new(Array1::from_shape_fn(n, |i| (i % 7) as f32 / 7.0).into_dyn());
+    /// let y = Arc::new(x.mapv(|v| 3.0 * v));
     /// let mut w = 0.0f32;
     /// let mut tape = Tape::<f32>::new();
     /// for _ in 0..20 {
     ///     tape.clear(); // last step's buffers go to the pool, its handles go stale
     ///     let wv = tape.param(ndarray::arr0(w));
-    ///     let xv = tape.constant(x.clone());
-    ///     let yv = tape.constant(y.clone());
+    ///     let xv = tape.constant_shared(&x);
+    ///     let yv = tape.constant_shared(&y);
     ///     let wx = tape.mul(xv, wv)?; // broadcast: the output comes from the pool
     ///     let r = tape.sub(wx, yv)?;
     ///     let sq = tape.square(r)?;
@@ -194,6 +198,8 @@ impl<F: Float> Tape<F> {
     /// assert!(tape.stats().pooled_bytes > 0);
     /// # Ok::<(), fogray_tape::TapeError>(())
     /// ```
+    ///
+    /// For parameters that live across steps, see [`crate::params`] and [`crate::optim`].
     pub fn clear(&mut self) {
         let pool = self.pool.get_mut().get_or_insert_with(Box::default);
         pool.next_step();
