@@ -51,7 +51,7 @@
 //! # Ok::<(), fogray_tape::TapeError>(())
 //! ```
 //!
-//! Calling `step` before `clear` is [`ParamError::InUse`](crate::params::ParamError::InUse):
+//! Calling `step` before `clear` is [`ParamError::InUse`]:
 //! the update is never made on a silent copy. For a gradient computed without a tape, insert
 //! it in a [`ParamGradients`].
 
