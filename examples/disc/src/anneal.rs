@@ -17,7 +17,7 @@
 use clap::Args;
 use fogray::tape::TapeError;
 
-use crate::adam::{Adam, AdamState};
+use crate::adam::{Adam, Descent};
 use crate::experiments::{Fit, Renderer};
 use crate::hard;
 use crate::setup::Setup;
@@ -87,7 +87,7 @@ impl Schedule {
 
 /// Adam on the soft loss with the softness and learning rate of `schedule`.
 pub fn fit_annealed(setup: &Setup, start: f64, schedule: &Schedule, adam: &Adam) -> Result<Fit, TapeError> {
-    let mut state = AdamState::default();
+    let mut descent = Descent::new(adam, start)?;
     let mut x = start;
     let mut path = vec![start];
     let mut taus = Vec::with_capacity(schedule.anneal_steps + 1);
@@ -95,7 +95,7 @@ pub fn fit_annealed(setup: &Setup, start: f64, schedule: &Schedule, adam: &Adam)
         let (tau, lr) = schedule.at(k);
         taus.push(tau);
         let g = setup.soft(x, tau)?.slope;
-        x = state.step(adam, x, g, lr);
+        x = descent.step(g, lr)?;
         path.push(x);
     }
     taus.push(schedule.tau_end);
