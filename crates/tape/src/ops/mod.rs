@@ -1,6 +1,7 @@
 //! The built-in ops, one family per file. Each is a [`CustomOp`](crate::CustomOp) like any
 //! user's op, plus a `Tape` method that applies it.
 
+pub mod activation;
 pub mod binary;
 pub mod index;
 pub mod reduce;
