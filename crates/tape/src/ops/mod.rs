@@ -4,6 +4,7 @@
 pub mod activation;
 pub mod binary;
 pub mod index;
+pub mod matmul;
 pub mod reduce;
 pub mod segment;
 pub mod select;
