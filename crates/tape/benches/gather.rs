@@ -1,6 +1,7 @@
 //! Criterion benches: rows of a table gathered by index and the gradient scattered back, on a
 //! 2-D grid renderer's bilinear lookups (110,592 corner indices into a [1024, 3] colour table,
-//! f32: a 32x32 grid, 8 cameras of 64 pixels, 64 samples a ray, 4 corners a sample).
+//! f32: the 4 corners of each of 27,648 samples in a 32x32 grid, from 8 cameras of 64 pixels
+//! at up to 64 samples a ray).
 //!
 //! `taped` is `Tape::gather` and a backward seeded with an upstream gradient on a new tape each
 //! time; `taped-reused` keeps one tape (cleared each time, its buffer pool reused); `plain-loop`
