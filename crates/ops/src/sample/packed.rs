@@ -1,0 +1,184 @@
+//! Packed samples: every ray's samples in one run of flat arrays, with offsets, ready for the
+//! composite (`Composite::new(&s.offsets)`, `delta`, `t`) and a field op (`positions`).
+
+use fogray_tape::{Float, Tape, TapeError, Var};
+use ndarray::{Array1, Array2};
+use rayon::prelude::*;
+
+use crate::error::SampleError;
+use crate::rays::{RayBatch, RayIntervals};
+
+/// The samples of `R` rays, packed: ray `r` owns samples `offsets[r]..offsets[r + 1]`, in
+/// increasing depth.
+///
+/// Sample `k` stands for the piece `[t[k] - delta[k] / 2, t[k] + delta[k] / 2]` of its ray
+/// (its depth is the piece's midpoint); a ray's pieces never overlap. Every ray of the input
+/// has a range, in order; a ray that misses (or whose piece is all empty space) has an empty
+/// one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PackedSamples<F: Float> {
+    /// Sample positions `[n, 3]`: `origin + t * direction` of the sample's ray.
+    pub positions: Array2<F>,
+    /// Depths `[n]`: distance along the ray (directions are unit).
+    pub t: Array1<F>,
+    /// Lengths `[n]` of the pieces the samples stand for (the composite's `delta`).
+    pub delta: Array1<F>,
+    /// `R + 1` offsets, starting at 0, never decreasing (the composite's packing).
+    pub offsets: Vec<usize>,
+    /// The ray of each sample, `[n]`.
+    pub ray: Vec<usize>,
+}
+
+/// The tape constants made by [`PackedSamples::to_tape`].
+#[derive(Debug, Clone, Copy)]
+pub struct SampleVars {
+    /// Positions `[n, 3]`.
+    pub positions: Var,
+    /// Depths `[n]`.
+    pub t: Var,
+    /// Lengths `[n]`.
+    pub delta: Var,
+}
+
+impl<F: Float> PackedSamples<F> {
+    /// Number of rays.
+    pub fn rays(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there is no sample at all.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// The sample range of ray `r`. Panics if `r >= rays()`.
+    pub fn range(&self, r: usize) -> std::ops::Range<usize> {
+        self.offsets[r]..self.offsets[r + 1]
+    }
+
+    /// Mean samples per ray (0 for no ray).
+    pub fn samples_per_ray(&self) -> f64 {
+        if self.rays() == 0 {
+            0.0
+        } else {
+            self.len() as f64 / self.rays() as f64
+        }
+    }
+
+    /// Records positions, depths and lengths on `tape` as constants (copies), for a taped
+    /// render: feed `positions` to the field and `delta`, `t` to the composite.
+    pub fn to_tape(&self, tape: &mut Tape<F>) -> Result<SampleVars, TapeError> {
+        Ok(SampleVars {
+            positions: tape.constant(self.positions.clone()),
+            t: tape.constant(self.t.clone()),
+            delta: tape.constant(self.delta.clone()),
+        })
+    }
+}
+
+/// A piece `[lo, hi]` of a ray, in f64.
+pub(crate) type Piece = (f64, f64);
+
+/// Checks that a sampler got one interval per ray.
+pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<(), SampleError> {
+    if rays.len() != intervals.len() {
+        return Err(SampleError::Shape {
+            what: "intervals",
+            expected: format!("one per ray ({})", rays.len()),
+            got: format!("{}", intervals.len()),
+        });
+    }
+    Ok(())
+}
+
+/// Runs `pieces_of(r)` for every ray in parallel and packs the results in ray order (so the
+/// output does not depend on the number of threads).
+pub(crate) fn pack<F: Float>(rays: &RayBatch<F>, pieces_of: impl Fn(usize) -> Vec<Piece> + Sync) -> PackedSamples<F> {
+    let per_ray: Vec<Vec<Piece>> = (0..rays.len()).into_par_iter().map(&pieces_of).collect();
+    let mut offsets = Vec::with_capacity(rays.len() + 1);
+    offsets.push(0);
+    for p in &per_ray {
+        offsets.push(offsets[offsets.len() - 1] + p.len());
+    }
+    let n = offsets[rays.len()];
+    let (mut pos, mut t, mut delta, mut ray) = (
+        Vec::with_capacity(3 * n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+        Vec::with_capacity(n),
+    );
+    for (r, pieces) in per_ray.iter().enumerate() {
+        let (o, d) = rays.ray(r);
+        for &(lo, hi) in pieces {
+            let mid = 0.5 * (lo + hi);
+            pos.extend((0..3).map(|a| F::lit(mid.mul_add(d[a], o[a]))));
+            t.push(F::lit(mid));
+            delta.push(F::lit(hi - lo));
+            ray.push(r);
+        }
+    }
+    PackedSamples {
+        positions: Array2::from_shape_vec((n, 3), pos).expect("three coordinates per sample"),
+        t: Array1::from(t),
+        delta: Array1::from(delta),
+        offsets,
+        ray,
+    }
+}
+
+/// Cuts `[lo, hi]` at the edges `origin + (i + shift) * step` (any integer `i`) that lie
+/// inside it, appending the pieces. Edges within `step * 1e-6` of an end are not used, so
+/// no piece is a rounding sliver unless the whole segment is (then it is one piece); a
+/// zero-length segment gives nothing.
+pub(crate) fn cut(lo: f64, hi: f64, origin: f64, step: f64, shift: f64, out: &mut Vec<Piece>) {
+    if hi <= lo {
+        return;
+    }
+    let eps = step * 1e-6;
+    let mut start = lo;
+    let mut i = ((lo + eps - origin) / step - shift).ceil();
+    loop {
+        let edge = (i + shift).mul_add(step, origin);
+        if edge >= hi - eps {
+            break;
+        }
+        if edge > start + eps {
+            out.push((start, edge));
+            start = edge;
+        }
+        i += 1.0;
+    }
+    out.push((start, hi));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cut_at_a_grid_by_hand() {
+        let mut p = Vec::new();
+        // [0.1, 0.75] cut at multiples of 0.25: edges 0.25, 0.5.
+        cut(0.1, 0.75, 0.0, 0.25, 0.0, &mut p);
+        assert_eq!(p, vec![(0.1, 0.25), (0.25, 0.5), (0.5, 0.75)]);
+        // The same grid shifted by 0.2 steps: edges 0.3, 0.55 (0.05 is before the segment).
+        p.clear();
+        cut(0.1, 0.75, 0.0, 0.25, 0.2, &mut p);
+        assert_eq!(p.len(), 3);
+        assert!((p[0].1 - 0.3).abs() < 1e-15 && (p[1].1 - 0.55).abs() < 1e-15 && p[2].1 == 0.75);
+        // An edge a rounding error past an end is not a piece.
+        p.clear();
+        cut(0.0, 0.5 + 1e-15, 0.0, 0.25, 0.0, &mut p);
+        assert_eq!(p, vec![(0.0, 0.25), (0.25, 0.5 + 1e-15)]);
+        // Shorter than a step: one piece; empty: none.
+        p.clear();
+        cut(0.3, 0.31, 0.0, 0.25, 0.0, &mut p);
+        cut(0.4, 0.4, 0.0, 0.25, 0.0, &mut p);
+        assert_eq!(p, vec![(0.3, 0.31)]);
+    }
+}
