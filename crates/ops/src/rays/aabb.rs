@@ -145,7 +145,9 @@ impl RayIntervals {
 
     /// Ray `r`'s segment, `None` for a miss or `r` out of range.
     pub fn segment(&self, r: usize) -> Option<(f64, f64)> {
-        self.hit.get(r).and_then(|&h| h.then(|| (self.t_near[r], self.t_far[r])))
+        self.hit
+            .get(r)
+            .and_then(|&h| h.then(|| (self.t_near[r], self.t_far[r])))
     }
 }
 
@@ -220,7 +222,11 @@ mod tests {
     fn bad_boxes_and_intervals_are_errors() {
         assert_eq!(
             Aabb::new([0.0; 3], [1.0, -1.0, 1.0]),
-            Err(GeometryError::InvalidBox { axis: 1, min: 0.0, max: -1.0 })
+            Err(GeometryError::InvalidBox {
+                axis: 1,
+                min: 0.0,
+                max: -1.0
+            })
         );
         assert!(Aabb::new([0.0; 3], [1.0, 1.0, f64::INFINITY]).is_err());
         assert!(Aabb::new([f64::NAN, 0.0, 0.0], [1.0; 3]).is_err());

@@ -144,11 +144,14 @@ mod tests {
     #[test]
     fn huge_directions_normalise_without_overflow() {
         // |(3e200, 4e200, 0)| overflows as a sum of squares but not as a hypot.
-        let d = [3e200, 4e200, 0.0];
+        let d: [f64; 3] = [3e200, 4e200, 0.0];
         assert!((d[0] * d[0] + d[1] * d[1]).sqrt().is_infinite());
         let r = RayBatch::new(arr2(&[[0.0; 3]]), arr2(&[d])).unwrap();
         let got = r.directions().row(0).to_vec();
-        assert!(got.iter().zip([0.6, 0.8, 0.0]).all(|(g, w)| (g - w).abs() < 1e-15), "{got:?}");
+        assert!(
+            got.iter().zip([0.6f64, 0.8, 0.0]).all(|(g, w)| (g - w).abs() < 1e-15),
+            "{got:?}"
+        );
     }
 
     #[test]
@@ -159,13 +162,22 @@ mod tests {
             RayBatch::new(wide.clone(), ok.clone()),
             Err(GeometryError::Shape { what: "origins", .. })
         ));
-        assert!(matches!(RayBatch::new(ok.clone(), wide), Err(GeometryError::Shape { .. })));
+        assert!(matches!(
+            RayBatch::new(ok.clone(), wide),
+            Err(GeometryError::Shape { .. })
+        ));
         let nan = arr2(&[[0.0f32, f32::NAN, 1.0]]);
         let e = RayBatch::new(nan, ok.clone()).unwrap_err();
         assert_eq!(e.to_string(), "origins[0, 1] is NaN (must be finite)");
         let zero = arr2(&[[0.0f32, 0.0, 0.0]]);
-        assert!(matches!(RayBatch::new(ok.clone(), zero), Err(GeometryError::InvalidValue { .. })));
+        assert!(matches!(
+            RayBatch::new(ok.clone(), zero),
+            Err(GeometryError::InvalidValue { .. })
+        ));
         let two = arr2(&[[0.0f32, 0.0, 1.0], [0.0, 0.0, 1.0]]);
-        assert!(matches!(RayBatch::new(ok, two), Err(GeometryError::Shape { what: "directions", .. })));
+        assert!(matches!(
+            RayBatch::new(ok, two),
+            Err(GeometryError::Shape { what: "directions", .. })
+        ));
     }
 }

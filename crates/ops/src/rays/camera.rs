@@ -63,12 +63,21 @@ impl Intrinsics {
                 height: self.height,
             });
         }
-        for (what, v, nonzero) in [("fx", self.fx, true), ("fy", self.fy, true), ("cx", self.cx, false), ("cy", self.cy, false)] {
+        for (what, v, nonzero) in [
+            ("fx", self.fx, true),
+            ("fy", self.fy, true),
+            ("cx", self.cx, false),
+            ("cy", self.cy, false),
+        ] {
             if !v.is_finite() || (nonzero && v == 0.0) {
                 return Err(GeometryError::InvalidValue {
                     what: what.into(),
                     value: v,
-                    rule: if nonzero { "must be finite and non-zero" } else { "must be finite" },
+                    rule: if nonzero {
+                        "must be finite and non-zero"
+                    } else {
+                        "must be finite"
+                    },
                 });
             }
         }
@@ -123,7 +132,12 @@ impl PinholeCamera {
     ///
     /// Errors: bad intrinsics, a non-finite input, `eye == target`, or `up` (nearly) parallel
     /// to the viewing direction (the sine of their angle below `1e-9`).
-    pub fn look_at(intrinsics: Intrinsics, eye: [f64; 3], target: [f64; 3], up: [f64; 3]) -> Result<Self, GeometryError> {
+    pub fn look_at(
+        intrinsics: Intrinsics,
+        eye: [f64; 3],
+        target: [f64; 3],
+        up: [f64; 3],
+    ) -> Result<Self, GeometryError> {
         intrinsics.check()?;
         let frame = Frame::look_at(eye, target, up)?;
         Ok(PinholeCamera { intrinsics, frame })
@@ -148,11 +162,7 @@ impl PinholeCamera {
     /// outside the image: no check).
     pub fn direction(&self, row: usize, col: usize) -> [f64; 3] {
         let k = &self.intrinsics;
-        let cam = [
-            (col as f64 + 0.5 - k.cx) / k.fx,
-            (row as f64 + 0.5 - k.cy) / k.fy,
-            1.0,
-        ];
+        let cam = [(col as f64 + 0.5 - k.cx) / k.fx, (row as f64 + 0.5 - k.cy) / k.fy, 1.0];
         // An invertible R maps a non-zero vector to a non-zero one.
         normalise(self.frame.rotate(cam)).unwrap_or([0.0, 0.0, 1.0])
     }
@@ -176,7 +186,10 @@ impl PinholeCamera {
     pub fn rays_for_pixels<F: Float>(&self, pixels: &[usize]) -> Result<RayBatch<F>, GeometryError> {
         rays_for_camera_pixels(
             std::slice::from_ref(self),
-            &pixels.iter().map(|&pixel| CameraPixel { camera: 0, pixel }).collect::<Vec<_>>(),
+            &pixels
+                .iter()
+                .map(|&pixel| CameraPixel { camera: 0, pixel })
+                .collect::<Vec<_>>(),
         )
     }
 }

@@ -7,7 +7,11 @@ fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
 }
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 fn unit(v: [f64; 3]) -> [f64; 3] {
     let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
@@ -45,7 +49,10 @@ fn look_at_directions_match_the_field_of_view_formula() {
                 let want = unit(std::array::from_fn(|i| forward[i] + u * right[i] + v * up[i]));
                 let got = rays.directions().row(a * w + b).to_vec();
                 for i in 0..3 {
-                    assert!((got[i] - want[i]).abs() < 1e-14, "eye {eye:?} pixel ({a}, {b}): {got:?} vs {want:?}");
+                    assert!(
+                        (got[i] - want[i]).abs() < 1e-14,
+                        "eye {eye:?} pixel ({a}, {b}): {got:?} vs {want:?}"
+                    );
                 }
                 assert_eq!(rays.origins().row(a * w + b).to_vec(), eye.to_vec());
             }
@@ -58,8 +65,20 @@ fn general_intrinsics_and_transform() {
     // Identity rotation, centre (1, 2, 3): the camera frame is the world frame shifted.
     // Pixel (row 1, col 3) with fx = 2, fy = 4, cx = 1, cy = 0.5: camera direction
     // ((3.5 - 1) / 2, (1.5 - 0.5) / 4, 1) = (1.25, 0.25, 1), length sqrt(2.625).
-    let k = Intrinsics { fx: 2.0, fy: 4.0, cx: 1.0, cy: 0.5, width: 5, height: 3 };
-    let m = [[1.0, 0.0, 0.0, 1.0], [0.0, 1.0, 0.0, 2.0], [0.0, 0.0, 1.0, 3.0], [0.0, 0.0, 0.0, 1.0]];
+    let k = Intrinsics {
+        fx: 2.0,
+        fy: 4.0,
+        cx: 1.0,
+        cy: 0.5,
+        width: 5,
+        height: 3,
+    };
+    let m = [
+        [1.0, 0.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0, 2.0],
+        [0.0, 0.0, 1.0, 3.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
     let cam = PinholeCamera::new(k, m).unwrap();
     let n = 2.625f64.sqrt();
     let d = cam.direction(1, 3);
@@ -98,24 +117,40 @@ fn chosen_pixels_and_pairs_pick_rows_of_the_full_batch() {
     for (i, p) in [34, 0, 34, 12].into_iter().enumerate() {
         assert_eq!(picked.directions().row(i), all_a.directions().row(p));
     }
-    let pairs = [CameraPixel { camera: 1, pixel: 3 }, CameraPixel { camera: 0, pixel: 20 }];
+    let pairs = [
+        CameraPixel { camera: 1, pixel: 3 },
+        CameraPixel { camera: 0, pixel: 20 },
+    ];
     let mixed = rays_for_camera_pixels::<f32>(&[a.clone(), b.clone()], &pairs).unwrap();
     assert_eq!(mixed.directions().row(0), all_b.directions().row(3));
     assert_eq!(mixed.origins().row(1), all_a.origins().row(20));
     assert_eq!(
         a.rays_for_pixels::<f32>(&[35]).unwrap_err(),
-        GeometryError::OutOfRange { what: "pixel", index: 35, len: 35 }
+        GeometryError::OutOfRange {
+            what: "pixel",
+            index: 35,
+            len: 35
+        }
     );
     assert_eq!(
         rays_for_camera_pixels::<f32>(&[a, b], &[CameraPixel { camera: 2, pixel: 0 }]).unwrap_err(),
-        GeometryError::OutOfRange { what: "camera", index: 2, len: 2 }
+        GeometryError::OutOfRange {
+            what: "camera",
+            index: 2,
+            len: 2
+        }
     );
 }
 
 #[test]
 fn bad_cameras_are_errors() {
     let k = Intrinsics::from_vertical_fov(4, 4, 1.0).unwrap();
-    let id = [[1.0, 0.0, 0.0, 0.0], [0.0, 1.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0], [0.0, 0.0, 0.0, 1.0]];
+    let id = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
     assert_eq!(
         Intrinsics::from_vertical_fov(0, 4, 1.0),
         Err(GeometryError::EmptyImage { width: 0, height: 4 })
@@ -130,13 +165,28 @@ fn bad_cameras_are_errors() {
     assert!(matches!(PinholeCamera::new(k, nan), Err(GeometryError::Transform(_))));
     let mut singular = id;
     singular[2] = [1.0, 0.0, 0.0, 0.0]; // third row = first: rank 2
-    assert!(matches!(PinholeCamera::new(k, singular), Err(GeometryError::Transform(_))));
+    assert!(matches!(
+        PinholeCamera::new(k, singular),
+        Err(GeometryError::Transform(_))
+    ));
     let mut projective = id;
     projective[3][0] = 0.5;
-    assert!(matches!(PinholeCamera::new(k, projective), Err(GeometryError::Transform(_))));
+    assert!(matches!(
+        PinholeCamera::new(k, projective),
+        Err(GeometryError::Transform(_))
+    ));
     let look = |eye, target, up| PinholeCamera::look_at(k, eye, target, up);
-    assert!(matches!(look([1.0; 3], [1.0; 3], [0.0, 0.0, 1.0]), Err(GeometryError::Degenerate(_))));
-    assert!(matches!(look([0.0, 0.0, 3.0], [0.0; 3], [0.0, 0.0, 1.0]), Err(GeometryError::Degenerate(_))));
-    assert!(matches!(look([0.0, 0.0, 3.0], [0.0; 3], [0.0; 3]), Err(GeometryError::Degenerate(_))));
+    assert!(matches!(
+        look([1.0; 3], [1.0; 3], [0.0, 0.0, 1.0]),
+        Err(GeometryError::Degenerate(_))
+    ));
+    assert!(matches!(
+        look([0.0, 0.0, 3.0], [0.0; 3], [0.0, 0.0, 1.0]),
+        Err(GeometryError::Degenerate(_))
+    ));
+    assert!(matches!(
+        look([0.0, 0.0, 3.0], [0.0; 3], [0.0; 3]),
+        Err(GeometryError::Degenerate(_))
+    ));
     assert!(look([f64::INFINITY, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0]).is_err());
 }

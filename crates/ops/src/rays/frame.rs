@@ -12,7 +12,11 @@ pub(crate) struct Frame {
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -24,7 +28,10 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
 /// product of the column lengths (1 for a rotation, 0 for a singular matrix).
 pub(crate) fn checked_transform(m: [[f64; 4]; 4]) -> Result<Frame, GeometryError> {
     if let Some((i, j)) = (0..16).map(|k| (k / 4, k % 4)).find(|&(i, j)| !m[i][j].is_finite()) {
-        return Err(GeometryError::Transform(format!("entry [{i}][{j}] is {} (must be finite)", m[i][j])));
+        return Err(GeometryError::Transform(format!(
+            "entry [{i}][{j}] is {} (must be finite)",
+            m[i][j]
+        )));
     }
     if (0..4).any(|j| (m[3][j] - if j == 3 { 1.0 } else { 0.0 }).abs() > 1e-9) {
         return Err(GeometryError::Transform(format!(
@@ -32,11 +39,16 @@ pub(crate) fn checked_transform(m: [[f64; 4]; 4]) -> Result<Frame, GeometryError
             m[3]
         )));
     }
-    let rotation = [[m[0][0], m[0][1], m[0][2]], [m[1][0], m[1][1], m[1][2]], [m[2][0], m[2][1], m[2][2]]];
+    let rotation = [
+        [m[0][0], m[0][1], m[0][2]],
+        [m[1][0], m[1][1], m[1][2]],
+        [m[2][0], m[2][1], m[2][2]],
+    ];
     let col = |j: usize| [rotation[0][j], rotation[1][j], rotation[2][j]];
     let det = dot(col(0), cross(col(1), col(2)));
     let scale = norm(col(0)) * norm(col(1)) * norm(col(2));
-    if !(det.abs() > 1e-9 * scale) || scale == 0.0 {
+    let invertible = det.abs() > 1e-9 * scale && scale > 0.0;
+    if !invertible {
         return Err(GeometryError::Transform(format!(
             "the 3x3 part is singular (determinant {det:e}, column lengths' product {scale:e})"
         )));
@@ -51,7 +63,9 @@ impl Frame {
     /// OpenCV axes looking from `eye` at `target` with `up` up (see `PinholeCamera::look_at`).
     pub(crate) fn look_at(eye: [f64; 3], target: [f64; 3], up: [f64; 3]) -> Result<Frame, GeometryError> {
         if let Some(v) = eye.iter().chain(&target).chain(&up).find(|v| !v.is_finite()) {
-            return Err(GeometryError::Degenerate(format!("{v} in eye, target or up (must be finite)")));
+            return Err(GeometryError::Degenerate(format!(
+                "{v} in eye, target or up (must be finite)"
+            )));
         }
         let forward = normalise([target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]])
             .ok_or_else(|| GeometryError::Degenerate("eye and target coincide".into()))?;

@@ -7,7 +7,7 @@
 //! ```
 //! use fogray_ops::rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera};
 //!
-//! // Two views of the box [-1, 1]^3 from distance 3, 64x64 pixels, 40 degrees vertically.
+//! // Two views of the box [-0.5, 0.5]^3 from distance 3, 64x64 pixels, 40 degrees vertically.
 //! let k = Intrinsics::from_vertical_fov(64, 64, 40f64.to_radians())?;
 //! let cams = [
 //!     PinholeCamera::look_at(k, [0.0, -3.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0])?,
@@ -21,10 +21,11 @@
 //!     CameraPixel { camera: 0, pixel: 0 },
 //! ];
 //! let rays = rays_for_camera_pixels::<f32>(&cams, &pairs)?;
-//! let clip = Aabb::new([-1.0; 3], [1.0; 3])?.clip(&rays);
-//! // Near-central rays cross the box from about t = 2 to t = 4; the corner ray misses it.
+//! let clip = Aabb::new([-0.5; 3], [0.5; 3])?.clip(&rays);
+//! // Near-central rays cross the box from about t = 2.5 to t = 3.5; the corner ray, 20
+//! // degrees off in both directions, passes beside it.
 //! let (near, far) = clip.segment(0).unwrap();
-//! assert!((near - 2.0).abs() < 1e-3 && (far - 4.0).abs() < 1e-3);
+//! assert!((near - 2.5).abs() < 1e-3 && (far - 3.5).abs() < 1e-3);
 //! assert!(clip.segment(1).is_some());
 //! assert_eq!(clip.segment(2), None);
 //! # Ok::<(), fogray_ops::GeometryError>(())

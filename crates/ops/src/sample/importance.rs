@@ -77,7 +77,13 @@ impl Importance {
                 })
                 .collect();
             let w: Vec<f64> = range.map(|k| weights[k].as_f64()).collect();
-            resample(&pieces, &w, self.floor, self.samples, RayJitter::for_ray(self.jitter, r))
+            resample(
+                &pieces,
+                &w,
+                self.floor,
+                self.samples,
+                RayJitter::for_ray(self.jitter, r),
+            )
         }))
     }
 }
@@ -97,7 +103,12 @@ fn check_previous<F: Float>(
         return Err(SampleError::Shape {
             what: "previous samples",
             expected: format!("offsets from 0 to {n}, never decreasing, and {n} deltas"),
-            got: format!("{} offsets ending at {:?}, {} deltas", offsets.len(), offsets.last(), previous.delta.len()),
+            got: format!(
+                "{} offsets ending at {:?}, {} deltas",
+                offsets.len(),
+                offsets.last(),
+                previous.delta.len()
+            ),
         });
     }
     if offsets.len() - 1 != rays.len() {
@@ -145,7 +156,8 @@ const JOIN: f64 = 1e-3;
 /// One ray: the pieces of equal probability `1 / n`, split at gaps between `pieces`.
 pub(crate) fn resample(pieces: &[Piece], weights: &[f64], floor: f64, n: usize, mut jitter: RayJitter) -> Vec<Piece> {
     let length: f64 = pieces.iter().map(|p| p.1 - p.0).sum();
-    if pieces.is_empty() || !(length > 0.0) {
+    // Deltas were checked finite and non-negative, so the length is too.
+    if pieces.is_empty() || length <= 0.0 {
         return Vec::new();
     }
     let total: f64 = weights.iter().sum();

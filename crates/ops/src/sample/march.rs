@@ -17,10 +17,20 @@ impl OccupancyGrid {
     pub(crate) fn occupied_runs(&self, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<Piece> {
         let r = self.resolution as i64;
         let min = self.bounds.min();
-        let start = self.cell_of(std::array::from_fn(|a| lo.mul_add(d[a], o[a]).clamp(min[a], self.bounds.max()[a])));
+        let start = self.cell_of(std::array::from_fn(|a| {
+            lo.mul_add(d[a], o[a]).clamp(min[a], self.bounds.max()[a])
+        }));
         let Some(start) = start else { return Vec::new() };
         let mut idx = start.map(|i| i as i64);
-        let dir: [i64; 3] = std::array::from_fn(|a| if d[a] > 0.0 { 1 } else if d[a] < 0.0 { -1 } else { 0 });
+        let dir: [i64; 3] = std::array::from_fn(|a| {
+            if d[a] > 0.0 {
+                1
+            } else if d[a] < 0.0 {
+                -1
+            } else {
+                0
+            }
+        });
         // The t at which the ray leaves cell idx across axis a.
         let exit = |a: usize, i: i64| -> f64 {
             match dir[a] {
@@ -83,7 +93,8 @@ impl OccupancyGrid {
         Ok(pack(rays, |r| {
             let mut pieces = Vec::new();
             let (o, d) = rays.ray(r);
-            let (Some((near, far)), Some((box_near, box_far))) = (intervals.segment(r), self.bounds.clip_ray(o, d)) else {
+            let (Some((near, far)), Some((box_near, box_far))) = (intervals.segment(r), self.bounds.clip_ray(o, d))
+            else {
                 return pieces;
             };
             let (lo, hi) = (near.max(box_near), far.min(box_far));

@@ -40,8 +40,14 @@
 //! ```
 
 mod importance;
+#[cfg(test)]
+mod importance_tests;
 mod march;
+#[cfg(test)]
+mod march_tests;
 mod occupancy;
+#[cfg(test)]
+mod occupancy_tests;
 mod packed;
 mod stratified;
 mod uniform;

@@ -61,7 +61,11 @@ impl OccupancyConfig {
     /// Errors: `density` not finite and non-negative.
     pub fn density(density: f64) -> Result<Self, SampleError> {
         if !(density.is_finite() && density >= 0.0) {
-            return Err(config_error("density threshold", density, "must be finite and non-negative"));
+            return Err(config_error(
+                "density threshold",
+                density,
+                "must be finite and non-negative",
+            ));
         }
         Ok(OccupancyConfig {
             threshold: Threshold::Density(density),
@@ -219,7 +223,9 @@ impl OccupancyGrid {
 
     /// The share of occupied cells, in `[0, 1]`.
     pub fn occupied_fraction(&self) -> f64 {
-        let ones: u64 = (0..self.estimate.len()).map(|i| self.bits[i / 64] >> (i % 64) & 1).sum();
+        let ones: u64 = (0..self.estimate.len())
+            .map(|i| self.bits[i / 64] >> (i % 64) & 1)
+            .sum();
         ones as f64 / self.estimate.len() as f64
     }
 
@@ -264,7 +270,12 @@ impl OccupancyGrid {
 
     /// The new density of each cell of `cells`: the largest the caller's function gives at
     /// the cell's points.
-    fn densities<F, D, E>(&self, cells: std::ops::Range<usize>, density: &D, points: CellPoints) -> Result<Vec<f64>, SampleError>
+    fn densities<F, D, E>(
+        &self,
+        cells: std::ops::Range<usize>,
+        density: &D,
+        points: CellPoints,
+    ) -> Result<Vec<f64>, SampleError>
     where
         F: Float,
         D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E>,
@@ -292,7 +303,10 @@ impl OccupancyGrid {
         let xyz = Array2::from_shape_vec((m, 3), xyz).expect("three coordinates per point");
         let sigma = density(xyz.view()).map_err(|e| SampleError::Density(e.to_string()))?;
         if sigma.len() != m {
-            return Err(SampleError::Density(format!("returned {} densities for {m} points", sigma.len())));
+            return Err(SampleError::Density(format!(
+                "returned {} densities for {m} points",
+                sigma.len()
+            )));
         }
         let sigma: Vec<f64> = sigma.iter().map(|s| s.as_f64()).collect();
         let mut out = Vec::with_capacity(cells.len());

@@ -107,7 +107,132 @@ impl Stratified {
 
     /// Samples every ray within its interval (parallel over rays; the same output whatever
     /// the thread count). Errors: `intervals` not one per ray.
-    pub fn sample<F: Float>(&self, rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<PackedSamples<F>, SampleError> {
+    pub fn sample<F: Float>(
+        &self,
+        rays: &RayBatch<F>,
+        intervals: &RayIntervals,
+    ) -> Result<PackedSamples<F>, SampleError> {
         sample_segments(rays, intervals, self.spacing, |r| RayJitter::for_ray(self.jitter, r))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::Array2;
+
+    /// 4000 rays from the origin along +x over [0, 1] at step 0.25 (four uniform pieces).
+    fn setup() -> (RayBatch<f64>, RayIntervals) {
+        let n = 4000;
+        let mut d = Array2::zeros((n, 3));
+        d.column_mut(0).fill(1.0);
+        let rays = RayBatch::new(Array2::zeros((n, 3)), d).unwrap();
+        (rays, RayIntervals::new(vec![0.0; n], vec![1.0; n]).unwrap())
+    }
+
+    /// The pieces of every ray tile [0, 1]: consecutive, from 0 to 1.
+    fn assert_tiles(s: &PackedSamples<f64>) {
+        for r in 0..s.rays() {
+            let mut at = 0.0;
+            for k in s.range(r) {
+                let (lo, hi) = (s.t[k] - s.delta[k] / 2.0, s.t[k] + s.delta[k] / 2.0);
+                assert!(
+                    (lo - at).abs() < 1e-12 && hi > lo,
+                    "ray {r} piece {k}: [{lo}, {hi}] after {at}"
+                );
+                at = hi;
+            }
+            assert!((at - 1.0).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn per_ray_shift_is_uniform_and_keeps_whole_steps() {
+        let (rays, iv) = setup();
+        let s = Stratified::new(Spacing::Step(0.25), Jitter::PerRay { seed: 7 })
+            .unwrap()
+            .sample(&rays, &iv)
+            .unwrap();
+        assert_tiles(&s);
+        // The first piece is [0, u h]: u should be U[0, 1), so its mean is 1/2 (standard error
+        // 1/sqrt(12 * 4000) = 0.0046) and each quarter holds a quarter of the rays (+-3.5 sd).
+        let u: Vec<f64> = (0..s.rays()).map(|r| s.delta[s.offsets[r]] / 0.25).collect();
+        let mean = u.iter().sum::<f64>() / u.len() as f64;
+        assert!((mean - 0.5).abs() < 0.02, "mean {mean}");
+        for q in 0..4 {
+            let c = u
+                .iter()
+                .filter(|&&x| (q as f64 / 4.0..(q + 1) as f64 / 4.0).contains(&x))
+                .count();
+            assert!((c as f64 - 1000.0).abs() < 95.0, "quarter {q}: {c}");
+        }
+        // Interior pieces keep the whole step; every ray has 4 or 5 pieces.
+        for r in 0..s.rays() {
+            let range = s.range(r);
+            assert!(range.len() == 4 || range.len() == 5);
+            for k in range.start + 1..range.end - 1 {
+                assert!((s.delta[k] - 0.25).abs() < 1e-12);
+            }
+        }
+        // The same seed gives the same samples; another seed different ones.
+        let again = Stratified::new(Spacing::Step(0.25), Jitter::PerRay { seed: 7 })
+            .unwrap()
+            .sample(&rays, &iv)
+            .unwrap();
+        assert_eq!(again, s);
+        let other = Stratified::new(Spacing::Step(0.25), Jitter::PerRay { seed: 8 })
+            .unwrap()
+            .sample(&rays, &iv)
+            .unwrap();
+        assert_ne!(other.t, s.t);
+    }
+
+    #[test]
+    fn per_sample_edges_move_between_midpoints() {
+        let (rays, iv) = setup();
+        let s = Stratified::new(Spacing::Count(4), Jitter::PerSample { seed: 1 })
+            .unwrap()
+            .sample(&rays, &iv)
+            .unwrap();
+        assert_tiles(&s);
+        // Four pieces per ray; edge i (i = 1, 2, 3, at 0.25 i unjittered) lies uniformly in
+        // [0.25 i - 0.125, 0.25 i + 0.125].
+        let mut sums = [0.0; 3];
+        for r in 0..s.rays() {
+            assert_eq!(s.range(r).len(), 4);
+            for i in 1..4 {
+                let k = s.offsets[r] + i;
+                let edge = s.t[k] - s.delta[k] / 2.0;
+                let centre = 0.25 * i as f64;
+                assert!((edge - centre).abs() <= 0.125 + 1e-12, "ray {r} edge {i}: {edge}");
+                sums[i - 1] += edge - centre;
+            }
+        }
+        // Mean offset 0 with standard error 0.25 / sqrt(12 * 4000) = 0.0011.
+        for (i, sum) in sums.iter().enumerate() {
+            assert!(
+                (sum / 4000.0).abs() < 0.005,
+                "edge {}: mean offset {}",
+                i + 1,
+                sum / 4000.0
+            );
+        }
+        // Rays draw independently: the first two rays' second edges differ.
+        assert_ne!(s.t[1], s.t[5]);
+    }
+
+    #[test]
+    fn no_jitter_is_uniform() {
+        let (rays, iv) = setup();
+        let s = Stratified::new(Spacing::Step(0.3), Jitter::None)
+            .unwrap()
+            .sample(&rays, &iv)
+            .unwrap();
+        let u = super::super::Uniform::new(Spacing::Step(0.3))
+            .unwrap()
+            .sample(&rays, &iv)
+            .unwrap();
+        assert_eq!(s, u);
+        assert!(Stratified::new(Spacing::Step(-1.0), Jitter::None).is_err());
     }
 }

@@ -62,7 +62,11 @@ impl Uniform {
 
     /// Samples every ray of `rays` within its interval (parallel over rays).
     /// Errors: `intervals` not one per ray.
-    pub fn sample<F: Float>(&self, rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<PackedSamples<F>, SampleError> {
+    pub fn sample<F: Float>(
+        &self,
+        rays: &RayBatch<F>,
+        intervals: &RayIntervals,
+    ) -> Result<PackedSamples<F>, SampleError> {
         sample_segments(rays, intervals, self.spacing, |_| RayJitter::none())
     }
 }
@@ -138,7 +142,9 @@ mod tests {
         let r = rays();
         let iv = Aabb::new([-1.0; 3], [1.0; 3]).unwrap().clip(&r);
         let s = Uniform::new(Spacing::Step(0.3)).unwrap().sample(&r, &iv).unwrap();
-        let op = crate::Composite::new(&s.offsets).unwrap().background(crate::Background::None);
+        let op = crate::Composite::new(&s.offsets)
+            .unwrap()
+            .background(crate::Background::None);
         let sigma = ndarray::Array1::from_elem(s.len(), 0.5).into_dyn();
         let color = ndarray::Array2::from_elem((s.len(), 1), 1.0).into_dyn();
         let delta = s.delta.clone().into_dyn();
