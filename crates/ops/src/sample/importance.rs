@@ -67,7 +67,7 @@ impl Importance {
         weights: ArrayView1<'_, F>,
     ) -> Result<PackedSamples<F>, SampleError> {
         check_previous(rays, previous, weights)?;
-        Ok(pack(rays, |r| {
+        Ok(pack(rays, |r, out| {
             let range = previous.range(r);
             let pieces: Vec<Piece> = range
                 .clone()
@@ -77,13 +77,8 @@ impl Importance {
                 })
                 .collect();
             let w: Vec<f64> = range.map(|k| weights[k].as_f64()).collect();
-            resample(
-                &pieces,
-                &w,
-                self.floor,
-                self.samples,
-                RayJitter::for_ray(self.jitter, r),
-            )
+            let jitter = RayJitter::for_ray(self.jitter, r);
+            out.extend(resample(&pieces, &w, self.floor, self.samples, jitter));
         }))
     }
 }

@@ -14,13 +14,14 @@ impl OccupancyGrid {
     /// runs in increasing `t`. Cell boundaries are computed from the cell index each time
     /// (never accumulated), so long rays do not drift; a start index off by one through
     /// rounding costs one zero-length step.
-    pub(crate) fn occupied_runs(&self, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<Piece> {
+    pub(crate) fn occupied_runs(&self, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64, runs: &mut Vec<Piece>) {
+        runs.clear();
         let r = self.resolution as i64;
         let min = self.bounds.min();
         let start = self.cell_of(std::array::from_fn(|a| {
-            lo.mul_add(d[a], o[a]).clamp(min[a], self.bounds.max()[a])
+            (o[a] + lo * d[a]).clamp(min[a], self.bounds.max()[a])
         }));
-        let Some(start) = start else { return Vec::new() };
+        let Some(start) = start else { return };
         let mut idx = start.map(|i| i as i64);
         let dir: [i64; 3] = std::array::from_fn(|a| {
             if d[a] > 0.0 {
@@ -35,32 +36,45 @@ impl OccupancyGrid {
         let exit = |a: usize, i: i64| -> f64 {
             match dir[a] {
                 0 => f64::INFINITY,
-                s => ((i + i64::from(s > 0)) as f64).mul_add(self.cell[a], min[a] - o[a]) / d[a],
+                s => (min[a] + (i + i64::from(s > 0)) as f64 * self.cell[a] - o[a]) / d[a],
             }
         };
-        let mut runs: Vec<Piece> = Vec::new();
+        let mut t_exit: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a]));
+        // The linear cell index, stepped with the cell index (see OccupancyGrid's layout).
+        let stride = [r * r, r, 1];
+        let mut linear = idx[0] * stride[0] + idx[1] * stride[1] + idx[2];
         let mut t = lo;
         loop {
-            let (axis, t_exit) = (0..3)
-                .map(|a| (a, exit(a, idx[a])))
-                .fold((0, f64::INFINITY), |best, x| if x.1 < best.1 { x } else { best });
-            let t_end = t_exit.min(hi);
-            if t_end > t && self.is_occupied(idx.map(|i| i as usize)) {
+            let axis = if t_exit[0] <= t_exit[1] {
+                if t_exit[0] <= t_exit[2] {
+                    0
+                } else {
+                    2
+                }
+            } else if t_exit[1] <= t_exit[2] {
+                1
+            } else {
+                2
+            };
+            let t_end = t_exit[axis].min(hi);
+            if t_end > t && self.is_occupied_linear(linear as usize) {
                 match runs.last_mut() {
                     Some(run) if run.1 == t => run.1 = t_end,
                     _ => runs.push((t, t_end)),
                 }
             }
-            if t_exit >= hi {
+            if t_exit[axis] >= hi {
                 break;
             }
-            t = t.max(t_exit);
+            t = t.max(t_exit[axis]);
             idx[axis] += dir[axis];
+            linear += dir[axis] * stride[axis];
             if !(0..r).contains(&idx[axis]) {
                 break;
             }
+            // Only the crossed axis has a new exit.
+            t_exit[axis] = exit(axis, idx[axis]);
         }
-        runs
     }
 
     /// Samples each ray at the fixed step `step` over the occupied parts of its interval
@@ -90,21 +104,21 @@ impl OccupancyGrid {
                 rule: "must be finite and positive",
             });
         }
-        Ok(pack(rays, |r| {
-            let mut pieces = Vec::new();
+        Ok(pack(rays, |r, pieces| {
             let (o, d) = rays.ray(r);
             let (Some((near, far)), Some((box_near, box_far))) = (intervals.segment(r), self.bounds.clip_ray(o, d))
             else {
-                return pieces;
+                return;
             };
             let (lo, hi) = (near.max(box_near), far.min(box_far));
             if hi > lo {
                 let mut jitter = RayJitter::for_ray(jitter, r);
-                for (a, b) in self.occupied_runs(o, d, lo, hi) {
-                    jitter.cut(a, b, lo, step, &mut pieces);
+                let mut runs = Vec::new();
+                self.occupied_runs(o, d, lo, hi, &mut runs);
+                for &(a, b) in &runs {
+                    jitter.cut(a, b, lo, step, pieces);
                 }
             }
-            pieces
         }))
     }
 }

@@ -200,7 +200,11 @@ impl OccupancyGrid {
         if c.iter().any(|&i| i >= self.resolution) {
             return false;
         }
-        let i = self.index(c);
+        self.is_occupied_linear(self.index(c))
+    }
+
+    /// Whether the cell at linear index `i` is occupied. Panics if `i >= r^3`.
+    pub(crate) fn is_occupied_linear(&self, i: usize) -> bool {
         self.bits[i / 64] >> (i % 64) & 1 == 1
     }
 

@@ -96,36 +96,69 @@ pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayInterva
     Ok(())
 }
 
-/// Runs `pieces_of(r)` for every ray in parallel and packs the results in ray order (so the
-/// output does not depend on the number of threads).
-pub(crate) fn pack<F: Float>(rays: &RayBatch<F>, pieces_of: impl Fn(usize) -> Vec<Piece> + Sync) -> PackedSamples<F> {
-    let per_ray: Vec<Vec<Piece>> = (0..rays.len()).into_par_iter().map(&pieces_of).collect();
-    let mut offsets = Vec::with_capacity(rays.len() + 1);
+/// One parallel task's share of the output: its rays' sample counts and samples, in order.
+struct Chunk<F> {
+    counts: Vec<usize>,
+    positions: Vec<F>,
+    t: Vec<F>,
+    delta: Vec<F>,
+}
+
+/// Rays per parallel task: enough to amortise the task, few enough to balance two cores.
+const RAYS_PER_TASK: usize = 64;
+
+/// Runs `pieces_of(r, out)` (which appends ray `r`'s pieces to `out`) for every ray, in
+/// parallel over chunks of rays, and packs the samples in ray order (so the output does not
+/// depend on the number of threads).
+pub(crate) fn pack<F: Float>(
+    rays: &RayBatch<F>,
+    pieces_of: impl Fn(usize, &mut Vec<Piece>) + Sync,
+) -> PackedSamples<F> {
+    let n_rays = rays.len();
+    let chunks: Vec<Chunk<F>> = (0..n_rays.div_ceil(RAYS_PER_TASK))
+        .into_par_iter()
+        .map(|c| {
+            let mut chunk = Chunk {
+                counts: Vec::with_capacity(RAYS_PER_TASK),
+                positions: Vec::new(),
+                t: Vec::new(),
+                delta: Vec::new(),
+            };
+            let mut pieces = Vec::new();
+            for r in c * RAYS_PER_TASK..((c + 1) * RAYS_PER_TASK).min(n_rays) {
+                pieces.clear();
+                pieces_of(r, &mut pieces);
+                chunk.counts.push(pieces.len());
+                let (o, d) = rays.ray(r);
+                for &(lo, hi) in &pieces {
+                    let mid = 0.5 * (lo + hi);
+                    chunk.positions.extend((0..3).map(|a| F::lit(o[a] + mid * d[a])));
+                    chunk.t.push(F::lit(mid));
+                    chunk.delta.push(F::lit(hi - lo));
+                }
+            }
+            chunk
+        })
+        .collect();
+    let mut offsets = Vec::with_capacity(n_rays + 1);
     offsets.push(0);
-    for p in &per_ray {
-        offsets.push(offsets[offsets.len() - 1] + p.len());
+    for count in chunks.iter().flat_map(|c| &c.counts) {
+        offsets.push(offsets[offsets.len() - 1] + count);
     }
-    let n = offsets[rays.len()];
-    let (mut pos, mut t, mut delta, mut ray) = (
-        Vec::with_capacity(3 * n),
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-        Vec::with_capacity(n),
-    );
-    for (r, pieces) in per_ray.iter().enumerate() {
-        let (o, d) = rays.ray(r);
-        for &(lo, hi) in pieces {
-            let mid = 0.5 * (lo + hi);
-            pos.extend((0..3).map(|a| F::lit(mid.mul_add(d[a], o[a]))));
-            t.push(F::lit(mid));
-            delta.push(F::lit(hi - lo));
-            ray.push(r);
-        }
-    }
+    let n = offsets[n_rays];
+    let ray = (0..n_rays)
+        .flat_map(|r| std::iter::repeat_n(r, offsets[r + 1] - offsets[r]))
+        .collect();
+    let concat = |part: fn(&Chunk<F>) -> &Vec<F>, len: usize| {
+        let mut all = Vec::with_capacity(len);
+        chunks.iter().for_each(|c| all.extend_from_slice(part(c)));
+        all
+    };
     PackedSamples {
-        positions: Array2::from_shape_vec((n, 3), pos).expect("three coordinates per sample"),
-        t: Array1::from(t),
-        delta: Array1::from(delta),
+        positions: Array2::from_shape_vec((n, 3), concat(|c| &c.positions, 3 * n))
+            .expect("three coordinates per sample"),
+        t: Array1::from(concat(|c| &c.t, n)),
+        delta: Array1::from(concat(|c| &c.delta, n)),
         offsets,
         ray,
     }
@@ -143,7 +176,8 @@ pub(crate) fn cut(lo: f64, hi: f64, origin: f64, step: f64, shift: f64, out: &mu
     let mut start = lo;
     let mut i = ((lo + eps - origin) / step - shift).ceil();
     loop {
-        let edge = (i + shift).mul_add(step, origin);
+        // Not mul_add: without FMA in the target it is a library call in this hot loop.
+        let edge = origin + (i + shift) * step;
         if edge >= hi - eps {
             break;
         }
@@ -180,5 +214,47 @@ mod tests {
         cut(0.3, 0.31, 0.0, 0.25, 0.0, &mut p);
         cut(0.4, 0.4, 0.0, 0.25, 0.0, &mut p);
         assert_eq!(p, vec![(0.3, 0.31)]);
+    }
+}
+
+#[cfg(test)]
+mod tape_tests {
+    use super::*;
+    use crate::rays::Aabb;
+    use crate::sample::{Spacing, Uniform};
+    use crate::{Background, Composite, CompositeInputs};
+    use ndarray::arr2;
+
+    #[test]
+    fn samples_drive_a_taped_render() {
+        // One ray along +x across [-1, 1]^3 (t in [2, 4]), density sigma = a * (x + 1) with
+        // a = 0.5 at the sample positions; opacity 1 - exp(-sum sigma_k delta_k). The midpoint
+        // rule is exact for a linear density: the integral of 0.5 (x + 1) over x in [-1, 1] is
+        // 1, so opacity = 1 - 1/e and d opacity / da = exp(-1) * 2 (the integral of x + 1).
+        let rays = RayBatch::new(arr2(&[[-3.0f64, 0.0, 0.0]]), arr2(&[[1.0, 0.0, 0.0]])).unwrap();
+        let clip = Aabb::new([-1.0; 3], [1.0; 3]).unwrap().clip(&rays);
+        let s = Uniform::new(Spacing::Step(0.3)).unwrap().sample(&rays, &clip).unwrap();
+        let mut tape = Tape::<f64>::new();
+        let vars = s.to_tape(&mut tape).unwrap();
+        let a = tape.param(ndarray::arr1(&[0.5]));
+        let x = s.positions.column(0).mapv(|x| x + 1.0);
+        let x1 = tape.constant(x);
+        let sigma = tape.mul(x1, a).unwrap();
+        let color = tape.constant(ndarray::Array2::<f64>::ones((s.len(), 1)));
+        let op = Composite::new(&s.offsets).unwrap().background(Background::None);
+        let inputs = CompositeInputs {
+            sigma,
+            delta: vars.delta,
+            color,
+            background: None,
+            t: None,
+        };
+        let out = op.apply(&mut tape, &inputs).unwrap();
+        let opacity = tape.value(out.opacity).unwrap()[0];
+        assert!((opacity - (1.0 - (-1.0f64).exp())).abs() < 1e-12, "{opacity}");
+        let g = tape.backward(out.opacity).unwrap();
+        let da = g.get(a).unwrap()[0];
+        assert!((da - 2.0 * (-1.0f64).exp()).abs() < 1e-12, "{da}");
+        assert_eq!(tape.value(vars.t).unwrap().len(), s.len());
     }
 }

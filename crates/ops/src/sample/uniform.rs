@@ -79,15 +79,13 @@ pub(crate) fn sample_segments<F: Float>(
     jitter_of: impl Fn(usize) -> RayJitter + Sync,
 ) -> Result<PackedSamples<F>, SampleError> {
     check_lengths(rays, intervals)?;
-    Ok(pack(rays, |r| {
-        let mut pieces = Vec::new();
+    Ok(pack(rays, |r, pieces| {
         if let Some((near, far)) = intervals.segment(r) {
             if far > near {
                 let step = spacing.step(far - near);
-                jitter_of(r).cut(near, far, near, step, &mut pieces);
+                jitter_of(r).cut(near, far, near, step, pieces);
             }
         }
-        pieces
     }))
 }
 
