@@ -106,7 +106,10 @@ impl OccupancyConfig {
 /// Where in each cell the density is evaluated by [`OccupancyGrid::update`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CellPoints {
-    /// The cell centre.
+    /// The cell centre. Matter that does not reach a cell's centre (the rim of a ball, a
+    /// thin wall) leaves that cell empty and the marcher skips it: prefer
+    /// [`CellPoints::CentreAndRandom`] with a new seed per update, which finds such cells
+    /// over a few updates (the decay keeps them).
     Centre,
     /// One uniform random point per cell (seeded; use a new seed per update, so that
     /// matter smaller than a cell is found over time).
