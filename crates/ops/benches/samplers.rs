@@ -118,6 +118,22 @@ fn report(rays: &RayBatch<f32>, clip: &RayIntervals) {
         uniform.samples_per_ray(),
         cpu_ms(|| u.sample(rays, clip).unwrap())
     );
+    let strat = Stratified::new(Spacing::Step(STEP), Jitter::PerSample { seed: 3 }).unwrap();
+    let s = strat.sample(rays, clip).unwrap();
+    println!(
+        "stratified per sample: {:.1} samples per ray, {:.1} ms CPU per batch",
+        s.samples_per_ray(),
+        cpu_ms(|| strat.sample(rays, clip).unwrap())
+    );
+    let coarse = Uniform::new(Spacing::Count(32)).unwrap().sample(rays, clip).unwrap();
+    let w = weights(&coarse);
+    let imp = Importance::new(64, 0.01, Jitter::PerRay { seed: 5 }).unwrap();
+    let fine = imp.sample(rays, &coarse, w.view()).unwrap();
+    println!(
+        "importance 64 from 32 uniform: {:.1} samples per ray, {:.1} ms CPU per batch",
+        fine.samples_per_ray(),
+        cpu_ms(|| imp.sample(rays, &coarse, w.view()).unwrap())
+    );
     for r in [32, 64, 128] {
         let g = occupancy(r);
         let m = g.march(rays, clip, STEP, Jitter::None).unwrap();

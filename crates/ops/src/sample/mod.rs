@@ -46,6 +46,7 @@ mod march;
 #[cfg(test)]
 mod march_tests;
 mod occupancy;
+mod occupancy_config;
 #[cfg(test)]
 mod occupancy_tests;
 mod packed;
@@ -53,7 +54,8 @@ mod stratified;
 mod uniform;
 
 pub use importance::Importance;
-pub use occupancy::{CellPoints, GridAxis, OccupancyConfig, OccupancyGrid, OccupancySlice, Threshold};
+pub use occupancy::{GridAxis, OccupancyGrid, OccupancySlice};
+pub use occupancy_config::{CellPoints, OccupancyConfig, Threshold};
 pub use packed::{PackedSamples, SampleVars};
 pub use stratified::{Jitter, Stratified};
 pub use uniform::{Spacing, Uniform};
