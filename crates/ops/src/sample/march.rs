@@ -32,11 +32,13 @@ impl OccupancyGrid {
                 0
             }
         });
-        // The t at which the ray leaves cell idx across axis a.
+        // The t at which the ray leaves cell idx across axis a: a product with 1/d, not a
+        // division, on the DDA's one dependent chain.
+        let inv: [f64; 3] = std::array::from_fn(|a| 1.0 / d[a]);
         let exit = |a: usize, i: i64| -> f64 {
             match dir[a] {
                 0 => f64::INFINITY,
-                s => (min[a] + (i + i64::from(s > 0)) as f64 * self.cell[a] - o[a]) / d[a],
+                s => (min[a] + (i + i64::from(s > 0)) as f64 * self.cell[a] - o[a]) * inv[a],
             }
         };
         let mut t_exit: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a]));
@@ -56,22 +58,22 @@ impl OccupancyGrid {
             } else {
                 2
             };
-            let t_end = t_exit[axis].min(hi);
+            // The last cell before the grid's far face runs to hi: the face's t, rounded
+            // differently from the clip that gave hi, must not leave a sliver.
+            let leaving = !(0..r).contains(&(idx[axis] + dir[axis]));
+            let t_end = if leaving { hi } else { t_exit[axis].min(hi) };
             if t_end > t && self.is_occupied_linear(linear as usize) {
                 match runs.last_mut() {
                     Some(run) if run.1 == t => run.1 = t_end,
                     _ => runs.push((t, t_end)),
                 }
             }
-            if t_exit[axis] >= hi {
+            if leaving || t_exit[axis] >= hi {
                 break;
             }
             t = t.max(t_exit[axis]);
             idx[axis] += dir[axis];
             linear += dir[axis] * stride[axis];
-            if !(0..r).contains(&idx[axis]) {
-                break;
-            }
             // Only the crossed axis has a new exit.
             t_exit[axis] = exit(axis, idx[axis]);
         }
@@ -113,7 +115,7 @@ impl OccupancyGrid {
             let (lo, hi) = (near.max(box_near), far.min(box_far));
             if hi > lo {
                 let mut jitter = RayJitter::for_ray(jitter, r);
-                let mut runs = Vec::new();
+                let mut runs = Vec::with_capacity(8);
                 self.occupied_runs(o, d, lo, hi, &mut runs);
                 for &(a, b) in &runs {
                     jitter.cut(a, b, lo, step, pieces);
