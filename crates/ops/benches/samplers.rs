@@ -146,6 +146,23 @@ fn report(rays: &RayBatch<f32>, clip: &RayIntervals) {
             cpu_ms(|| occupancy(r)),
         );
     }
+    report_random_updates(rays, clip, uniform.samples_per_ray());
+}
+
+/// The 64^3 grid after eight updates at the centre and a random point of each cell: it also
+/// marks the cells the ball reaches without covering their centres.
+fn report_random_updates(rays: &RayBatch<f32>, clip: &RayIntervals, uniform_per_ray: f64) {
+    let mut g = occupancy(64);
+    for seed in 0..8 {
+        g.update(ball, CellPoints::CentreAndRandom { seed }).unwrap();
+    }
+    let m = g.march(rays, clip, STEP, Jitter::None).unwrap();
+    println!(
+        "occupancy 64^3 after 8 centre+random updates ({:.2} % occupied): {:.1} samples per ray ({:.1}x fewer)",
+        100.0 * g.occupied_fraction(),
+        m.samples_per_ray(),
+        uniform_per_ray / m.samples_per_ray()
+    );
 }
 
 fn samplers(c: &mut Criterion) {
