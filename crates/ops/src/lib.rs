@@ -9,7 +9,10 @@
 //! - [`twins`]: the same composite written with tape primitives only, in the stable form
 //!   (exclusive cumsum of optical depth, `exp`, `expm1`) and the naive form (cumulative
 //!   product of `1 - alpha`), to check the fused op against and to measure what fusing buys;
-//! - [`hard`]: the hard "first hit" renderer that the soft one generalises.
+//! - [`hard`]: the hard "first hit" renderer that the soft one generalises;
+//! - [`rays`]: pinhole cameras, batches of rays, and ray / box clipping;
+//! - [`sample`]: samplers that turn clipped rays into packed samples for the composite
+//!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space.
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
@@ -36,7 +39,10 @@
 pub mod composite;
 mod error;
 pub mod hard;
+pub mod rays;
+pub mod sample;
 pub mod twins;
 
 pub use composite::{Background, Composite, CompositeInputs, CompositeVars};
-pub use error::CompositeError;
+pub use error::{CompositeError, GeometryError, SampleError};
+pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

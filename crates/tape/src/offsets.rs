@@ -154,6 +154,13 @@ impl Deref for Offsets {
     }
 }
 
+/// Compares the entries, so that tests can write `assert_eq!(s.offsets, vec![0, 3, 5])`.
+impl PartialEq<Vec<usize>> for Offsets {
+    fn eq(&self, other: &Vec<usize>) -> bool {
+        *self.0 == **other
+    }
+}
+
 impl AsRef<[usize]> for Offsets {
     fn as_ref(&self) -> &[usize] {
         &self.0
