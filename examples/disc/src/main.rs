@@ -1,4 +1,4 @@
-//! `fogray-disc`: the disc experiment of lesson 8 on the command line.
+//! `fogray-disc`: the disc experiment on the command line (`docs/disc.md`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -18,8 +18,8 @@ use fogray_disc::{plots, reproduce};
 #[command(
     name = "fogray-disc",
     version,
-    about = "The disc experiment of lesson 8: a hard renderer's staircase against a soft renderer's landscape",
-    long_about = "The disc experiment of lesson 8. A disc of radius 1 m is photographed by six cameras on a ring of radius 5 m; a model disc offset by x is rendered hard (first hit) and soft (a Gaussian fog sheet of softness tau, composited by fogray's fused op, with dE/dx from the tape's backward). Without a subcommand it runs `reproduce`: every figure of the lesson beside ours, and all plots (SVG and PNG in --out)."
+    about = "The disc experiment of the volume-rendering lesson: a hard renderer's staircase against a soft renderer's landscape",
+    long_about = "The disc experiment of the lesson 'Making visibility soft: volume rendering'. A disc of radius 1 m is photographed by six cameras on a ring of radius 5 m; a model disc offset by x is rendered hard (first hit) and soft (a Gaussian fog sheet of softness tau, composited by fogray's fused op, with dE/dx from the tape's backward). Without a subcommand it runs `reproduce`: every figure of the lesson beside ours, and all plots (SVG and PNG in --out)."
 )]
 struct Cli {
     #[command(subcommand)]
