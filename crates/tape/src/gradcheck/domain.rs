@@ -152,8 +152,8 @@ impl Difference {
         }
     }
 
-    /// Whether the formula reads `f(x)` itself.
-    pub(crate) fn one_sided(self) -> bool {
+    /// Whether the formula is one-sided (and reads `f(x)` itself).
+    pub fn one_sided(self) -> bool {
         self != Difference::Central
     }
 }

@@ -50,8 +50,8 @@ use crate::var::Var;
 /// f64.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GradcheckOptions {
-    /// Step of the finite differences, relative to `max(1, |x|)` (fast mode: to the largest
-    /// `max(1, |x|)` of all inputs). Default 1e-6.
+    /// Step of the finite differences, relative to `max(1, |x|)` (fast mode: along a
+    /// direction of unit norm over all inputs). Default 1e-6.
     pub eps: f64,
     /// Absolute tolerance used by [`GradcheckReport::passes`] defaults. Default 1e-5.
     pub atol: f64,
@@ -251,8 +251,11 @@ fn directional(
     opts: &GradcheckOptions,
     rng: &mut StdRng,
 ) -> Result<Vec<GradcheckEntry>> {
-    let scale = inputs.iter().flat_map(|x| x.iter()).fold(1.0f64, |m, v| m.max(v.abs()));
-    let h = opts.eps * scale;
+    // Directions have unit norm, so the step moves the inputs by eps in all (a step relative to
+    // the largest input would move a long input's every element by it, far beyond where a
+    // difference is accurate); an element's raw direction is scaled by max(1, |x|), so that
+    // large values move in proportion.
+    let h = opts.eps;
     // The sign each element's direction must have: +1 or -1 near an end, 0 for either.
     let mut signs: Vec<ArrayD<i8>> = Vec::with_capacity(inputs.len());
     for (i, x) in inputs.iter().enumerate() {
@@ -283,20 +286,21 @@ fn directional(
     };
     let mut entries = Vec::with_capacity(opts.projections);
     for k in 0..opts.projections {
-        let dirs: Vec<ArrayD<f64>> = inputs
+        let mut dirs: Vec<ArrayD<f64>> = inputs
             .iter()
             .zip(&signs)
             .map(|(x, s)| {
-                Zip::from(x).and(s).map_collect(|_, &s| {
+                Zip::from(x).and(s).map_collect(|&x, &s| {
                     let u: f64 = rng.gen_range(-1.0..1.0);
-                    if s == 0 {
-                        u
-                    } else {
-                        f64::from(s) * u.abs()
-                    }
+                    let u = if s == 0 { u } else { f64::from(s) * u.abs() };
+                    u * x.abs().max(1.0)
                 })
             })
             .collect();
+        let norm = dirs.iter().flat_map(|d| d.iter()).map(|u| u * u).sum::<f64>().sqrt();
+        if norm > 0.0 {
+            dirs.iter_mut().for_each(|d| d.mapv_inplace(|u| u / norm));
+        }
         let [a, b] = difference.offsets();
         let f1 = projected(shifted(&dirs, a * h))?;
         let f2 = projected(shifted(&dirs, b * h))?;
