@@ -32,9 +32,7 @@ pub(super) struct Problem {
 /// Ray `r` alone (full mode) as a problem.
 pub(super) fn ray_problem(p: &Packed, l: &Loss, r: usize) -> Result<Problem, String> {
     let (s, ch) = (p.offsets[r]..p.offsets[r + 1], p.ch);
-    let mut op = Composite::new(&[0, s.len()])
-        .and_then(|op| op.background(Background::PerRay).min_transmittance(p.min_transmittance))
-        .map_err(|e| e.to_string())?;
+    let mut op = per_ray_op(&[0, s.len()], p.min_transmittance)?;
     let mut inputs = vec![
         Array1::from(p.sigma[s.clone()].to_vec()).into_dyn(),
         Array1::from(p.delta[s.clone()].to_vec()).into_dyn(),
@@ -62,12 +60,17 @@ pub(super) fn ray_problem(p: &Packed, l: &Loss, r: usize) -> Result<Problem, Str
     })
 }
 
+/// The composite over `offsets` with a background per ray, as the input gives it.
+fn per_ray_op(offsets: &[usize], min_transmittance: f64) -> Result<Composite, String> {
+    Composite::new(offsets)
+        .and_then(|op| op.background(Background::PerRay).min_transmittance(min_transmittance))
+        .map_err(|e| e.to_string())
+}
+
 /// Every ray at once (fast mode), moving the values out of `p`.
 pub(super) fn batch_problem(p: &mut Packed, l: &Loss) -> Result<Problem, String> {
     let (rays, n, ch) = (p.offsets.len() - 1, p.sigma.len(), p.ch);
-    let mut op = Composite::new(&p.offsets)
-        .and_then(|op| op.background(Background::PerRay).min_transmittance(p.min_transmittance))
-        .map_err(|e| e.to_string())?;
+    let mut op = per_ray_op(&p.offsets, p.min_transmittance)?;
     let take = std::mem::take;
     let mut inputs = vec![
         Array1::from(take(&mut p.sigma)).into_dyn(),
