@@ -52,13 +52,44 @@ enum Command {
         /// JSON input file, or - for standard input.
         #[arg(long, default_value = "-")]
         input: PathBuf,
+        /// Print only these fields of each ray (comma-separated, in output order whatever the
+        /// order given); default: every field.
+        #[arg(long, value_enum, value_delimiter = ',', conflicts_with = "per_ray")]
+        fields: Vec<cli::composite::Field>,
+        /// Print only the per-ray fields: color, opacity, depth, grad_background (no array
+        /// as long as the ray). The same as --fields color,opacity,depth,grad_background.
+        #[arg(long)]
+        per_ray: bool,
     },
-    /// Compare the gradients of the fused op, the stable taped twin and central finite
-    /// differences (f64) on a JSON input, and print the worst disagreements.
+    /// Check the fused op's gradient (in the input's precision) against the stable taped twin
+    /// and finite differences (f64); exit status 1 if any entry is outside the tolerance.
+    #[command(long_about = GRADCHECK_HELP)]
     Gradcheck {
         /// JSON input file (the format of `fogray composite`), or - for standard input.
         #[arg(long, default_value = "-")]
         input: PathBuf,
+        /// Absolute tolerance [default: 1e-6 for f64 input, 1e-4 for f32].
+        #[arg(long)]
+        atol: Option<f64>,
+        /// Relative tolerance [default: 1e-5 for f64 input, 1e-3 for f32].
+        #[arg(long)]
+        rtol: Option<f64>,
+        /// Check random directional derivatives instead of every element: time linear in the
+        /// number of samples (full mode costs each ray's squared length).
+        #[arg(long)]
+        fast: bool,
+        /// Number of random directions with --fast.
+        #[arg(long, default_value_t = 8)]
+        projections: usize,
+        /// Seed of the random directions.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// How many of the worst comparisons to print.
+        #[arg(long, default_value_t = 5)]
+        worst: usize,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
     },
     /// Samples per second (forward+backward with the spread of the runs, and forward alone) of
     /// the fused op on 1 and all threads and of the stable and naive taped twins, also in a
@@ -89,7 +120,8 @@ enum Command {
     },
 }
 
-const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model of lesson 8).
+const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model: w_k = T_k (1 - exp(-sigma_k delta_k)),
+C = sum w_k c_k + T_end c_bg).
 
 Input (JSON):
   { "precision": "f64",            "f32" or "f64" (default f64)
@@ -100,19 +132,48 @@ Input (JSON):
                 "background": [r,g,b],   optional, default all zeros
                 "t": [..],         optional sample depths: enables "depth"
                 "grad_color": [gr,gg,gb] optional dL/dC: enables the grad_* outputs
+                "grad_depth": g    optional dL/ddepth (needs t): adds g * depth to the
+                                   loss and enables grad_t
               } ] }
 
 Output (JSON, one object per ray):
   { "rays": [ { "color": [..], "opacity": x, "depth": x or null,
                 "weights": [..], "transmittance": [..],      T before each sample
                 "grad_sigma": [..], "grad_delta": [..],
-                "grad_color": [[..], ..], "grad_background": [..] } ] }
+                "grad_color": [[..], ..], "grad_background": [..],
+                "grad_t": [..] } ] }                       (rays with grad_depth)
+
+--fields color,opacity,... prints only those fields; --per-ray only color, opacity, depth
+and grad_background (a ray of ten million samples then prints a few numbers).
 
 depth is the unnormalised expected depth sum w_k t_k. Bad input: exit status 2, one line on
 stderr naming the ray and sample, nothing on stdout.
 
 Example:
   echo '{"rays":[{"sigma":[0,0.5,2,8],"delta":[0.5,0.5,0.5,0.5],"color":[[0.9],[0.2],[0.9],[0.4]],"background":[1],"grad_color":[1]}]}' | fogray composite"#;
+
+const GRADCHECK_HELP: &str = r#"Check the fused composite's gradient on a JSON input (the format of fogray composite).
+
+The loss is L = sum(grad_color . color) + sum(grad_depth depth), with the input's grad_color
+and grad_depth; where a ray gives none, ones are used and the output says so (a note line).
+The gradients of sigma, delta, color, background and t (rays with t) are computed by the fused
+op in the input's precision ("precision": "f32" computes in f32, at the input rounded to f32)
+and compared with
+  - the stable taped twin in f64, every element;
+  - finite differences of the fused op in f64, every element, ray by ray (central, step 1e-6
+    relative; one-sided where sigma or delta is within a step of 0, their lower bound), or
+    with --fast along random unit directions through every input (step 1e-5; one-sided and
+    inward when any sigma or delta is near 0), in time linear in the number of samples.
+Each comparison passes if |fused - reference| <= atol + rtol |reference|. Defaults: atol 1e-6,
+rtol 1e-5 for f64 input; atol 1e-4, rtol 1e-3 for f32 input.
+
+Output: a table per input and reference (checked, failing, worst difference and where: ray,
+sample, channel, or direction), the worst comparisons, and PASS or FAIL (--json: the same
+as JSON). Exit status: 0 if every comparison passes, 1 if any fails, 2 on bad input (one line
+on stderr, e.g. the composite's own message for a negative density).
+
+Example:
+  echo '{"rays":[{"sigma":[0,0.5,2,8],"delta":[0.5,0.5,0.5,0.5],"color":[[0.9],[0.2],[0.9],[0.4]],"background":[1],"grad_color":[1]}]}' | fogray gradcheck"#;
 
 fn read_input(path: &PathBuf) -> Result<String, String> {
     let mut text = String::new();
@@ -171,18 +232,56 @@ fn main() -> ExitCode {
             }
             .and_then(|()| bench(*quick, *json, workload.as_deref())),
         ),
-        Command::Composite { method, input } => (
-            "composite",
-            read_input(input)
+        Command::Composite {
+            method,
+            input,
+            fields,
+            per_ray,
+        } => {
+            use cli::composite::Field;
+            let fields: &[Field] = match (fields.is_empty(), per_ray) {
+                (_, true) => &Field::PER_RAY,
+                (true, false) => &Field::ALL,
+                (false, false) => fields,
+            };
+            (
+                "composite",
+                read_input(input)
+                    .and_then(|t| cli::input::parse(&t))
+                    .and_then(|p| cli::composite::run(&p, *method, fields)),
+            )
+        }
+        Command::Gradcheck {
+            input,
+            atol,
+            rtol,
+            fast,
+            projections,
+            seed,
+            worst,
+            json,
+        } => {
+            let settings = cli::gradcheck::Settings {
+                atol: *atol,
+                rtol: *rtol,
+                fast: *fast,
+                projections: *projections,
+                seed: *seed,
+                json: *json,
+                worst: *worst,
+            };
+            let outcome = read_input(input)
                 .and_then(|t| cli::input::parse(&t))
-                .and_then(|p| cli::composite::run(&p, *method)),
-        ),
-        Command::Gradcheck { input } => (
-            "gradcheck",
-            read_input(input)
-                .and_then(|t| cli::input::parse(&t))
-                .and_then(|p| cli::gradcheck::run(&p)),
-        ),
+                .and_then(|p| cli::gradcheck::run(p, &settings));
+            match outcome {
+                // Exit status 1: the check ran and found a disagreement.
+                Ok(o) => {
+                    println!("{}", o.text);
+                    return if o.passed { ExitCode::SUCCESS } else { ExitCode::from(1) };
+                }
+                Err(e) => ("gradcheck", Err(e)),
+            }
+        }
     };
     match result {
         Ok(out) => {
