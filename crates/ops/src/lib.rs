@@ -9,7 +9,10 @@
 //! - [`twins`]: the same composite written with tape primitives only, in the stable form
 //!   (exclusive cumsum of optical depth, `exp`, `expm1`) and the naive form (cumulative
 //!   product of `1 - alpha`), to check the fused op against and to measure what fusing buys;
-//! - [`hard`]: the hard "first hit" renderer that the soft one generalises.
+//! - [`hard`]: the hard "first hit" renderer that the soft one generalises;
+//! - [`grid`]: a dense grid field over a box, looked up bilinearly (2-D) or trilinearly (3-D)
+//!   at packed positions, as a fused op ([`GridField`]) with a deterministic parallel backward
+//!   into the grid values and the positions, and its taped twin.
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
@@ -35,8 +38,10 @@
 
 pub mod composite;
 mod error;
+pub mod grid;
 pub mod hard;
 pub mod twins;
 
 pub use composite::{Background, Composite, CompositeInputs, CompositeVars};
-pub use error::CompositeError;
+pub use error::{CompositeError, GridError};
+pub use grid::{GridBox, GridField, GridGradients, GridWanted};
