@@ -6,7 +6,7 @@ mod grid_common;
 
 use fogray_ops::{GridBox, GridError, GridField, GridWanted};
 use fogray_tape::{Tape, TapeError};
-use grid_common::{node_position, oracle, positions_in_cells, random_field};
+use grid_common::{node_position, oracle, oracle_grid_gradient, positions_in_cells, random_field};
 use ndarray::{arr2, Array2, Array3, Array4, ArrayD, IxDyn};
 use rand::{Rng, SeedableRng};
 
@@ -132,6 +132,44 @@ fn linear_fields_are_reproduced_exactly() {
                     a[0][ax]
                 );
             }
+        }
+    }
+}
+
+/// The grid gradient on grids cut into many slabs (one and two cell layers each; see the
+/// scatter's docs) against a one-position-at-a-time scatter.
+#[test]
+fn grid_gradient_agrees_with_the_plain_scatter() {
+    for (seed, nodes) in [
+        (1, vec![12, 64, 64]),
+        (2, vec![20, 64, 32]),
+        (3, vec![9, 4096]),
+        (4, vec![3, 4, 5]),
+    ] {
+        let (field, grid) = random_field(seed, &nodes, 4);
+        let pts = positions_in_cells(seed, &field, 40_000, 0.0..1.0);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let upstream = Array2::from_shape_fn((pts.nrows(), 4), |_| rng.gen_range(-1.0..1.0));
+        let g = field
+            .vjp(
+                &grid.view(),
+                &pts.view().into_dyn(),
+                &upstream.view().into_dyn(),
+                GridWanted {
+                    grid: true,
+                    positions: false,
+                },
+            )
+            .unwrap();
+        assert!(g.positions.is_none());
+        let want = oracle_grid_gradient(&field, &pts, &upstream);
+        // Each weight carries the rounding of its fractions, about 1e-16 times the cell index
+        // (absolute, so relative to a small weight 1 - t it is large), and sums cancel: the
+        // error is bounded by the rounding times the sum of the terms' sizes.
+        let rounding = 1e-15 * *nodes.iter().max().unwrap() as f64;
+        let scale = oracle_grid_gradient(&field, &pts, &upstream.mapv(f64::abs));
+        for ((a, b), s) in g.grid.unwrap().iter().zip(want.iter()).zip(scale.iter()) {
+            assert!((a - b).abs() <= rounding * (s + 1.0), "{a} vs {b} (terms {s})");
         }
     }
 }

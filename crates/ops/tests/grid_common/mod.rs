@@ -36,29 +36,29 @@ pub fn positions_in_cells(seed: u64, field: &GridField, n: usize, frac: std::ops
     })
 }
 
-/// The lookup by the textbook formula: for each position, the cell by `floor` (the last cell
-/// on the max face), then the sum over the 2^D corners of the product of the per-axis weights.
-pub fn oracle(field: &GridField, grid: &ArrayD<f64>, positions: &Array2<f64>) -> Array2<f64> {
-    let (d, ch) = (field.dims(), field.channels());
-    let mut out = Array2::zeros((positions.nrows(), ch));
-    for (s, p) in positions.rows().into_iter().enumerate() {
-        let mut cell = vec![0usize; d];
-        let mut t = vec![0.0; d];
-        let mut inside = true;
-        for a in 0..d {
-            let (lo, hi, n) = (field.bbox().min()[a], field.bbox().max()[a], field.nodes()[a]);
-            if !(lo..=hi).contains(&p[a]) {
-                inside = false;
-                break;
-            }
-            let u = (p[a] - lo) / (hi - lo) * (n - 1) as f64;
-            cell[a] = (u.floor() as usize).min(n - 2);
-            t[a] = u - cell[a] as f64;
+/// For each position inside the box: its cell along each axis and fractions, by `floor` (the
+/// last cell on the max face).
+fn cell_of(field: &GridField, p: ndarray::ArrayView1<'_, f64>) -> Option<(Vec<usize>, Vec<f64>)> {
+    let d = field.dims();
+    let mut cell = vec![0usize; d];
+    let mut t = vec![0.0; d];
+    for a in 0..d {
+        let (lo, hi, n) = (field.bbox().min()[a], field.bbox().max()[a], field.nodes()[a]);
+        if !(lo..=hi).contains(&p[a]) {
+            return None;
         }
-        if !inside {
-            continue;
-        }
-        for corner in 0..1usize << d {
+        let u = (p[a] - lo) / (hi - lo) * (n - 1) as f64;
+        cell[a] = (u.floor() as usize).min(n - 2);
+        t[a] = u - cell[a] as f64;
+    }
+    Some((cell, t))
+}
+
+/// Each corner of a cell: its node's index and its weight.
+fn corners(cell: &[usize], t: &[f64]) -> Vec<(Vec<usize>, f64)> {
+    let d = cell.len();
+    (0..1usize << d)
+        .map(|corner| {
             let mut w = 1.0;
             let mut index = Vec::with_capacity(d + 1);
             for a in 0..d {
@@ -66,6 +66,35 @@ pub fn oracle(field: &GridField, grid: &ArrayD<f64>, positions: &Array2<f64>) ->
                 w *= if upper == 1 { t[a] } else { 1.0 - t[a] };
                 index.push(cell[a] + upper);
             }
+            (index, w)
+        })
+        .collect()
+}
+
+/// dL/dgrid for L = sum(output * upstream), scattered one position at a time, in f64.
+pub fn oracle_grid_gradient(field: &GridField, positions: &Array2<f64>, upstream: &Array2<f64>) -> ArrayD<f64> {
+    let mut out = ArrayD::zeros(IxDyn(field.shape()));
+    for (s, p) in positions.rows().into_iter().enumerate() {
+        let Some((cell, t)) = cell_of(field, p) else { continue };
+        for (mut index, w) in corners(&cell, &t) {
+            for c in 0..field.channels() {
+                index.push(c);
+                out[IxDyn(&index)] += w * upstream[[s, c]];
+                index.pop();
+            }
+        }
+    }
+    out
+}
+
+/// The lookup by the textbook formula: for each position, the cell by `floor` (the last cell
+/// on the max face), then the sum over the 2^D corners of the product of the per-axis weights.
+pub fn oracle(field: &GridField, grid: &ArrayD<f64>, positions: &Array2<f64>) -> Array2<f64> {
+    let ch = field.channels();
+    let mut out = Array2::zeros((positions.nrows(), ch));
+    for (s, p) in positions.rows().into_iter().enumerate() {
+        let Some((cell, t)) = cell_of(field, p) else { continue };
+        for (mut index, w) in corners(&cell, &t) {
             for c in 0..ch {
                 index.push(c);
                 out[[s, c]] += w * grid[IxDyn(&index)];
