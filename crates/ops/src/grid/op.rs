@@ -10,7 +10,7 @@ use rayon::prelude::*;
 
 use super::backward::position_gradient;
 use super::config::{GridField, GridGradients, GridWanted};
-use super::forward::forward;
+use super::forward::{forward, CHUNK};
 use super::geometry::Layout;
 use super::scatter::grid_gradient;
 use crate::error::GridError;
@@ -62,7 +62,13 @@ impl GridField {
             });
         }
         let positions = flat(positions);
-        if let Some(i) = positions.par_iter().position_first(|x| x.is_nan()) {
+        // By chunks: rayon's per-element search costs more than the lookups.
+        let chunk = CHUNK * d;
+        if let Some(c) = positions
+            .par_chunks(chunk)
+            .position_first(|c| c.iter().any(|x| x.is_nan()))
+        {
+            let i = c * chunk + positions[c * chunk..].iter().position(|x| x.is_nan()).unwrap_or(0);
             return Err(GridError::NanPosition {
                 sample: i / d,
                 axis: i % d,

@@ -13,11 +13,14 @@
 use fogray_tape::Float;
 use rayon::prelude::*;
 
-use super::forward::position;
+use super::forward::{position, prefetch};
 use super::geometry::{weights, Layout};
 
 /// Positions per block of the counting sort (fixed: the order of the sums depends on it).
 const BLOCK: usize = 1 << 15;
+
+/// How many positions ahead the scatter requests positions and upstream gradients.
+const AHEAD: usize = 16;
 
 /// A slab holds at least this many gradient values (unless the grid is thinner).
 const MIN_SLAB_VALUES: usize = 1 << 14;
@@ -150,7 +153,17 @@ impl<F: Float, const D: usize> SlabTask<'_, F, D> {
         let origin = self.slab * self.slabs.thickness * self.layout.strides[0];
         for (b, block) in blocks.iter().enumerate() {
             let (lo, hi) = (block.starts[self.slab] as usize, block.starts[self.slab + 1] as usize);
-            for &local in &block.order[lo..hi] {
+            let mine = &block.order[lo..hi];
+            for (j, &local) in mine.iter().enumerate() {
+                // The slab's positions are scattered over the block: request those a few
+                // steps ahead, so that their loads overlap.
+                if let Some(&ahead) = mine.get(j + AHEAD) {
+                    let s = b * BLOCK + ahead as usize;
+                    if let (Some(p), Some(g)) = (self.positions.get(s * D), self.upstream.get(s * self.ch)) {
+                        prefetch(p);
+                        prefetch(g);
+                    }
+                }
                 let s = b * BLOCK + local as usize;
                 let g = &self.upstream[s * self.ch..][..ch];
                 if g.iter().all(|&v| v == F::zero()) {
