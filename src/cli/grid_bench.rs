@@ -12,7 +12,7 @@ use ndarray::{Array2, ArrayD, IxDyn};
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use super::bench::{median_secs, time_runs, Memory, Timing};
+use super::bench::{median_secs, time_runs, within, Memory, Timing};
 use super::reference::errors;
 
 /// Nodes per axis of the workloads' cubic grids.
@@ -206,14 +206,6 @@ fn measured_run(mem: &dyn Memory, step: impl FnOnce() -> Result<Option<Values>, 
         values,
         peak_extra: mem.peak_since_reset(),
     })
-}
-
-/// Runs `f` in `pool`, or in the global pool when `None`.
-fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
-    match pool {
-        Some(p) => p.install(f),
-        None => f(),
-    }
 }
 
 /// Everything measured of one method on one workload, before it becomes a row.

@@ -51,7 +51,7 @@ const BATCH: usize = 16;
 /// Asks the CPU to start loading the cache line holding `x` into cache (a hint: it changes no
 /// value, and does nothing on other architectures).
 #[inline(always)]
-pub(crate) fn prefetch<T>(x: &T) {
+fn prefetch<T>(x: &T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch never faults and has no visible effect; `x` is a valid reference and
     // SSE is part of the x86_64 baseline. (The intrinsic is a safe function from Rust 1.87.)

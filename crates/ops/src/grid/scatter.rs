@@ -13,22 +13,21 @@
 use fogray_tape::Float;
 use rayon::prelude::*;
 
-use super::forward::{position, prefetch};
+use super::forward::position;
 use super::geometry::{weights, Layout};
 
 /// Positions per block of the counting sort (fixed: the order of the sums depends on it).
 const BLOCK: usize = 1 << 15;
 
-/// How many positions ahead the scatter requests positions and upstream gradients.
-const AHEAD: usize = 16;
-
 /// A slab holds at least this many gradient values (unless the grid is thinner).
 const MIN_SLAB_VALUES: usize = 1 << 14;
 
-/// The positions of one block grouped by slab: `order[starts[j]..starts[j + 1]]` are the
-/// (block-local) indices of the positions in slab `j`, in increasing order.
-struct Sorted {
-    order: Vec<u32>,
+/// The positions of one block grouped by slab, each with its upstream gradient: records
+/// `starts[j]..starts[j + 1]` (of `D + C` values each: the position, then the gradient) are
+/// those of slab `j`, in position order. The copy turns the slab pass's scattered reads into
+/// one sequential run per block and slab.
+struct Sorted<F> {
+    records: Vec<F>,
     starts: Vec<u32>,
 }
 
@@ -56,7 +55,13 @@ impl Slabs {
     }
 }
 
-fn sort_block<F: Float, const D: usize>(layout: &Layout<D>, slabs: Slabs, positions: &[F]) -> Sorted {
+fn sort_block<F: Float, const D: usize>(
+    layout: &Layout<D>,
+    slabs: Slabs,
+    positions: &[F],
+    upstream: &[F],
+    ch: usize,
+) -> Sorted<F> {
     let n = positions.len() / D;
     let outside = slabs.count;
     let keys: Vec<usize> = (0..n)
@@ -79,7 +84,15 @@ fn sort_block<F: Float, const D: usize>(layout: &Layout<D>, slabs: Slabs, positi
         order[next[k] as usize] = s as u32;
         next[k] += 1;
     }
-    Sorted { order, starts }
+    // Positions outside the box (key `slabs.count`, sorted last) are not copied.
+    let inside = starts[slabs.count] as usize;
+    let mut records = Vec::with_capacity(inside * (D + ch));
+    for &s in &order[..inside] {
+        let s = s as usize;
+        records.extend_from_slice(&positions[s * D..(s + 1) * D]);
+        records.extend_from_slice(&upstream[s * ch..(s + 1) * ch]);
+    }
+    Sorted { records, starts }
 }
 
 /// Adds `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
@@ -92,9 +105,10 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
     out: &mut [F],
 ) {
     let slabs = Slabs::new(layout, ch);
-    let blocks: Vec<Sorted> = positions
+    let blocks: Vec<Sorted<F>> = positions
         .par_chunks(BLOCK * D)
-        .map(|p| sort_block(layout, slabs, p))
+        .zip(upstream.par_chunks(BLOCK * ch))
+        .map(|(p, g)| sort_block(layout, slabs, p, g, ch))
         .collect();
     let window = 2 * slabs.thickness * slabs.layer;
     for parity in 0..2 {
@@ -110,14 +124,7 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
             .for_each_init(Vec::new, |acc, (i, dst)| {
                 let j = 2 * i + parity;
                 if j < slabs.count {
-                    let task = SlabTask {
-                        layout,
-                        slab: j,
-                        slabs,
-                        positions,
-                        upstream,
-                        ch,
-                    };
+                    let task = SlabTask { layout, slab: j, slabs };
                     match ch {
                         // A constant channel count lets the compiler unroll the channel loop.
                         1 => task.sum(&blocks, acc, dst, 1),
@@ -132,45 +139,31 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
 }
 
 /// One slab's share of the scatter.
-struct SlabTask<'a, F: Float, const D: usize> {
+struct SlabTask<'a, const D: usize> {
     layout: &'a Layout<D>,
     slab: usize,
     slabs: Slabs,
-    positions: &'a [F],
-    upstream: &'a [F],
-    ch: usize,
 }
 
-impl<F: Float, const D: usize> SlabTask<'_, F, D> {
+impl<const D: usize> SlabTask<'_, D> {
     /// Sums the slab's terms into `acc` (f64, reused across tasks) and adds them to `dst`, the
     /// gradient from the slab's first node layer on.
     #[inline(always)]
-    fn sum(&self, blocks: &[Sorted], acc: &mut Vec<f64>, dst: &mut [F], ch: usize) {
+    fn sum<F: Float>(&self, blocks: &[Sorted<F>], acc: &mut Vec<f64>, dst: &mut [F], ch: usize) {
         let len = dst.len().min((self.slabs.thickness + 1) * self.slabs.layer);
         acc.clear();
         acc.resize(len, 0.0);
         // The slab's first node, as a linear node index.
         let origin = self.slab * self.slabs.thickness * self.layout.strides[0];
-        for (b, block) in blocks.iter().enumerate() {
+        for block in blocks {
             let (lo, hi) = (block.starts[self.slab] as usize, block.starts[self.slab + 1] as usize);
-            let mine = &block.order[lo..hi];
-            for (j, &local) in mine.iter().enumerate() {
-                // The slab's positions are scattered over the block: request those a few
-                // steps ahead, so that their loads overlap.
-                if let Some(&ahead) = mine.get(j + AHEAD) {
-                    let s = b * BLOCK + ahead as usize;
-                    if let (Some(p), Some(g)) = (self.positions.get(s * D), self.upstream.get(s * self.ch)) {
-                        prefetch(p);
-                        prefetch(g);
-                    }
-                }
-                let s = b * BLOCK + local as usize;
-                let g = &self.upstream[s * self.ch..][..ch];
+            for record in block.records[lo * (D + ch)..hi * (D + ch)].chunks_exact(D + ch) {
+                let (p, g) = record.split_at(D);
                 if g.iter().all(|&v| v == F::zero()) {
                     continue;
                 }
                 // The sort located it in this slab; the same code finds the same cell.
-                let Some(cell) = self.layout.locate(position::<F, D>(self.positions, s)) else {
+                let Some(cell) = self.layout.locate(position::<F, D>(p, 0)) else {
                     continue;
                 };
                 let w = weights(cell.t);
