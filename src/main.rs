@@ -7,7 +7,7 @@ use std::io::Read;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
 use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use cli::evaluate::Method;
@@ -19,6 +19,15 @@ use cli::evaluate::Method;
 static PEAK: &PeakMemAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 struct Allocator;
+
+/// Which op `fogray bench` measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum BenchOp {
+    /// The emission-absorption composite and its taped twins.
+    Composite,
+    /// The trilinear grid field and its taped twin.
+    Grid,
+}
 
 impl cli::bench::Memory for Allocator {
     fn reset(&self) {
@@ -100,7 +109,16 @@ enum Command {
     /// optical depth ~5), each beside its error against an independent compensated f64
     /// reference on the same rays and its peak extra memory; then the tape's own cost per
     /// recorded op and per byte.
+    ///
+    /// With --op grid: lookups per second of the fused trilinear grid field (1 thread and all)
+    /// and of its taped twin (1 thread, a quarter of the lookups), forward + backward into the
+    /// grid and forward alone, 4,194,304 lookups at uniform random positions in 128^3 x 4 and
+    /// 64^3 x 4 grids, f32 and f64, each beside its error against a plain f64 loop on the same
+    /// lookups and its peak extra memory.
     Bench {
+        /// Which op to measure.
+        #[arg(long, value_enum, default_value = "composite")]
+        op: BenchOp,
         /// A single run per measurement, without warm-up, instead of the median of at least five
         /// runs (and at least 0.3 s of them) after a warm-up run.
         #[arg(long)]
@@ -108,7 +126,8 @@ enum Command {
         /// Print {"results": [...], "tape_overhead": [...]} as JSON.
         #[arg(long)]
         json: bool,
-        /// Only this workload, as RxS (rays x samples per ray).
+        /// Only this workload, as RxS (rays x samples per ray) for the composite, or N (an N^3 x 4
+        /// grid) for the grid field.
         #[arg(long)]
         workload: Option<String>,
         /// Have glibc keep freed memory for reuse (a training loop's steady state) instead of
@@ -187,6 +206,36 @@ fn read_input(path: &PathBuf) -> Result<String, String> {
     Ok(text)
 }
 
+fn bench_grid(quick: bool, json: bool, workload: Option<&str>) -> Result<String, String> {
+    let grids = match workload {
+        Some(w) => vec![w
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n >= 2)
+            .ok_or_else(|| format!("grid workload {w:?} is not a node count of at least 2 (for example 128)"))?],
+        None => cli::grid_bench::GRIDS.to_vec(),
+    };
+    let mut log = |m: &cli::grid_bench::GridMeasurement| {
+        if !json {
+            eprintln!(
+                "  grid {} {} {} thread(s) {}^3x{}: {:.2} M lookups/s",
+                m.method,
+                m.precision,
+                m.threads,
+                m.grid,
+                m.channels,
+                m.lookups_per_sec / 1e6
+            );
+        }
+    };
+    let results = cli::grid_bench::run(&grids, quick, &Allocator, &mut log)?;
+    if json {
+        serde_json::to_string_pretty(&serde_json::json!({ "results": results })).map_err(|e| e.to_string())
+    } else {
+        Ok(cli::grid_bench::table(&results))
+    }
+}
+
 fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, String> {
     let workloads = match workload {
         Some(w) => vec![cli::bench::parse_workload(w)?],
@@ -219,6 +268,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     let (name, result) = match &cli.command {
         Command::Bench {
+            op,
             quick,
             json,
             workload,
@@ -230,7 +280,10 @@ fn main() -> ExitCode {
             } else {
                 Ok(())
             }
-            .and_then(|()| bench(*quick, *json, workload.as_deref())),
+            .and_then(|()| match op {
+                BenchOp::Composite => bench(*quick, *json, workload.as_deref()),
+                BenchOp::Grid => bench_grid(*quick, *json, workload.as_deref()),
+            }),
         ),
         Command::Composite {
             method,

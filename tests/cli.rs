@@ -422,3 +422,12 @@ fn bench_reports_speed_beside_error_and_memory() {
     assert_eq!(code, 2);
     assert!(err.contains("RxS"), "{err}");
 }
+
+#[test]
+fn grid_bench_rejects_a_bad_grid_size() {
+    for bad in ["1", "64x32", "many"] {
+        let (code, out, err) = fogray(&["bench", "--op", "grid", "--workload", bad], "");
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(out.is_empty() && err.contains("node count"), "{bad}: {err}");
+    }
+}

@@ -341,7 +341,7 @@ fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memo
 }
 
 /// Runs `f` in `pool`, or in the global pool when `None`.
-fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
+pub fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
     match pool {
         Some(p) => p.install(f),
         None => f(),

@@ -4,6 +4,7 @@ pub mod bench;
 pub mod composite;
 pub mod evaluate;
 pub mod gradcheck;
+pub mod grid_bench;
 pub mod heap;
 pub mod input;
 pub mod reference;
