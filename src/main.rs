@@ -1,4 +1,4 @@
-//! `fogray`: the command line of the fogray workspace (design.md §4).
+//! `fogray`: the command line of the fogray workspace (contracts in `docs/cli.md`).
 
 mod cli;
 
@@ -136,7 +136,44 @@ enum Command {
         /// glibc only.
         #[arg(long)]
         keep_freed_memory: bool,
+        /// Also write the report as markdown into this directory (bench-composite.md or
+        /// bench-grid.md), stamped with the date, the machine and the command.
+        #[arg(long)]
+        markdown: Option<PathBuf>,
+        /// With --markdown: also put the headline rows into this README, between its
+        /// <!-- headline:composite:start/end --> (or grid) markers.
+        #[arg(long, requires = "markdown")]
+        readme: Option<PathBuf>,
     },
+}
+
+/// Where `fogray bench` writes its generated report, if anywhere.
+struct Publish<'a> {
+    dir: Option<&'a std::path::Path>,
+    readme: Option<&'a std::path::Path>,
+    command: String,
+}
+
+impl Publish<'_> {
+    /// Writes `DIR/bench-NAME.md` and the README's headline block.
+    fn write(
+        &self,
+        name: &str,
+        title: &str,
+        tables: &str,
+        headline: impl Fn(&fogray::stamp::Stamp) -> String,
+    ) -> Result<(), String> {
+        let Some(dir) = self.dir else { return Ok(()) };
+        let stamp = fogray::stamp::Stamp::now(&self.command);
+        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        let path = dir.join(format!("bench-{name}.md"));
+        std::fs::write(&path, cli::markdown::report(title, &stamp, tables))
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        match self.readme {
+            Some(readme) => cli::markdown::update_readme(readme, name, &headline(&stamp)),
+            None => Ok(()),
+        }
+    }
 }
 
 const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model: w_k = T_k (1 - exp(-sigma_k delta_k)),
@@ -206,7 +243,7 @@ fn read_input(path: &PathBuf) -> Result<String, String> {
     Ok(text)
 }
 
-fn bench_grid(quick: bool, json: bool, workload: Option<&str>) -> Result<String, String> {
+fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, String> {
     let grids = match workload {
         Some(w) => vec![w
             .parse::<usize>()
@@ -229,6 +266,12 @@ fn bench_grid(quick: bool, json: bool, workload: Option<&str>) -> Result<String,
         }
     };
     let results = cli::grid_bench::run(&grids, quick, &Allocator, &mut log)?;
+    publish.write(
+        "grid",
+        "The grid field: lookups per second and errors",
+        &cli::grid_bench::table(&results),
+        |s| cli::markdown::grid_headline(&results, s),
+    )?;
     if json {
         serde_json::to_string_pretty(&serde_json::json!({ "results": results })).map_err(|e| e.to_string())
     } else {
@@ -236,7 +279,7 @@ fn bench_grid(quick: bool, json: bool, workload: Option<&str>) -> Result<String,
     }
 }
 
-fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, String> {
+fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, String> {
     let workloads = match workload {
         Some(w) => vec![cli::bench::parse_workload(w)?],
         None => cli::bench::WORKLOADS.to_vec(),
@@ -256,11 +299,28 @@ fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, Stri
     };
     let results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
     let tape = cli::tape_cost::run(quick)?;
+    let tables = cli::bench::table(&results) + &cli::tape_cost::table(&tape);
+    publish.write(
+        "composite",
+        "The composite: samples per second and errors",
+        &tables,
+        |s| cli::markdown::composite_headline(&results, s),
+    )?;
     if json {
         serde_json::to_string_pretty(&serde_json::json!({ "results": results, "tape_overhead": tape }))
             .map_err(|e| e.to_string())
     } else {
         Ok(cli::bench::table(&results) + &cli::tape_cost::table(&tape))
+    }
+}
+
+/// The report's destination and the command line that asked for it (for the stamp).
+fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Publish<'a> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    Publish {
+        dir: markdown.as_deref(),
+        readme: readme.as_deref(),
+        command: format!("fogray {}", args.join(" ")),
     }
 }
 
@@ -273,6 +333,8 @@ fn main() -> ExitCode {
             json,
             workload,
             keep_freed_memory,
+            markdown,
+            readme,
         } => (
             "bench",
             if *keep_freed_memory {
@@ -281,8 +343,8 @@ fn main() -> ExitCode {
                 Ok(())
             }
             .and_then(|()| match op {
-                BenchOp::Composite => bench(*quick, *json, workload.as_deref()),
-                BenchOp::Grid => bench_grid(*quick, *json, workload.as_deref()),
+                BenchOp::Composite => bench(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
+                BenchOp::Grid => bench_grid(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
             }),
         ),
         Command::Composite {

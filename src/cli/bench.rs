@@ -1,6 +1,6 @@
 //! `fogray bench`: samples per second of the fused op (1 thread and all) and of the stable and
 //! naive taped twins, in f32 and f64, each beside its error against an independent f64
-//! reference on the same rays and its peak extra memory (design.md §6).
+//! reference on the same rays and its peak extra memory (`docs/performance.md`).
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -7,5 +7,6 @@ pub mod gradcheck;
 pub mod grid_bench;
 pub mod heap;
 pub mod input;
+pub mod markdown;
 pub mod reference;
 pub mod tape_cost;
