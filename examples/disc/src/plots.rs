@@ -134,6 +134,8 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(err)?;
+    let (root, strip) = root.split_vertically(root.dim_in_pixel().1 - 40);
+    let root = &root;
     let (t0, t1) = (p.t[0], p.t[p.t.len() - 1]);
     let smax = p.sigma.iter().fold(0.0f64, |m, &v| m.max(v)) * 1.1;
     let mut chart = ChartBuilder::on(root)
@@ -173,40 +175,44 @@ where
             p.t.iter().copied().zip(p.sigma.iter().copied()),
             GREY.stroke_width(2),
         ))
-        .map_err(err)?
-        .label("sigma (left axis)")
-        .legend(legend_line(GREY));
+        .map_err(err)?;
     chart
         .draw_secondary_series(LineSeries::new(
             p.t.iter().copied().zip(p.transmittance.iter().copied()),
             BLUE.stroke_width(2),
         ))
-        .map_err(err)?
-        .label("T before each sample (right axis)")
-        .legend(legend_line(BLUE));
+        .map_err(err)?;
     chart
         .draw_secondary_series(
             p.t.iter()
                 .zip(&p.weights)
                 .map(|(&t, &w)| Circle::new((t, w), 3, ORANGE.filled())),
         )
-        .map_err(err)?
-        .label("stopping weight w (right axis)")
-        .legend(|(x, y)| Circle::new((x + 10, y), 3, ORANGE.filled()));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 14))
-        .draw()
         .map_err(err)?;
+    // The legend in a strip under the chart, where it covers no curve.
+    let font = (FONT, 14).into_font();
+    let mut x = 80;
+    for (label, color) in [
+        ("sigma (left axis)", GREY),
+        ("T before each sample (right axis)", BLUE),
+        ("stopping weight w (right axis)", ORANGE),
+    ] {
+        if color == ORANGE {
+            strip.draw(&Circle::new((x + 10, 20), 3, ORANGE.filled())).map_err(err)?;
+        } else {
+            strip
+                .draw(&PathElement::new(vec![(x, 20), (x + 20, 20)], color.stroke_width(2)))
+                .map_err(err)?;
+        }
+        strip.draw(&Text::new(label, (x + 28, 12), font.clone())).map_err(err)?;
+        x += 330;
+    }
     Ok(())
 }
 
 /// The ray panel of the lesson: sigma (grey), T (blue) and w (orange) along one ray.
 pub fn ray(dir: &Path, p: &RayProfile) -> Res {
-    both!(dir.join("ray"), (1100, 520), draw_ray, p)
+    both!(dir.join("ray"), (1100, 560), draw_ray, p)
 }
 
 /// One camera's photograph, soft render and hard render, one coloured cell per pixel.
@@ -242,6 +248,7 @@ where
         .disable_mesh()
         .disable_y_axis()
         .x_desc("pixel (blue line: the ray of the ray panel)")
+        .x_label_formatter(&|v| format!("{v:.0}"))
         .draw()
         .map_err(err)?;
     let to_u8 = |v: f64| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
@@ -284,10 +291,11 @@ where
     DB::ErrorType: 'static,
 {
     root.fill(&WHITE).map_err(err)?;
+    let (left, right) = root.split_horizontally(640);
     let steps = annealed.iter().chain(fixed).map(|f| f.path.len()).max().unwrap_or(1) as f64;
-    let mut chart = ChartBuilder::on(root)
+    let mut chart = ChartBuilder::on(&left)
         .caption(
-            "descents from starts in [-3, 3]: annealed softness vs fixed tau = 0.15",
+            "descents from 25 starts in [-3, 3]",
             (FONT, 20),
         )
         .margin(12)
@@ -299,6 +307,7 @@ where
         .configure_mesh()
         .x_desc("Adam step")
         .y_desc("model offset x (m)")
+        .x_label_formatter(&|v| format!("{v:.0}"))
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
@@ -334,10 +343,46 @@ where
         .label_font((FONT, 14))
         .draw()
         .map_err(err)?;
+    draw_fit_ends(&right, annealed, fixed, steps)
+}
+
+/// The same descents as |x| on a log axis, where their end states are told apart: how close to
+/// the truth each one settles.
+fn draw_fit_ends<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, annealed: &[Fit], fixed: &[Fit], steps: f64) -> Res
+where
+    DB::ErrorType: 'static,
+{
+    const FLOOR: f64 = 1e-4;
+    let mut chart = ChartBuilder::on(root)
+        .caption("distance from the truth |x| (log)", (FONT, 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(60)
+        .build_cartesian_2d(0.0..steps, (FLOOR..4.0).log_scale())
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("Adam step")
+        .y_desc("|x| (m)")
+        .x_label_formatter(&|v| format!("{v:.0}"))
+        .y_label_formatter(&|v| format!("{v:.0e}"))
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    for (paths, style) in [(fixed, BLACK.mix(0.5).stroke_width(1)), (annealed, ORANGE.stroke_width(1))] {
+        for f in paths {
+            chart
+                .draw_series(LineSeries::new(
+                    f.path.iter().enumerate().map(|(k, &x)| (k as f64, x.abs().max(FLOOR))),
+                    style,
+                ))
+                .map_err(err)?;
+        }
+    }
     Ok(())
 }
 
 /// Annealed fits (orange) beside the lesson's fixed-softness fits (grey), from many starts.
 pub fn fits(dir: &Path, annealed: &[Fit], fixed: &[Fit]) -> Res {
-    both!(dir.join("fits"), (1100, 600), draw_fits, annealed, fixed)
+    both!(dir.join("fits"), (1280, 600), draw_fits, annealed, fixed)
 }
