@@ -198,7 +198,9 @@ where
         ("stopping weight w (right axis)", ORANGE),
     ] {
         if color == ORANGE {
-            strip.draw(&Circle::new((x + 10, 20), 3, ORANGE.filled())).map_err(err)?;
+            strip
+                .draw(&Circle::new((x + 10, 20), 3, ORANGE.filled()))
+                .map_err(err)?;
         } else {
             strip
                 .draw(&PathElement::new(vec![(x, 20), (x + 20, 20)], color.stroke_width(2)))
@@ -294,10 +296,7 @@ where
     let (left, right) = root.split_horizontally(640);
     let steps = annealed.iter().chain(fixed).map(|f| f.path.len()).max().unwrap_or(1) as f64;
     let mut chart = ChartBuilder::on(&left)
-        .caption(
-            "descents from 25 starts in [-3, 3]",
-            (FONT, 20),
-        )
+        .caption("descents from 25 starts in [-3, 3]", (FONT, 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)
@@ -369,7 +368,10 @@ where
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
-    for (paths, style) in [(fixed, BLACK.mix(0.5).stroke_width(1)), (annealed, ORANGE.stroke_width(1))] {
+    for (paths, style) in [
+        (fixed, BLACK.mix(0.5).stroke_width(1)),
+        (annealed, ORANGE.stroke_width(1)),
+    ] {
         for f in paths {
             chart
                 .draw_series(LineSeries::new(

@@ -103,7 +103,8 @@ impl GridField {
     /// tape needs it.
     ///
     /// Errors (the tape is unchanged): the shapes do not fit the op, or a position has a NaN
-    /// coordinate (the [`GridError`] in words, as [`TapeError::InvalidArgument`]), or a
+    /// coordinate (the [`GridError`] itself inside [`TapeError::Op`], read back with
+    /// [`TapeError::downcast_ref`]), or a
     /// handle is stale.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, grid: Var, positions: Var) -> Result<Var, TapeError> {
         tape.apply1(self.clone(), &[grid, positions])

@@ -174,8 +174,9 @@ impl GridField {
     }
 }
 
+/// The grid's own error, kept whole through the tape (`TapeError::downcast_ref`).
 fn op_error(e: GridError) -> OpError {
-    OpError::InvalidArgument(e.to_string())
+    OpError::typed(e)
 }
 
 impl<F: Float> CustomOp<F> for GridField {
