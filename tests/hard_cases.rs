@@ -608,11 +608,16 @@ fn invalid_input_is_an_error_naming_ray_and_sample_and_changes_nothing() {
             )
             .unwrap_err();
         let msg = err.to_string();
-        assert!(
-            matches!(err, TapeError::InvalidArgument { op: "composite", .. }),
-            "{name}: {msg}"
-        );
+        assert!(matches!(err, TapeError::Op { op: "composite", .. }), "{name}: {msg}");
         assert!(msg.contains(needle), "{name}: {msg}");
+        // The composite's own error comes back whole through the tape.
+        match err.downcast_ref::<CompositeError>() {
+            Some(CompositeError::InvalidSample { ray, sample, .. }) => {
+                assert_eq!((*ray, *sample), (1, 0), "{name}")
+            }
+            Some(CompositeError::InvalidBackground { channel, .. }) => assert_eq!(*channel, 0, "{name}"),
+            other => panic!("{name}: {other:?}"),
+        }
         assert_eq!(t.stats(), before, "{name}: the tape is unchanged");
     }
     // Shapes and packing.

@@ -6,8 +6,8 @@
 //! It governs glibc's main arena, which serves the main thread: the taped runs and the fused
 //! runs on all threads allocate there. The fused 1-thread runs execute inside a one-thread
 //! rayon pool, whose thread glibc serves from a per-thread arena that still maps buffers of
-//! this size afresh (measured: with the setting, the same loop ran at 169 M samples/s on the
-//! main thread and 79 on a pool thread), so their figures are not comparable across the flag.
+//! this size afresh (with the setting, the same loop runs far slower on a pool thread than on
+//! the main thread), so their figures are not comparable across the flag.
 
 /// Serves large allocations from the heap and never trims it.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]

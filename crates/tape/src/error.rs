@@ -1,11 +1,62 @@
 //! Typed errors: [`OpError`] is what an op reports, [`TapeError`] what the tape returns.
+//!
+//! An op with an error type of its own (the composite's names the ray and the sample at
+//! fault) reports it whole as [`OpError::Typed`]; it reaches the caller inside
+//! [`TapeError::Op`], and [`TapeError::downcast_ref`] gives it back typed, so `?` can carry it
+//! through a pipeline of tape calls without flattening it into a string.
+
+use std::error::Error as StdError;
+use std::fmt;
+use std::sync::Arc;
 
 use thiserror::Error;
+
+/// An op's own error, kept whole (shared, so that errors stay cheap to clone).
+#[derive(Clone)]
+pub struct TypedError(Arc<dyn StdError + Send + Sync + 'static>);
+
+impl TypedError {
+    /// Wraps any error.
+    pub fn new<E: StdError + Send + Sync + 'static>(error: E) -> Self {
+        TypedError(Arc::new(error))
+    }
+
+    /// The wrapped error as an `E`, if it is one.
+    pub fn downcast_ref<E: StdError + 'static>(&self) -> Option<&E> {
+        self.0.downcast_ref::<E>()
+    }
+}
+
+impl fmt::Debug for TypedError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Debug::fmt(&self.0, f)
+    }
+}
+
+impl fmt::Display for TypedError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        fmt::Display::fmt(&self.0, f)
+    }
+}
+
+impl StdError for TypedError {
+    fn source(&self) -> Option<&(dyn StdError + 'static)> {
+        self.0.source()
+    }
+}
+
+/// Two typed errors are equal when they are the same error or read the same.
+impl PartialEq for TypedError {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0) || self.0.to_string() == other.0.to_string()
+    }
+}
 
 /// An error raised by an op's forward or backward (built-in or custom).
 ///
 /// The tape wraps it into a [`TapeError`] that carries the op's name.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum OpError {
     /// Two shapes that the op needs to agree do not.
     #[error("shapes {lhs:?} and {rhs:?} do not agree")]
@@ -21,10 +72,22 @@ pub enum OpError {
     /// The op has no backward; differentiating through it is an error, never a silent zero.
     #[error("the op is not differentiable")]
     NotDifferentiable,
+    /// The op's own typed error (see [`OpError::typed`]).
+    #[error(transparent)]
+    Typed(TypedError),
+}
+
+impl OpError {
+    /// Reports an op's own error whole, so that the caller can read it back typed with
+    /// [`TapeError::downcast_ref`].
+    pub fn typed<E: StdError + Send + Sync + 'static>(error: E) -> Self {
+        OpError::Typed(TypedError::new(error))
+    }
 }
 
 /// Every error the tape returns. A call that fails leaves the tape exactly as it was.
 #[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
 pub enum TapeError {
     /// An op received operands whose shapes do not agree.
     #[error("{op}: shapes {lhs:?} and {rhs:?} do not agree")]
@@ -82,7 +145,8 @@ pub enum TapeError {
         /// The returned gradient's shape.
         got: Vec<usize>,
     },
-    /// An op failed for another reason (for example it is not differentiable).
+    /// An op failed for another reason: it is not differentiable, or it reported an error of
+    /// its own type (read it back with [`TapeError::downcast_ref`]).
     #[error("{op}: {source}")]
     Op {
         /// The op's name.
@@ -93,12 +157,38 @@ pub enum TapeError {
 }
 
 impl TapeError {
-    /// Attaches an op's name to what it reported.
-    pub(crate) fn from_op(op: &'static str, e: OpError) -> Self {
+    /// Attaches an op's name to what it reported: shape and argument errors become
+    /// [`TapeError::ShapeMismatch`] and [`TapeError::InvalidArgument`], anything else
+    /// [`TapeError::Op`].
+    pub fn from_op(op: &'static str, e: OpError) -> Self {
         match e {
             OpError::ShapeMismatch { lhs, rhs } => TapeError::ShapeMismatch { op, lhs, rhs },
             OpError::InvalidArgument(reason) => TapeError::InvalidArgument { op, reason },
             source => TapeError::Op { op, source },
+        }
+    }
+
+    /// The op's own error inside this one, as an `E`, if an op reported one of that type
+    /// through [`OpError::typed`].
+    ///
+    /// ```
+    /// use fogray_tape::{OpError, TapeError};
+    ///
+    /// #[derive(Debug, thiserror::Error)]
+    /// #[error("ray {ray}: no samples")]
+    /// struct Empty { ray: usize }
+    ///
+    /// let e = TapeError::from_op("render", OpError::typed(Empty { ray: 3 }));
+    /// assert_eq!(e.to_string(), "render: ray 3: no samples");
+    /// assert_eq!(e.downcast_ref::<Empty>().map(|e| e.ray), Some(3));
+    /// ```
+    pub fn downcast_ref<E: StdError + 'static>(&self) -> Option<&E> {
+        match self {
+            TapeError::Op {
+                source: OpError::Typed(t),
+                ..
+            } => t.downcast_ref(),
+            _ => None,
         }
     }
 }

@@ -2,9 +2,9 @@
 //! the next, instead of going back to the system and coming back as fresh pages.
 //!
 //! A fresh page costs a fault and the kernel's clearing of it, every step, and glibc hands every
-//! buffer above 32 MiB back to the system when it is freed: the stable taped composite on 65536
-//! rays of 64 samples (1 thread, forward and backward) runs at 16.6 M samples/s in f32 and 12.4
-//! in f64 on a new tape each step, and at 20.5 and 16.2 on one tape reused with its pool. The pool is what a caching allocator would give, held by the
+//! buffer above 32 MiB back to the system when it is freed (`fogray bench` measures the
+//! difference: its `reused` column runs the taped composite on one tape reused with its pool).
+//! The pool is what a caching allocator would give, held by the
 //! tape that filled it (released with it, or by [`Tape::release_buffers`](crate::Tape)), and
 //! started by the tape's first `clear()`: a tape used once holds no buffer beyond its values.
 //!

@@ -54,7 +54,7 @@
 //! - The forward keeps only each ray's stop index; the backward recomputes `T_k` and `alpha_k`
 //!   from sigma and delta with the same code (bitwise the same values), so the op's extra
 //!   memory is its outputs and gradients alone; the price is two vectorised exponentials per
-//!   sample more, about 15-20 % of the op's time (perf: the exponentials are about 35 %).
+//!   sample more (`fogray bench` measures what that costs against the one-pass call).
 //! - The colour loops are compiled for 1 to 4 channels with the count a constant and sum in
 //!   four interleaved chains; the one sequential chain of the backward carries one fused
 //!   multiply-add per four samples.

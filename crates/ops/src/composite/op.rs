@@ -517,7 +517,7 @@ fn sum_rows<F: Float>(rows: &[F], ch: usize) -> Vec<F> {
 }
 
 fn op_error(e: CompositeError) -> OpError {
-    OpError::InvalidArgument(e.to_string())
+    e.into()
 }
 
 impl<F: Float> CustomOp<F> for Composite {
