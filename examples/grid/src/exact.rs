@@ -52,6 +52,9 @@ pub struct ExactPixel {
     pub color: [f64; 3],
     /// The fraction of light that gets through every primitive, `exp(-optical depth)`.
     pub transmittance: f64,
+    /// The unnormalised expected depth `integral of t sigma(t) T(t) dt` (the composite's
+    /// `depth` output; divide by `1 - transmittance` for the mean depth of what is seen).
+    pub depth: f64,
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -140,7 +143,7 @@ pub fn render_ray(scene: &Scene, ray: &Ray) -> ExactPixel {
     cuts.sort_by(f64::total_cmp);
     cuts.dedup();
     let mut color = [0.0; 3];
-    let mut optical_depth = 0.0f64;
+    let (mut optical_depth, mut depth) = (0.0f64, 0.0);
     for w in cuts.windows(2) {
         let (t0, t1) = (w[0], w[1]);
         let mid = 0.5 * (t0 + t1);
@@ -156,19 +159,25 @@ pub fn render_ray(scene: &Scene, ray: &Ray) -> ExactPixel {
         if sigma == 0.0 {
             continue;
         }
-        let tau = sigma * (t1 - t0);
+        let (length, tau) = (t1 - t0, sigma * (t1 - t0));
+        let (through, alpha) = ((-optical_depth).exp(), -(-tau).exp_m1());
         // T alpha c with c = weighted / sigma.
-        let emitted = (-optical_depth).exp() * -(-tau).exp_m1() / sigma;
         for (acc, w) in color.iter_mut().zip(weighted) {
-            *acc += emitted * w;
+            *acc += through * alpha / sigma * w;
         }
+        // integral over s in [0, L] of (t0 + s) sigma e^(-sigma s) = t0 alpha + alpha / sigma - L e^(-tau).
+        depth += through * (t0 * alpha + alpha / sigma - length * (1.0 - alpha));
         optical_depth += tau;
     }
     let transmittance = (-optical_depth).exp();
     for (acc, bg) in color.iter_mut().zip(scene.background) {
         *acc += transmittance * bg;
     }
-    ExactPixel { color, transmittance }
+    ExactPixel {
+        color,
+        transmittance,
+        depth,
+    }
 }
 
 #[cfg(test)]

@@ -26,6 +26,7 @@ const TITLE_HEIGHT: u32 = 26;
 const GAP: u32 = 8;
 
 /// Why an image could not be compared or written.
+#[non_exhaustive]
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ImageError {
     /// Images that should match in shape do not, or an image is not `[rows][columns][3]`.

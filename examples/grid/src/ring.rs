@@ -33,6 +33,7 @@ pub const EYE_DISTANCE: f64 = 3.0;
 pub const FIELD_OF_VIEW_DEGREES: f64 = 40.0;
 
 /// Why a ring of cameras was rejected.
+#[non_exhaustive]
 #[derive(Debug, Clone, PartialEq, Eq, Error)]
 pub enum RingError {
     /// A count that must be at least 1.
@@ -205,6 +206,8 @@ mod tests {
         assert_eq!(ring.test_views(), vec![4, 13, 22, 31]);
         assert_eq!(ring.train_views().len(), 32);
         assert!(Ring::new(5, 0, 8).unwrap().test_views().is_empty());
+        // e = 8 / 3 = 2, e / 2 = 1: every odd view, four of them for three asked.
+        assert_eq!(Ring::new(5, 3, 8).unwrap().test_views(), vec![1, 3, 5, 7]);
         assert_eq!(Ring::new(0, 4, 8), Err(RingError::Zero { what: "views" }));
         assert_eq!(Ring::new(4, 4, 0), Err(RingError::Zero { what: "size" }));
     }

@@ -27,6 +27,7 @@ use serde::{Deserialize, Serialize};
 use thiserror::Error;
 
 /// Why a scene was rejected.
+#[non_exhaustive]
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum SceneError {
     /// The scene file could not be read.

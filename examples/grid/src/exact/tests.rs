@@ -52,6 +52,34 @@ fn a_sphere_through_its_centre_transmits_exp_minus_2_r_s() {
 }
 
 #[test]
+fn the_expected_depth_of_a_slab_is_2_minus_3_over_e() {
+    // Density 1 on depths [1, 2]: the integral of t e^-(t - 1) over [1, 2] is
+    // [-t e^-(t - 1)] + [-e^-(t - 1)] from 1 to 2 = (1 - 2/e) + (1 - 1/e) = 2 - 3/e.
+    let sc = scene([0.0; 3], vec![cuboid([-1.0; 3], [1.0, 1.0, 0.0], 1.0, [1.0; 3])]);
+    let px = render_ray(
+        &sc,
+        &Ray {
+            origin: [0.5, 0.5, -2.0],
+            direction: [0.0, 0.0, 1.0],
+        },
+    );
+    close(px.depth, 2.0 - 3.0 / std::f64::consts::E, 1e-15);
+    let sc = scene(
+        [0.0; 3],
+        vec![cuboid([-1.0, -1.0, -1.5], [1.0, 1.0, -1.0], 2.0, [1.0; 3])],
+    );
+    let px = render_ray(
+        &sc,
+        &Ray {
+            origin: [0.5, 0.5, -2.0],
+            direction: [0.0, 0.0, 1.0],
+        },
+    );
+    // Density 2 on [0.5, 1]: alpha = 1 - e^-1, so 0.5 alpha + alpha / 2 - 0.5 e^-1 = 1 - 1.5/e.
+    close(px.depth, 1.0 - 1.5 / std::f64::consts::E, 1e-15);
+}
+
+#[test]
 fn an_off_centre_chord_and_a_diagonal_through_a_box() {
     // Distance 0.3 from the centre of a sphere of radius 0.5: chord 2 sqrt(0.25 - 0.09) = 0.8.
     let sc = scene([0.0; 3], vec![sphere([0.0; 3], 0.5, 3.0, [1.0; 3])]);
@@ -183,29 +211,30 @@ fn medium_at(scene: &Scene, p: [f64; 3]) -> (f64, [f64; 3]) {
     (sigma, weighted)
 }
 
-/// Midpoint quadrature of the emission-absorption integral over `t in [0, far]` with `n` steps.
-fn quadrature(scene: &Scene, ray: &Ray, far: f64, n: usize) -> [f64; 4] {
+/// Midpoint quadrature over `t in [0, far]` with `n` steps: colour, transmittance and
+/// unnormalised expected depth.
+fn quadrature(scene: &Scene, ray: &Ray, far: f64, n: usize) -> [f64; 5] {
     let h = far / n as f64;
-    let (mut color, mut t_through) = ([0.0; 3], 1.0);
+    let (mut color, mut t_through, mut depth) = ([0.0; 3], 1.0, 0.0);
     for i in 0..n {
         let t = (i as f64 + 0.5) * h;
         let p = [0, 1, 2].map(|k| ray.origin[k] + t * ray.direction[k]);
         let (sigma, weighted) = medium_at(scene, p);
         if sigma > 0.0 {
             let alpha = 1.0 - (-sigma * h).exp();
-            for k in 0..3 {
-                color[k] += t_through * alpha * weighted[k] / sigma;
+            for (acc, w) in color.iter_mut().zip(weighted) {
+                *acc += t_through * alpha * w / sigma;
             }
+            depth += t_through * alpha * t;
             t_through *= 1.0 - alpha;
         }
     }
-    [0, 1, 2]
-        .map(|k| color[k] + t_through * scene.background[k])
-        .into_iter()
-        .chain([t_through])
-        .collect::<Vec<_>>()
-        .try_into()
-        .unwrap()
+    let bg = scene.background;
+    [0, 1, 2, 3, 4].map(|k| match k {
+        0..=2 => color[k] + t_through * bg[k],
+        3 => t_through,
+        _ => depth,
+    })
 }
 
 #[test]
@@ -245,8 +274,14 @@ fn brute_force_quadrature_converges_to_the_exact_render() {
                 .map(|ray| {
                     let exact = render_ray(&sc, ray);
                     let q = quadrature(&sc, ray, far, n);
-                    let want = [exact.color[0], exact.color[1], exact.color[2], exact.transmittance];
-                    (0..4).map(|k| (q[k] - want[k]).abs()).fold(0.0, f64::max)
+                    let want = [
+                        exact.color[0],
+                        exact.color[1],
+                        exact.color[2],
+                        exact.transmittance,
+                        exact.depth,
+                    ];
+                    (0..5).map(|k| (q[k] - want[k]).abs()).fold(0.0, f64::max)
                 })
                 .sum::<f64>()
                 / rays.len() as f64
@@ -256,5 +291,5 @@ fn brute_force_quadrature_converges_to_the_exact_render() {
     // a boundary, so its error (here the mean over the rays of the worst channel) falls like
     // the step, by about 10 per decade of samples.
     assert!(errors[0] > 5.0 * errors[1] && errors[1] > 5.0 * errors[2], "{errors:?}");
-    assert!(errors[2] < 3e-5, "{errors:?}");
+    assert!(errors[2] < 5e-5, "{errors:?}");
 }
