@@ -1,2 +1,11 @@
+//! # fogray
+//!
+//! Differentiable volume rendering in Rust: this facade re-exports the reverse-mode tape
+//! ([`tape`], the `fogray-tape` crate) and the volume-rendering ops ([`ops`], `fogray-ops`),
+//! and holds what the command line and the examples share ([`stamp`]: the provenance written
+//! at the top of every generated report).
+
 pub use fogray_ops as ops;
 pub use fogray_tape as tape;
+
+pub mod stamp;

@@ -1,4 +1,5 @@
-//! The lesson's tables (§3, §4, §5) and its checkpoint exercise, reproduced by the fused op
+//! The worked tables of the lesson *Making visibility soft: volume rendering* (discretisation,
+//! the solid limit, the derivative) and its checkpoint exercise, reproduced by the fused op
 //! and by the stable taped twin, in f64 and f32. Each expected number is the lesson's printed
 //! value; "to the printed digits" means within half a unit of the last printed digit.
 

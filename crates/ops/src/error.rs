@@ -1,6 +1,6 @@
 //! Errors of the volume-rendering ops: each names the ray and sample at fault.
 
-use fogray_tape::{OpError, TapeError};
+use fogray_tape::{OffsetsError, OpError, TapeError};
 use thiserror::Error;
 
 /// Why a composite's input was rejected. Nothing is computed when one is returned.
@@ -14,7 +14,7 @@ use thiserror::Error;
 pub enum CompositeError {
     /// The offsets are not a valid packing (must start at 0 and never decrease).
     #[error("offsets: {0}")]
-    Offsets(String),
+    Offsets(#[from] OffsetsError),
     /// An array's length or shape does not fit the packing.
     #[error("{what}: expected {expected}, got {got}")]
     Shape {
@@ -52,6 +52,120 @@ pub enum CompositeError {
     /// A configuration value outside its domain.
     #[error("{0}")]
     Config(String),
+}
+
+/// Why a camera, a box or a batch of rays was rejected. Nothing is built when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum GeometryError {
+    /// An image with no pixel (`width` or `height` is 0).
+    #[error("image size {width}x{height}: both must be at least 1")]
+    EmptyImage {
+        /// Pixels per row.
+        width: usize,
+        /// Rows.
+        height: usize,
+    },
+    /// A number outside its domain (NaN, infinite, a zero focal length...).
+    #[error("{what} is {value} ({rule})")]
+    InvalidValue {
+        /// Which value.
+        what: String,
+        /// The offending value.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
+    },
+    /// A camera-to-world transform that cannot place a camera.
+    #[error("camera-to-world transform: {0}")]
+    Transform(String),
+    /// A box whose bounds are not finite or not increasing on some axis.
+    #[error("box axis {axis}: min {min}, max {max} (must be finite with min < max)")]
+    InvalidBox {
+        /// Axis (0 = x, 1 = y, 2 = z).
+        axis: usize,
+        /// Lower bound given.
+        min: f64,
+        /// Upper bound given.
+        max: f64,
+    },
+    /// An array whose shape does not fit.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input.
+        what: &'static str,
+        /// What was required.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A pixel or camera index out of range.
+    #[error("{what} {index} is out of range (must be below {len})")]
+    OutOfRange {
+        /// `"pixel"` or `"camera"`.
+        what: &'static str,
+        /// The index given.
+        index: usize,
+        /// The number of valid indices.
+        len: usize,
+    },
+    /// A `look_at` whose eye, target and up do not define a frame.
+    #[error("look_at: {0}")]
+    Degenerate(String),
+}
+
+/// Why a sampler or the occupancy grid rejected its input. Nothing is returned or changed
+/// when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum SampleError {
+    /// A configuration value outside its domain (a step that is not positive, no samples...).
+    #[error("{what} is {value} ({rule})")]
+    Config {
+        /// Which setting.
+        what: &'static str,
+        /// The offending value.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
+    },
+    /// Arrays that do not fit each other.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input.
+        what: &'static str,
+        /// What was required.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A per-ray or per-sample value outside its domain.
+    #[error("ray {ray}: {what} is {value} ({rule})")]
+    InvalidValue {
+        /// Ray index (or cell index for densities).
+        ray: usize,
+        /// Which value.
+        what: String,
+        /// The offending value.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
+    },
+    /// The caller's density function failed or returned something unusable.
+    #[error("density function: {0}")]
+    Density(String),
+}
+
+impl From<GeometryError> for TapeError {
+    fn from(e: GeometryError) -> Self {
+        TapeError::from_op("rays", OpError::typed(e))
+    }
+}
+
+impl From<SampleError> for TapeError {
+    fn from(e: SampleError) -> Self {
+        TapeError::from_op("sample", OpError::typed(e))
+    }
 }
 
 impl From<CompositeError> for OpError {

@@ -2,7 +2,7 @@
 //! threshold, or the background if none does ("first hit", the limit the soft composite
 //! reaches as densities grow). It has no useful derivative, so it is not a tape op.
 
-use fogray_tape::Float;
+use fogray_tape::{Float, Offsets};
 
 use crate::error::CompositeError;
 
@@ -11,18 +11,16 @@ use crate::error::CompositeError;
 ///
 /// Errors if the offsets are not a valid packing of `sigma`, or a density is NaN.
 pub fn first_hit<F: Float>(sigma: &[F], offsets: &[usize], threshold: F) -> Result<Vec<Option<usize>>, CompositeError> {
-    if offsets.first() != Some(&0) || offsets.windows(2).any(|w| w[1] < w[0]) {
-        return Err(CompositeError::Offsets("must start at 0 and never decrease".into()));
-    }
-    if offsets.last() != Some(&sigma.len()) {
+    let offsets = Offsets::new(offsets)?;
+    if offsets.rows() != sigma.len() {
         return Err(CompositeError::Shape {
             what: "sigma",
-            expected: format!("{} samples (the offsets' end)", offsets[offsets.len() - 1]),
+            expected: format!("{} samples (the offsets' end)", offsets.rows()),
             got: format!("{}", sigma.len()),
         });
     }
     if let Some(i) = sigma.iter().position(|s| s.is_nan()) {
-        let (ray, sample) = crate::composite::locate(offsets, i);
+        let (ray, sample) = offsets.locate(i).unwrap_or((0, i));
         return Err(CompositeError::InvalidSample {
             ray,
             sample,
@@ -32,8 +30,8 @@ pub fn first_hit<F: Float>(sigma: &[F], offsets: &[usize], threshold: F) -> Resu
         });
     }
     Ok(offsets
-        .windows(2)
-        .map(|w| sigma[w[0]..w[1]].iter().position(|&s| s > threshold))
+        .ranges()
+        .map(|rows| sigma[rows].iter().position(|&s| s > threshold))
         .collect())
 }
 

@@ -2,21 +2,25 @@
 //!
 //! Volume-rendering ops on packed rays for [`fogray_tape`]:
 //!
-//! - [`Composite`]: the emission-absorption composite of lesson 8 as one fused op with a
+//! - [`Composite`]: the emission-absorption composite (`docs/volume-rendering.md` in the
+//!   repository restates the model and its derivative) as one fused op with a
 //!   hand-written backward (colour, opacity, depth, weights and transmittance out; gradients
 //!   for density, step, colour, background and depth values), plugged into the tape through
 //!   its public [`CustomOp`](fogray_tape::CustomOp) interface;
 //! - [`twins`]: the same composite written with tape primitives only, in the stable form
 //!   (exclusive cumsum of optical depth, `exp`, `expm1`) and the naive form (cumulative
 //!   product of `1 - alpha`), to check the fused op against and to measure what fusing buys;
-//! - [`hard`]: the hard "first hit" renderer that the soft one generalises.
+//! - [`hard`]: the hard "first hit" renderer that the soft one generalises;
+//! - [`rays`]: pinhole cameras, batches of rays, and ray / box clipping;
+//! - [`sample`]: samplers that turn clipped rays into packed samples for the composite
+//!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space.
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
 //! use fogray_tape::Tape;
 //! use ndarray::{arr1, arr2};
 //!
-//! // The four-sample ray of the lesson's §3: C = 0.605.
+//! // The four-sample worked example of the volume-rendering lesson: C = 0.605.
 //! let mut tape = Tape::<f64>::new();
 //! let sigma = tape.param(arr1(&[0.0, 0.5, 2.0, 8.0]));
 //! let delta = tape.constant(arr1(&[0.5; 4]));
@@ -26,7 +30,7 @@
 //! let out = op.apply(&mut tape, &CompositeInputs { sigma, delta, color, background, t: None })?;
 //! let c = tape.value(out.color)?[[0, 0]];
 //! assert!((c - 0.605).abs() < 5e-4);
-//! let grads = tape.backward(out.color)?;          // dC/dsigma, the lesson's §5
+//! let grads = tape.backward(out.color)?;          // dC/dsigma: what it adds minus what it hides
 //! assert!((grads.get(sigma).unwrap()[0] - 0.147).abs() < 5e-4);
 //! # Ok::<(), fogray_tape::TapeError>(())
 //! ```
@@ -36,7 +40,10 @@
 pub mod composite;
 mod error;
 pub mod hard;
+pub mod rays;
+pub mod sample;
 pub mod twins;
 
 pub use composite::{Background, Composite, CompositeInputs, CompositeVars};
-pub use error::CompositeError;
+pub use error::{CompositeError, GeometryError, SampleError};
+pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

@@ -39,6 +39,7 @@ impl<F: Float> Tape<F> {
         let mut grads = Gradients {
             grads: (0..=top).map(|_| None).collect(),
             epoch: self.epoch,
+            lent: self.lent.clone(),
         };
         if !self.values[top].needs_grad {
             return Ok(grads);

@@ -7,6 +7,8 @@
 //! backs a range with 2 MiB pages where asked to, under its default `madvise` policy. A reused
 //! buffer costs no fault at all. Custom ops with large outputs can use the same helpers.
 
+use std::borrow::Cow;
+
 use ndarray::{ArrayD, ArrayViewD, Zip};
 
 use crate::float::Float;
@@ -14,6 +16,15 @@ use crate::pool;
 
 /// Below this many bytes a buffer is not worth a system call.
 const WORTH_ADVISING: usize = 4 << 20;
+
+/// The elements of `x` in row-major order: borrowed when `x` is already contiguous in that
+/// order (the usual case for tape values), copied otherwise.
+pub fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
+    match x.as_slice() {
+        Some(s) => Cow::Borrowed(s),
+        None => Cow::Owned(x.iter().copied().collect()),
+    }
+}
 
 /// `len` zeros: a buffer from the pool of the tape running this op, or a fresh one whose
 /// pages, if it is large, are advised to be huge before anything touches them.

@@ -11,6 +11,8 @@ use std::sync::Arc;
 
 use thiserror::Error;
 
+use crate::params::ParamError;
+
 /// An op's own error, kept whole (shared, so that errors stay cheap to clone).
 #[derive(Clone)]
 pub struct TypedError(Arc<dyn StdError + Send + Sync + 'static>);
@@ -154,6 +156,10 @@ pub enum TapeError {
         /// What the op reported.
         source: OpError,
     },
+    /// A parameter store or an optimiser rejected the call (see [`ParamError`]); it converts
+    /// with `?`, so a training loop can return one error type.
+    #[error(transparent)]
+    Param(#[from] ParamError),
 }
 
 impl TapeError {

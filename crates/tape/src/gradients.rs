@@ -4,6 +4,7 @@ use ndarray::{ArrayD, ArrayViewD, Zip};
 
 use crate::error::Result;
 use crate::float::Float;
+use crate::params::Lent;
 use crate::tape::Tape;
 use crate::var::Var;
 
@@ -16,6 +17,8 @@ use crate::var::Var;
 pub struct Gradients<F: Float> {
     pub(crate) grads: Vec<Option<ArrayD<F>>>,
     pub(crate) epoch: u64,
+    /// The parameters the tape had lent, pairing each with its gradient's index.
+    pub(crate) lent: Vec<Lent>,
 }
 
 impl<F: Float> Gradients<F> {

@@ -60,6 +60,14 @@
 //! [`buffer`], which asks Linux for huge pages before the first touch and, in a
 //! training loop that reuses one tape through [`Tape::clear`], hands out the buffers of the
 //! step before instead of fresh pages (see [`Tape::clear`] and [`Tape::recycle`]).
+//!
+//! Training: parameters that live across steps belong in a [`params::Params`] store, which
+//! lends each to a tape in O(1) ([`Tape::param_from`]: the tape shares the array, whatever its
+//! size, and gives it back on [`Tape::clear`]); constants that live across steps are lent the
+//! same way ([`Tape::constant_shared`]). The optimisers of [`optim`] ([`optim::Sgd`] with
+//! momentum, [`optim::Adam`]) update the store's arrays in place from a backward's
+//! [`Gradients`], which know which parameter each gradient belongs to. The module docs of
+//! [`optim`] show a training loop.
 
 #![warn(missing_docs)]
 
@@ -71,8 +79,12 @@ mod error;
 mod float;
 pub mod gradcheck;
 mod gradients;
+mod offsets;
 pub mod ops;
+pub mod optim;
+pub mod params;
 mod pool;
+mod storage;
 mod tape;
 mod var;
 
@@ -81,5 +93,6 @@ pub use error::{OpError, Result, TapeError, TypedError};
 pub use float::Float;
 pub use gradcheck::{gradcheck, GradcheckEntry, GradcheckOptions, GradcheckReport};
 pub use gradients::Gradients;
+pub use offsets::{Offsets, OffsetsError};
 pub use tape::{Tape, TapeStats};
 pub use var::Var;

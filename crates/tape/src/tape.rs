@@ -8,18 +8,20 @@ use crate::custom::{Backward, CustomOp, Recorded};
 use crate::error::{Result, TapeError};
 use crate::float::Float;
 use crate::gradients::Gradients;
+use crate::params::Lent;
 use crate::pool::{self, Home};
+use crate::storage::Storage;
 use crate::var::{fresh_epoch, Var};
 
 /// One value on the tape.
 #[derive(Debug)]
 pub(crate) struct Value<F: Float> {
-    pub(crate) data: ArrayD<F>,
+    pub(crate) data: Storage<F>,
     /// A param, or the output of a record with an input that needs a gradient.
     pub(crate) needs_grad: bool,
     /// Whether `backward` keeps this intermediate's gradient (params' are always kept).
     pub(crate) retain: bool,
-    /// `true` for values made by `param`, `constant` or `detach`.
+    /// `true` for values made by `param`, `param_from`, `constant`, `constant_shared` or `detach`.
     pub(crate) is_leaf: bool,
 }
 
@@ -38,8 +40,11 @@ pub struct TapeStats {
     pub values: usize,
     /// Op applications recorded for backward (those with an input that needs a gradient).
     pub records: usize,
-    /// Bytes of value data.
+    /// Bytes of value data (shared arrays included).
     pub value_bytes: usize,
+    /// Bytes of the values that are shared arrays, lent by a [`Params`](crate::params::Params)
+    /// store or through [`Tape::constant_shared`] (part of `value_bytes`; never copied).
+    pub shared_bytes: usize,
     /// Bytes of residuals saved by ops for their backward, as the ops report them.
     pub saved_bytes: usize,
     /// Bytes of buffers kept from earlier steps for reuse (see [`Tape::clear`]).
@@ -56,6 +61,8 @@ pub struct Tape<F: Float> {
     pub(crate) values: Vec<Value<F>>,
     pub(crate) records: Vec<Record<F>>,
     pub(crate) epoch: u64,
+    /// The parameters lent to this tape since the last `clear`, one entry each.
+    pub(crate) lent: Vec<Lent>,
     grad_enabled: bool,
     /// Large buffers of earlier steps, for the ops of the next ones (see [`crate::pool`]).
     pub(crate) pool: Home<F>,
@@ -74,30 +81,36 @@ impl<F: Float> Tape<F> {
             values: Vec::new(),
             records: Vec::new(),
             epoch: fresh_epoch(),
+            lent: Vec::new(),
             grad_enabled: true,
             pool: Home::new(None),
         }
     }
 
     /// A leaf that gradients are computed for.
+    ///
+    /// The tape takes `value` and, after [`Tape::clear`], recycles its buffer: a parameter that
+    /// lives across steps belongs in a [`Params`](crate::params::Params) store and enters each
+    /// step through [`Tape::param_from`] without a copy.
     pub fn param<D: Dimension>(&mut self, value: ndarray::Array<F, D>) -> Var {
-        self.push_leaf(value.into_dyn(), true)
+        self.push_leaf(Storage::Owned(value.into_dyn()), true)
     }
 
-    /// A leaf that never receives a gradient.
+    /// A leaf that never receives a gradient (see [`Tape::constant_shared`] for one that lives
+    /// across steps).
     pub fn constant<D: Dimension>(&mut self, value: ndarray::Array<F, D>) -> Var {
-        self.push_leaf(value.into_dyn(), false)
+        self.push_leaf(Storage::Owned(value.into_dyn()), false)
     }
 
     /// A zero-dimensional constant holding `x`.
     pub fn scalar(&mut self, x: F) -> Var {
-        self.push_leaf(ArrayD::from_elem(ndarray::IxDyn(&[]), x), false)
+        self.push_leaf(Storage::Owned(ArrayD::from_elem(ndarray::IxDyn(&[]), x)), false)
     }
 
     /// A constant copy of `v`'s value: no gradient flows through it.
     pub fn detach(&mut self, v: Var) -> Result<Var> {
         let data = self.value(v)?.to_owned();
-        Ok(self.push_leaf(data, false))
+        Ok(self.push_leaf(Storage::Owned(data), false))
     }
 
     /// The value behind `v`.
@@ -149,24 +162,30 @@ impl<F: Float> Tape<F> {
     /// [`Tape::release_buffers`]. A tape that is never cleared keeps no buffer: one-shot use
     /// has the smallest peak memory.
     ///
-    /// Every handle made before is invalidated: using one is [`TapeError::StaleVar`].
+    /// Every handle made before is invalidated: using one is [`TapeError::StaleVar`]. Arrays
+    /// lent by a [`Params`](crate::params::Params) store are given back, so an optimiser can
+    /// update them in place.
     ///
-    /// A training loop that keeps one tape (gradient descent on `sum((w x - y)^2)`):
+    /// A training loop that keeps one tape (gradient descent on `sum((w x - y)^2)`; the data
+    /// `x` and `y` live across steps, so they are lent with [`Tape::constant_shared`] instead
+    /// of copied onto the tape each step):
     ///
     /// ```
+    /// use std::sync::Arc;
+    ///
     /// use fogray_tape::Tape;
     /// use ndarray::Array1;
     ///
     /// let n = 100_000; // 400 KB per value: large enough to be pooled
-    /// let x = Array1::from_shape_fn(n, |i| (i % 7) as f32 / 7.0);
-    /// let y = x.mapv(|v| 3.0 * v);
+    /// let x = Arc::new(Array1::from_shape_fn(n, |i| (i % 7) as f32 / 7.0).into_dyn());
+    /// let y = Arc::new(x.mapv(|v| 3.0 * v));
     /// let mut w = 0.0f32;
     /// let mut tape = Tape::<f32>::new();
     /// for _ in 0..20 {
     ///     tape.clear(); // last step's buffers go to the pool, its handles go stale
     ///     let wv = tape.param(ndarray::arr0(w));
-    ///     let xv = tape.constant(x.clone());
-    ///     let yv = tape.constant(y.clone());
+    ///     let xv = tape.constant_shared(&x);
+    ///     let yv = tape.constant_shared(&y);
     ///     let wx = tape.mul(xv, wv)?; // broadcast: the output comes from the pool
     ///     let r = tape.sub(wx, yv)?;
     ///     let sq = tape.square(r)?;
@@ -179,13 +198,19 @@ impl<F: Float> Tape<F> {
     /// assert!(tape.stats().pooled_bytes > 0);
     /// # Ok::<(), fogray_tape::TapeError>(())
     /// ```
+    ///
+    /// For parameters that live across steps, see [`crate::params`] and [`crate::optim`].
     pub fn clear(&mut self) {
         let pool = self.pool.get_mut().get_or_insert_with(Box::default);
         pool.next_step();
         for v in self.values.drain(..) {
-            pool.put(v.data.into_raw_vec_and_offset().0);
+            // Shared arrays go back to their owner (the `Arc` is dropped), never to the pool.
+            if let Storage::Owned(data) = v.data {
+                pool.put(data.into_raw_vec_and_offset().0);
+            }
         }
         self.records.clear();
+        self.lent.clear();
         self.epoch = fresh_epoch();
     }
 
@@ -225,6 +250,12 @@ impl<F: Float> Tape<F> {
                 .iter()
                 .map(|v| v.data.len() * std::mem::size_of::<F>())
                 .sum(),
+            shared_bytes: self
+                .values
+                .iter()
+                .filter(|v| v.data.is_shared())
+                .map(|v| v.data.len() * std::mem::size_of::<F>())
+                .sum(),
             saved_bytes: self.records.iter().map(|r| r.op.saved_bytes()).sum(),
             pooled_bytes: self.pool.borrow().as_ref().map_or(0, |p| p.bytes()),
         }
@@ -259,7 +290,7 @@ impl<F: Float> Tape<F> {
         }
         for data in outputs {
             self.values.push(Value {
-                data,
+                data: Storage::Owned(data),
                 needs_grad,
                 retain: false,
                 is_leaf: false,
@@ -319,7 +350,7 @@ impl<F: Float> Tape<F> {
         }
     }
 
-    fn push_leaf(&mut self, data: ArrayD<F>, needs_grad: bool) -> Var {
+    pub(crate) fn push_leaf(&mut self, data: Storage<F>, needs_grad: bool) -> Var {
         self.values.push(Value {
             data,
             needs_grad,

@@ -10,7 +10,7 @@ use crate::hard;
 use crate::setup::Setup;
 use crate::soft::{self, Compositor};
 
-/// The hard loss over the 1 mm sweep of §1.
+/// The hard loss over the lesson's 1 mm sweep of the offset.
 #[derive(Debug, Clone, Serialize)]
 pub struct Staircase {
     /// Distinct loss values with ties (exactly tangent rays) treated consistently.

@@ -1,6 +1,7 @@
 //! # fogray-disc
 //!
-//! The disc experiment of lesson 8 (§1 and §6): a disc photographed by six cameras, a model
+//! The disc experiment of the lesson *Making visibility soft: volume rendering* (its first and
+//! sixth sections; `docs/disc.md` restates the setup): a disc photographed by six cameras, a model
 //! disc offset by `x`, and the loss of a hard renderer (a staircase) against that of a soft
 //! one (a smooth landscape whose slope comes from the tape's `backward` through the fused
 //! composite). A template for a differentiable renderer of your own: build the density on the

@@ -1,4 +1,4 @@
-//! `fogray-disc`: the disc experiment of lesson 8 on the command line.
+//! `fogray-disc`: the disc experiment on the command line (`docs/disc.md`).
 
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -18,8 +18,8 @@ use fogray_disc::{plots, reproduce};
 #[command(
     name = "fogray-disc",
     version,
-    about = "The disc experiment of lesson 8: a hard renderer's staircase against a soft renderer's landscape",
-    long_about = "The disc experiment of lesson 8. A disc of radius 1 m is photographed by six cameras on a ring of radius 5 m; a model disc offset by x is rendered hard (first hit) and soft (a Gaussian fog sheet of softness tau, composited by fogray's fused op, with dE/dx from the tape's backward). Without a subcommand it runs `reproduce`: every figure of the lesson beside ours, and all plots (SVG and PNG in --out)."
+    about = "The disc experiment of the volume-rendering lesson: a hard renderer's staircase against a soft renderer's landscape",
+    long_about = "The disc experiment of the lesson 'Making visibility soft: volume rendering'. A disc of radius 1 m is photographed by six cameras on a ring of radius 5 m; a model disc offset by x is rendered hard (first hit) and soft (a Gaussian fog sheet of softness tau, composited by fogray's fused op, with dE/dx from the tape's backward). Without a subcommand it runs `reproduce`: every figure of the lesson beside ours, and all plots (SVG and PNG in --out)."
 )]
 struct Cli {
     #[command(subcommand)]
@@ -109,10 +109,11 @@ enum Command {
         #[arg(long, value_delimiter = ',', default_values_t = [16, 32, 64, 128, 256])]
         counts: Vec<usize>,
     },
-    /// The speed-against-error report: time per sample of the fused op (with early
-    /// termination thresholds 0, 1e-6, 1e-4, 1e-2) and of the taped twins, in f32 and f64,
-    /// against the worst error of the disc's pixels, for uniform and band sampling at 16..256
-    /// samples per ray. Writes speed_vs_error.md, .json, .svg and .png into --dir.
+    /// The speed-against-error report: time per frame (288 rays x 4 model offsets, forward and
+    /// backward) of the fused op (with early termination thresholds 0, 1e-6, 1e-4, 1e-2) and of
+    /// the taped twins, in f32 and f64, against the worst error of the frame's pixels, for
+    /// uniform and band sampling at 16..256 samples per ray; the Pareto front and what to pick
+    /// for each error budget. Writes speed_vs_error.md, .json, .svg and .png into --dir.
     Report {
         #[command(flatten)]
         common: Common,
@@ -290,13 +291,15 @@ fn run(cli: Cli) -> Result<(), String> {
             let setup = Setup::new(common.scene.clone())?;
             let pb = bar(10, common.json);
             pb.set_message("report");
-            let rows = fogray_disc::report::run(&setup, common.scene.tau, &|| pb.inc(1))?;
+            let timing = fogray_disc::report::Timing::STABLE;
+            let rows = fogray_disc::report::run(&setup, common.scene.tau, timing, &|| pb.inc(1))?;
             pb.finish_and_clear();
             std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
-            let md =
-                fogray_disc::report::markdown(&rows, common.scene.tau, "cargo run --release -p fogray-disc -- report");
+            let stamp = fogray::stamp::Stamp::now("cargo run --release -p fogray-disc -- report");
+            let md = fogray_disc::report::markdown(&rows, common.scene.tau, timing, &stamp);
             std::fs::write(dir.join("speed_vs_error.md"), &md).map_err(|e| e.to_string())?;
-            let js = serde_json::to_string_pretty(&json!({ "results": rows })).map_err(|e| e.to_string())?;
+            let js =
+                serde_json::to_string_pretty(&json!({ "stamp": stamp, "results": rows })).map_err(|e| e.to_string())?;
             std::fs::write(dir.join("speed_vs_error.json"), &js).map_err(|e| e.to_string())?;
             fogray_disc::report::plot(&dir, &rows, common.scene.tau)?;
             if common.json {

@@ -1,12 +1,18 @@
-//! The speed-against-error report: time per sample of each method, precision and early
-//! termination threshold, against the worst error of the disc's pixels with respect to their
-//! exact values, for uniform and band sampling at several samples per ray.
+//! The speed-against-error report: the time of one frame (forward and backward over the
+//! disc's 288 rays for each of 4 model offsets) for each method, precision, early termination
+//! threshold, sampling and number of samples per ray, against the worst error of the frame's
+//! pixels with respect to their exact values; the configurations that no other beats in both
+//! time and error (the Pareto front), and the recommendation read off that front.
+//!
+//! The time axis is per frame, not per sample: a configuration is chosen by what a whole job
+//! costs, and 16 band samples beat 256 uniform ones only when the samples are counted.
 
 use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
 use fogray::ops::{twins, Background, Composite, CompositeInputs};
+use fogray::stamp::Stamp;
 use fogray::tape::{Float, Tape};
 use ndarray::{Array1, Array2, ArrayD};
 use plotters::prelude::*;
@@ -24,10 +30,38 @@ pub struct Row {
     pub sampling: Sampling,
     pub samples: usize,
     pub min_transmittance: f64,
-    /// Forward and backward (gradients for sigma and colour), all threads, median of 5.
-    pub ns_per_sample: f64,
+    /// One frame's forward and backward (gradients for sigma and colour), all threads: the
+    /// median of the runs [`Timing`] asks for, in microseconds.
+    pub us_per_frame: f64,
+    /// Interquartile range of those runs over their median.
+    pub spread: f64,
     /// Worst |C - C_exact| over every pixel and channel.
     pub max_error: f64,
+    /// No other configuration is at once faster and at least as accurate.
+    pub pareto: bool,
+}
+
+/// How long each configuration is timed: until its runs add up to `min_seconds` and there are
+/// at least `min_runs` of them, after one warm-up run.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    /// The least total time of the timed runs.
+    pub min_seconds: f64,
+    /// The fewest timed runs.
+    pub min_runs: usize,
+}
+
+impl Timing {
+    /// What the report uses: long enough for stable medians.
+    pub const STABLE: Timing = Timing {
+        min_seconds: 0.2,
+        min_runs: 5,
+    };
+    /// One timed run (for tests, which check errors and never speed).
+    pub const ONCE: Timing = Timing {
+        min_seconds: 0.0,
+        min_runs: 1,
+    };
 }
 
 /// The model offsets whose rays are rendered together (288 rays each).
@@ -74,20 +108,28 @@ fn batch(setup: &Setup, sampling: Sampling, samples: usize, tau: f64) -> Batch {
     b
 }
 
-fn median_ns(mut f: impl FnMut() -> Result<(), String>, per: f64) -> Result<f64, String> {
+/// The median run time of `f` in microseconds and the runs' interquartile range over it,
+/// after a warm-up run.
+fn time_frame(timing: Timing, mut f: impl FnMut() -> Result<(), String>) -> Result<(f64, f64), String> {
     f()?;
     let mut t: Vec<f64> = Vec::new();
-    for _ in 0..5 {
+    let mut total = 0.0;
+    while t.len() < timing.min_runs.max(1) || total < timing.min_seconds {
         let start = Instant::now();
         f()?;
-        t.push(start.elapsed().as_secs_f64() * 1e9 / per);
+        let secs = start.elapsed().as_secs_f64();
+        total += secs;
+        t.push(secs * 1e6);
     }
     t.sort_by(f64::total_cmp);
-    Ok(t[2])
+    let at = |q: f64| t[((t.len() - 1) as f64 * q).round() as usize];
+    let median = at(0.5);
+    Ok((median, (at(0.75) - at(0.25)) / median))
 }
 
 fn measure<F: Float>(
     setup: &Setup,
+    timing: Timing,
     b: &Batch,
     sampling: Sampling,
     samples: usize,
@@ -130,15 +172,17 @@ fn measure<F: Float>(
             black_box(g);
             Ok(outs[0].iter().map(|v| v.as_f64()).collect())
         };
-        let ns = median_ns(|| step().map(drop), n as f64)?;
+        let (us_per_frame, spread) = time_frame(timing, || step().map(drop))?;
         rows.push(Row {
             method: "fused",
             precision: F::NAME,
             sampling,
             samples,
             min_transmittance: threshold,
-            ns_per_sample: ns,
+            us_per_frame,
+            spread,
             max_error: error(&step()?),
+            pareto: false,
         });
     }
     let op = Composite::new(&b.offsets)
@@ -168,58 +212,153 @@ fn measure<F: Float>(
                 .map(|v| v.as_f64())
                 .collect())
         };
-        let ns = median_ns(|| step().map(drop), n as f64)?;
+        let (us_per_frame, spread) = time_frame(timing, || step().map(drop))?;
         rows.push(Row {
             method,
             precision: F::NAME,
             sampling,
             samples,
             min_transmittance: 0.0,
-            ns_per_sample: ns,
+            us_per_frame,
+            spread,
             max_error: error(&step()?),
+            pareto: false,
         });
     }
     Ok(())
 }
 
 /// Measures every configuration at softness `tau`; `progress` is called once per batch.
-pub fn run(setup: &Setup, tau: f64, progress: &dyn Fn()) -> Result<Vec<Row>, String> {
+pub fn run(setup: &Setup, tau: f64, timing: Timing, progress: &dyn Fn()) -> Result<Vec<Row>, String> {
     let mut rows = Vec::new();
     for sampling in [Sampling::Uniform, Sampling::Band] {
         for samples in COUNTS {
             let b = batch(setup, sampling, samples, tau);
-            measure::<f32>(setup, &b, sampling, samples, &mut rows)?;
-            measure::<f64>(setup, &b, sampling, samples, &mut rows)?;
+            measure::<f32>(setup, timing, &b, sampling, samples, &mut rows)?;
+            measure::<f64>(setup, timing, &b, sampling, samples, &mut rows)?;
             progress();
         }
     }
+    mark_pareto_front(&mut rows);
     Ok(rows)
 }
 
-/// The markdown table.
-pub fn markdown(rows: &[Row], tau: f64, command: &str) -> String {
+/// Marks the rows that no other row dominates (faster and at least as accurate, or as fast
+/// and more accurate).
+pub fn mark_pareto_front(rows: &mut [Row]) {
+    let dominated: Vec<bool> = rows
+        .iter()
+        .map(|r| {
+            rows.iter().any(|o| {
+                o.us_per_frame <= r.us_per_frame
+                    && o.max_error <= r.max_error
+                    && (o.us_per_frame < r.us_per_frame || o.max_error < r.max_error)
+            })
+        })
+        .collect();
+    for (r, d) in rows.iter_mut().zip(dominated) {
+        r.pareto = !d;
+    }
+}
+
+/// The front's rows by increasing time (and so decreasing error).
+pub fn front(rows: &[Row]) -> Vec<&Row> {
+    let mut f: Vec<&Row> = rows.iter().filter(|r| r.pareto).collect();
+    f.sort_by(|a, b| a.us_per_frame.total_cmp(&b.us_per_frame));
+    f
+}
+
+fn describe(r: &Row) -> String {
+    let stop = if r.min_transmittance > 0.0 {
+        format!(", early termination at {:e}", r.min_transmittance)
+    } else {
+        String::new()
+    };
+    format!(
+        "{} {} with {} {} samples per ray{stop}",
+        r.method,
+        r.precision,
+        r.samples,
+        format!("{:?}", r.sampling).to_lowercase()
+    )
+}
+
+/// For each error budget, the fastest configuration whose error is within it (the first row
+/// of the front, by time, that reaches it).
+pub fn recommendations(rows: &[Row]) -> Vec<(f64, Option<&Row>)> {
+    let front = front(rows);
+    [1e-2, 1e-3, 1e-4, 1e-5, 1e-6]
+        .into_iter()
+        .map(|budget| (budget, front.iter().copied().find(|r| r.max_error <= budget)))
+        .collect()
+}
+
+/// The markdown report: provenance, what is measured, the recommendation read off the Pareto
+/// front, the front, then every row.
+pub fn markdown(rows: &[Row], tau: f64, timing: Timing, stamp: &Stamp) -> String {
     let mut s = format!(
-        "# Speed against error: the disc's rays\n\nMeasured by `{command}` on this machine ({} threads). Each configuration composites the 288 rays of the disc scene for the model at x = {:?} (1152 rays) with softness tau = {tau} m, forward and backward (gradients for sigma and colour); time is the median of 5 runs per sample; error is the worst |C - C_exact| over every pixel and channel, against the exact pixels (the sheet's optical depth by converged quadrature).\n\n| method | precision | sampling | samples/ray | min_transmittance | ns/sample | max error |\n|---|---|---|---|---|---|---|\n",
-        rayon::current_num_threads(),
-        OFFSETS
+        "# Speed against error: the disc's rays\n\n{}\n\nA frame is the 288 rays of the disc scene for each of the model offsets x = {:?} (1152 rays) at softness tau = {tau} m, composited forward and backward (gradients for density and colour). Time is the median over runs repeated for at least {} s (and at least {} runs), with their interquartile range over the median as the spread; error is the worst |C - C_exact| over every pixel and channel of the frame, against the exact pixels (the sheet's optical depth by converged quadrature).\n\n## What to pick\n\nRead off the Pareto front (the configurations that no other beats in both time and error): the fastest one within each error budget.\n\n| error budget | fastest configuration | time per frame (us) | its error |\n|---|---|---|---|\n",
+        stamp.markdown(),
+        OFFSETS,
+        timing.min_seconds,
+        timing.min_runs
     );
+    for (budget, pick) in recommendations(rows) {
+        s += &match pick {
+            Some(r) => format!(
+                "| {budget:e} | {} | {:.0} | {:.2e} |\n",
+                describe(r),
+                r.us_per_frame,
+                r.max_error
+            ),
+            None => format!("| {budget:e} | none measured reaches it | - | - |\n"),
+        };
+    }
+    s += "\n## The Pareto front\n\n| configuration | time per frame (us) | spread | max error |\n|---|---|---|---|\n";
+    for r in front(rows) {
+        s += &format!(
+            "| {} | {:.0} | {:.0}% | {:.2e} |\n",
+            describe(r),
+            r.us_per_frame,
+            r.spread * 100.0,
+            r.max_error
+        );
+    }
+    s += "\n## Every configuration\n\n| method | precision | sampling | samples/ray | min_transmittance | time per frame (us) | spread | max error | on the front |\n|---|---|---|---|---|---|---|---|---|\n";
     for r in rows {
         s += &format!(
-            "| {} | {} | {:?} | {} | {:e} | {:.1} | {:.2e} |\n",
-            r.method, r.precision, r.sampling, r.samples, r.min_transmittance, r.ns_per_sample, r.max_error
+            "| {} | {} | {:?} | {} | {:e} | {:.0} | {:.0}% | {:.2e} | {} |\n",
+            r.method,
+            r.precision,
+            r.sampling,
+            r.samples,
+            r.min_transmittance,
+            r.us_per_frame,
+            r.spread * 100.0,
+            r.max_error,
+            if r.pareto { "yes" } else { "" }
         );
     }
     s
 }
 
-/// The log-log plot (`speed_vs_error.svg` and `.png` in `dir`): time per sample against
+/// The log-log plot (`speed_vs_error.svg` and `.png` in `dir`): time per frame against
 /// error, one colour per method and precision, circles for uniform sampling and triangles for
-/// band sampling.
+/// band sampling, the Pareto front as a line; the legend beside the chart, off the data.
 pub fn plot(dir: &Path, rows: &[Row], tau: f64) -> Result<(), String> {
     let (svg, png) = (dir.join("speed_vs_error.svg"), dir.join("speed_vs_error.png"));
-    draw_plot(SVGBackend::new(&svg, (1100, 700)).into_drawing_area(), rows, tau)?;
-    draw_plot(BitMapBackend::new(&png, (1100, 700)).into_drawing_area(), rows, tau)
+    draw_plot(SVGBackend::new(&svg, (1200, 700)).into_drawing_area(), rows, tau)?;
+    draw_plot(BitMapBackend::new(&png, (1200, 700)).into_drawing_area(), rows, tau)
 }
+
+const SERIES: [(&str, &str, RGBColor); 6] = [
+    ("fused", "f32", RGBColor(230, 120, 20)),
+    ("fused", "f64", RGBColor(150, 60, 0)),
+    ("taped", "f32", RGBColor(40, 90, 200)),
+    ("taped", "f64", RGBColor(20, 40, 120)),
+    ("taped-naive", "f32", RGBColor(150, 150, 150)),
+    ("taped-naive", "f64", RGBColor(60, 60, 60)),
+];
 
 fn draw_plot<DB: DrawingBackend>(
     root: DrawingArea<DB, plotters::coord::Shift>,
@@ -231,25 +370,25 @@ where
 {
     let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
     root.fill(&WHITE).map_err(e)?;
+    let (left, right) = root.split_horizontally(930);
     // Exact results (error 0) are drawn at the floor.
     let floor = rows
         .iter()
         .map(|r| r.max_error)
         .filter(|&e| e > 0.0)
         .fold(1.0, f64::min)
-        / 10.0;
-    let ceiling = rows.iter().map(|r| r.max_error).fold(floor, f64::max) * 1e3;
-    let tmax = rows.iter().map(|r| r.ns_per_sample).fold(1.0, f64::max) * 1.5;
-    let tmin = rows.iter().map(|r| r.ns_per_sample).fold(f64::INFINITY, f64::min) / 1.5;
-    let mut chart = ChartBuilder::on(&root)
+        / 3.0;
+    let ceiling = rows.iter().map(|r| r.max_error).fold(floor, f64::max) * 3.0;
+    let tmax = rows.iter().map(|r| r.us_per_frame).fold(1.0, f64::max) * 1.3;
+    let tmin = rows.iter().map(|r| r.us_per_frame).fold(f64::INFINITY, f64::min) / 1.3;
+    let mut chart = ChartBuilder::on(&left)
         .caption(
-            format!("disc rays, tau = {tau} m: time per sample against worst pixel error (fused: 4 early-termination thresholds each)"),
+            format!("disc, tau = {tau} m: time per frame (1152 rays) against worst pixel error"),
             ("sans-serif", 18),
         )
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(70)
-        // Empty decades on top leave room for the legend.
         .build_cartesian_2d(
             (tmin..tmax).log_scale().with_key_points(one_two_five(tmin, tmax)),
             (floor..ceiling).log_scale(),
@@ -257,50 +396,76 @@ where
         .map_err(e)?;
     chart
         .configure_mesh()
-        .x_desc("forward + backward time per sample (ns, log)")
-        .y_desc("worst |C - C_exact| over all pixels (log)")
+        .x_desc("forward + backward time per frame (us, log)")
+        .y_desc("worst |C - C_exact| over the frame's pixels (log)")
         .y_label_formatter(&|v| format!("{v:.0e}"))
         .x_label_formatter(&|v| format!("{v}"))
         .light_line_style(WHITE.mix(0.0))
         .draw()
         .map_err(e)?;
-    let series = [
-        ("fused", "f32", RGBColor(230, 120, 20)),
-        ("fused", "f64", RGBColor(150, 60, 0)),
-        ("taped", "f32", RGBColor(40, 90, 200)),
-        ("taped", "f64", RGBColor(20, 40, 120)),
-        ("taped-naive", "f32", RGBColor(150, 150, 150)),
-        ("taped-naive", "f64", RGBColor(60, 60, 60)),
-    ];
-    for (method, precision, color) in series {
+    let point = |r: &Row| (r.us_per_frame, r.max_error.max(floor));
+    // The front as a staircase: each step holds its error until the next, faster-converging point.
+    let front = front(rows);
+    let mut stairs = Vec::new();
+    for (k, r) in front.iter().enumerate() {
+        stairs.push(point(r));
+        if let Some(next) = front.get(k + 1) {
+            stairs.push((next.us_per_frame, r.max_error.max(floor)));
+        }
+    }
+    chart
+        .draw_series(LineSeries::new(stairs, BLACK.stroke_width(1)))
+        .map_err(e)?;
+    for (method, precision, color) in SERIES {
         let pick = |s: Sampling| {
             rows.iter()
                 .filter(move |r| r.method == method && r.precision == precision && r.sampling == s)
         };
-        let point = |r: &Row| (r.ns_per_sample, r.max_error.max(floor));
         chart
             .draw_series(pick(Sampling::Uniform).map(|r| Circle::new(point(r), 4, color.filled())))
-            .map_err(e)?
-            .label(format!("{method} {precision}"))
-            .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+            .map_err(e)?;
         chart
             .draw_series(pick(Sampling::Band).map(|r| TriangleMarker::new(point(r), 6, color.filled())))
             .map_err(e)?;
     }
     chart
-        .draw_series(std::iter::once(TriangleMarker::new((tmin, floor), 0, WHITE)))
-        .map_err(e)?
-        .label("circle: uniform sampling, triangle: band sampling")
-        .legend(|(x, y)| TriangleMarker::new((x + 10, y), 6, BLACK.filled()));
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::UpperRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font(("sans-serif", 14))
-        .draw()
+        .draw_series(front.iter().map(|r| Circle::new(point(r), 8, BLACK.stroke_width(1))))
         .map_err(e)?;
+    draw_legend(&right).map_err(e)?;
     root.present().map_err(e)?;
+    Ok(())
+}
+
+/// The legend in its own panel, so that it covers no data.
+fn draw_legend<DB: DrawingBackend>(
+    panel: &DrawingArea<DB, plotters::coord::Shift>,
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    let font = ("sans-serif", 15).into_font();
+    let mut y = 60;
+    for (method, precision, color) in SERIES {
+        panel.draw(&Circle::new((20, y), 5, color.filled()))?;
+        panel.draw(&Text::new(format!("{method} {precision}"), (34, y - 8), font.clone()))?;
+        y += 26;
+    }
+    y += 14;
+    panel.draw(&Circle::new((20, y), 5, BLACK.filled()))?;
+    panel.draw(&Text::new("uniform sampling", (34, y - 8), font.clone()))?;
+    y += 26;
+    panel.draw(&TriangleMarker::new((20, y), 6, BLACK.filled()))?;
+    panel.draw(&Text::new("band sampling", (34, y - 8), font.clone()))?;
+    y += 26;
+    panel.draw(&Circle::new((20, y), 8, BLACK.stroke_width(1)))?;
+    panel.draw(&Text::new("on the Pareto front", (34, y - 8), font.clone()))?;
+    y += 40;
+    for line in [
+        "fused: early termination",
+        "at 0, 1e-6, 1e-4, 1e-2",
+        "samples per ray:",
+        "16, 32, 64, 128, 256",
+    ] {
+        panel.draw(&Text::new(line, (12, y), font.clone()))?;
+        y += 22;
+    }
     Ok(())
 }
 

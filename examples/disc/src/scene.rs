@@ -1,6 +1,6 @@
-//! The scene of lesson 8, §1 and §6: a disc photographed by cameras on a ring, and the rays
+//! The scene of the disc experiment: a disc photographed by cameras on a ring, and the rays
 //! and samples of every pixel. Every parameter is a flag whose default is the setup
-//! reconstructed in design.md §5.
+//! reconstructed from the lesson's figures (`docs/disc.md` gives it in full).
 
 use clap::Args;
 

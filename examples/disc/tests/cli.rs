@@ -1,4 +1,4 @@
-//! The `fogray-disc` binary: the JSON contract of design.md §5 and its errors.
+//! The `fogray-disc` binary: the JSON contract of `docs/cli.md` and its errors.
 
 use std::process::Command;
 

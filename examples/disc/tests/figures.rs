@@ -1,4 +1,4 @@
-//! Every figure of the lesson (design.md §5) from the reconstructed setup, asserted with a
+//! Every figure of the lesson (listed in `docs/disc.md`) from the reconstructed setup, asserted with a
 //! tolerance around the reconstructed value; and the annealed fits from every start.
 
 use fogray_disc::adam::Adam;

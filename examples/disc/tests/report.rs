@@ -1,7 +1,8 @@
 //! The speed-against-error report: every configuration is measured, and its error column
 //! means what it says (speed is reported, never asserted).
 
-use fogray_disc::report::{self, COUNTS, THRESHOLDS};
+use fogray::stamp::Stamp;
+use fogray_disc::report::{self, Timing, COUNTS, THRESHOLDS};
 use fogray_disc::sampling::Sampling;
 use fogray_disc::scene::Scene;
 use fogray_disc::setup::Setup;
@@ -9,10 +10,10 @@ use fogray_disc::setup::Setup;
 #[test]
 fn report_measures_every_configuration_with_meaningful_errors() {
     let setup = Setup::new(Scene::default()).unwrap();
-    let rows = report::run(&setup, 0.15, &|| {}).unwrap();
+    let rows = report::run(&setup, 0.15, Timing::ONCE, &|| {}).unwrap();
     // 2 samplings x 5 counts x 2 precisions x (4 fused thresholds + 2 taped twins)
     assert_eq!(rows.len(), 2 * COUNTS.len() * 2 * (THRESHOLDS.len() + 2));
-    assert!(rows.iter().all(|r| r.max_error.is_finite() && r.ns_per_sample > 0.0));
+    assert!(rows.iter().all(|r| r.max_error.is_finite() && r.us_per_frame > 0.0));
     let find = |method: &str, precision: &str, sampling: Sampling, samples: usize, threshold: f64| {
         rows.iter()
             .find(|r| {
@@ -42,6 +43,28 @@ fn report_measures_every_configuration_with_meaningful_errors() {
     }
     // Band sampling beats uniform sampling at equal (small) sample counts.
     assert!(find("fused", "f64", Sampling::Band, 16, 0.0) < find("fused", "f64", Sampling::Uniform, 16, 0.0));
-    let md = report::markdown(&rows, 0.15, "test");
-    assert_eq!(md.lines().filter(|l| l.starts_with("| fused")).count(), 80);
+    let md = report::markdown(&rows, 0.15, Timing::ONCE, &Stamp::now("test"));
+    assert_eq!(md.lines().filter(|l| l.starts_with("| fused |")).count(), 80);
+    // The front: no row on it is beaten in both time and error by any row, and every row off
+    // it is (checked here by brute force, independently of how the report marks it).
+    for r in &rows {
+        let beaten = rows.iter().any(|o| {
+            o.us_per_frame <= r.us_per_frame
+                && o.max_error <= r.max_error
+                && (o.us_per_frame < r.us_per_frame || o.max_error < r.max_error)
+        });
+        assert_eq!(r.pareto, !beaten);
+    }
+    // Each recommendation is the fastest row of all within its budget.
+    for (budget, pick) in report::recommendations(&rows) {
+        let fastest = rows
+            .iter()
+            .filter(|r| r.max_error <= budget)
+            .map(|r| r.us_per_frame)
+            .fold(f64::INFINITY, f64::min);
+        match pick {
+            Some(r) => assert_eq!(r.us_per_frame, fastest, "budget {budget}"),
+            None => assert!(fastest.is_infinite(), "budget {budget}"),
+        }
+    }
 }

@@ -1,9 +1,7 @@
 //! The composite's configuration (everything that is not differentiable) and how it is
 //! applied to a tape.
 
-use std::sync::Arc;
-
-use fogray_tape::{Float, Tape, TapeError, Var};
+use fogray_tape::{Float, Offsets, Tape, TapeError, Var};
 
 use crate::error::CompositeError;
 
@@ -24,7 +22,7 @@ pub enum Background {
 /// [`Composite::apply`].
 #[derive(Debug, Clone)]
 pub struct Composite {
-    pub(crate) offsets: Arc<[usize]>,
+    pub(crate) offsets: Offsets,
     pub(crate) background: Background,
     pub(crate) min_transmittance: f64,
     pub(crate) depth: bool,
@@ -68,26 +66,21 @@ impl Composite {
     /// decreasing; ray `r` owns samples `offsets[r]..offsets[r+1]`; empty rays are allowed).
     /// Defaults: shared background, exact (no early termination), outputs colour and opacity.
     pub fn new(offsets: &[usize]) -> Result<Self, CompositeError> {
-        match offsets.first() {
-            None => return Err(CompositeError::Offsets("need at least one entry (0)".into())),
-            Some(&o) if o != 0 => return Err(CompositeError::Offsets(format!("must start at 0, got {o}"))),
-            _ => {}
-        }
-        if let Some(r) = offsets.windows(2).position(|w| w[1] < w[0]) {
-            return Err(CompositeError::Offsets(format!(
-                "ray {r} ends before it starts ({} then {})",
-                offsets[r],
-                offsets[r + 1]
-            )));
-        }
-        Ok(Composite {
-            offsets: offsets.into(),
+        Ok(Self::packed(Offsets::new(offsets)?))
+    }
+
+    /// [`Composite::new`] over an already validated packing (for example a sampler's), which
+    /// it shares instead of copying.
+    /// Defaults: shared background, exact (no early termination), outputs colour and opacity.
+    pub fn packed(offsets: Offsets) -> Self {
+        Composite {
+            offsets,
             background: Background::Shared,
             min_transmittance: 0.0,
             depth: false,
             weights: false,
             transmittance: false,
-        })
+        }
     }
 
     /// Chooses where the background comes from.
@@ -138,6 +131,11 @@ impl Composite {
 
     /// The packing.
     pub fn offsets(&self) -> &[usize] {
+        &self.offsets
+    }
+
+    /// The packing, as the validated type (cloning it is cheap).
+    pub fn packing(&self) -> &Offsets {
         &self.offsets
     }
 

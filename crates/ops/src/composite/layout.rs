@@ -4,6 +4,7 @@
 use std::borrow::Cow;
 use std::ops::Range;
 
+use fogray_tape::buffer::flat;
 use fogray_tape::Float;
 use ndarray::ArrayViewD;
 
@@ -35,27 +36,12 @@ impl<F: Float> Flat<'_, F> {
     }
 }
 
-fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
-    match x.as_slice() {
-        Some(s) => Cow::Borrowed(s),
-        None => Cow::Owned(x.iter().copied().collect()),
-    }
-}
-
 fn shape_err(what: &'static str, expected: String, got: &[usize]) -> CompositeError {
     CompositeError::Shape {
         what,
         expected,
         got: format!("shape {got:?}"),
     }
-}
-
-/// The ray that owns global sample `i`, and the sample's index within it.
-pub(crate) fn locate(offsets: &[usize], i: usize) -> (usize, usize) {
-    let r = offsets.partition_point(|&o| o <= i).saturating_sub(1);
-    // Skip empty rays that share the start offset.
-    let r = (r..offsets.len() - 1).find(|&r| offsets[r + 1] > i).unwrap_or(r);
-    (r, i - offsets[r])
 }
 
 /// Checks shapes and values of the inputs in the op's order
@@ -127,7 +113,7 @@ pub(crate) fn flatten<'a, F: Float>(
 
 pub(crate) fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), CompositeError> {
     let bad = |i: usize, what: String, value: F, rule: &'static str| {
-        let (ray, sample) = locate(&op.offsets, i);
+        let (ray, sample) = op.offsets.locate(i).unwrap_or((0, i));
         CompositeError::InvalidSample {
             ray,
             sample,
@@ -226,16 +212,6 @@ pub(crate) fn take_front<'a, T>(rest: &mut &'a mut [T], len: usize) -> &'a mut [
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn locate_skips_empty_rays() {
-        let offsets = [0, 2, 2, 2, 5];
-        assert_eq!(locate(&offsets, 0), (0, 0));
-        assert_eq!(locate(&offsets, 1), (0, 1));
-        assert_eq!(locate(&offsets, 2), (3, 0));
-        assert_eq!(locate(&offsets, 4), (3, 2));
-        assert_eq!(locate(&[0, 0, 1], 0), (1, 0));
-    }
 
     #[test]
     fn blocks_cover_every_ray_once() {

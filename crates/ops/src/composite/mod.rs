@@ -1,4 +1,6 @@
-//! The emission-absorption composite of lesson 8 over packed rays, as one fused op.
+//! The emission-absorption composite over packed rays, as one fused op (the model and its
+//! derivative are those of the lesson *Making visibility soft: volume rendering*, restated in
+//! `docs/volume-rendering.md`).
 //!
 //! # The formulas
 //!
@@ -14,7 +16,7 @@
 //! (`depth` is the unnormalised expected depth: the background contributes 0, an empty ray has
 //! depth 0; divide by the opacity for the depth given that the ray stops.)
 //!
-//! The backward is the closed form of lesson 8, §5. For a loss `L` with upstream gradients
+//! The backward is the lesson's closed form ("what a sample adds minus what it hides"). For a loss `L` with upstream gradients
 //! `gC`, `gO`, `gD`, `gW_k`, `gT_k`, every output is linear in per-sample "values"
 //! `v_k = gC.c_k + gO + gD t_k + gW_k` (the background's value is `gC.c_bg`), and
 //!
@@ -77,7 +79,7 @@ mod decay;
 mod forward;
 mod layout;
 
-pub(crate) use layout::{locate, validate};
+pub(crate) use layout::validate;
 mod one_pass;
 mod op;
 mod rows;

@@ -24,10 +24,7 @@ fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, Composite
 }
 
 fn flat<'a, F: Float>(g: &'a Option<ArrayViewD<'_, F>>) -> Option<Cow<'a, [F]>> {
-    g.as_ref().map(|g| match g.as_slice() {
-        Some(s) => Cow::Borrowed(s),
-        None => Cow::Owned(g.iter().copied().collect()),
-    })
+    g.as_ref().map(fogray_tape::buffer::flat)
 }
 
 /// The contiguous data of an output buffer of exactly `shape`, or why not.

@@ -1,8 +1,31 @@
 //! Indexing along axis 0: `gather` (index select) and its adjoint `scatter_add`.
 //! Each is the other's backward.
+//!
+//! A table is a sequence of rows (axis 0), each row the elements of the remaining axes. On a
+//! contiguous table a row is a slice, so both ops are loops of slice copies and adds over the
+//! indices (rows of 1 to 4 elements get loops with the row length known at compile time); a
+//! strided view is read row by row. `scatter_add` adds in index order, one thread, so its
+//! result never depends on the machine; in `f32` it accumulates in `f64` and rounds once, so a
+//! row that receives many small terms after a large one keeps them.
+//!
+//! ```
+//! use fogray_tape::Tape;
+//! use ndarray::arr2;
+//!
+//! let mut tape = Tape::<f32>::new();
+//! let table = tape.param(arr2(&[[1.0f32, 2.0], [3.0, 4.0], [5.0, 6.0]]));
+//! let rows = tape.gather(table, &[2, 0, 2])?;
+//! assert_eq!(tape.value(rows)?, arr2(&[[5.0f32, 6.0], [1.0, 2.0], [5.0, 6.0]]).into_dyn());
+//! let loss = tape.sum(rows)?;
+//! let grads = tape.backward(loss)?;
+//! // Each row's gradient counts how often it was picked.
+//! assert_eq!(grads.get(table).unwrap(), arr2(&[[1.0f32, 1.0], [0.0, 0.0], [2.0, 2.0]]).into_dyn());
+//! # Ok::<(), fogray_tape::TapeError>(())
+//! ```
 
-use ndarray::{ArrayD, ArrayViewD, Axis};
+use ndarray::{ArrayD, ArrayViewD, Axis, IxDyn};
 
+use crate::buffer::{scratch, zeroed};
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -32,19 +55,105 @@ fn check_indices(indices: &[usize], rows: usize) -> Result<(), OpError> {
     }
 }
 
-fn gather<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize]) -> ArrayD<F> {
-    x.select(Axis(0), indices)
+/// `shape` with its first axis (the rows) replaced by `rows`, and the elements of one row.
+fn rows_shape(shape: &[usize], rows: usize) -> (Vec<usize>, usize) {
+    let mut out = shape.to_vec();
+    out[0] = rows;
+    (out, shape[1..].iter().product())
 }
 
-fn scatter_add<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize], rows: usize) -> ArrayD<F> {
-    let mut shape = x.shape().to_vec();
-    shape[0] = rows;
-    let mut out = ArrayD::zeros(shape);
-    for (row, &i) in x.axis_iter(Axis(0)).zip(indices) {
-        let mut target = out.index_axis_mut(Axis(0), i);
-        target += &row;
+fn into_array<F: Float>(shape: Vec<usize>, data: Vec<F>) -> Result<ArrayD<F>, OpError> {
+    ArrayD::from_shape_vec(IxDyn(&shape), data).map_err(|e| OpError::InvalidArgument(e.to_string()))
+}
+
+/// Rows `indices` of `x` (every index already checked to be below `x`'s row count).
+fn gather<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize]) -> Result<ArrayD<F>, OpError> {
+    let (shape, c) = rows_shape(x.shape(), indices.len());
+    let mut out = scratch::<F>(indices.len() * c);
+    if c > 0 {
+        match x.as_slice() {
+            Some(table) => match c {
+                1 => copy_rows::<F, 1>(table, indices, &mut out),
+                2 => copy_rows::<F, 2>(table, indices, &mut out),
+                3 => copy_rows::<F, 3>(table, indices, &mut out),
+                4 => copy_rows::<F, 4>(table, indices, &mut out),
+                _ => {
+                    for (dst, &i) in out.chunks_exact_mut(c).zip(indices) {
+                        dst.copy_from_slice(&table[i * c..(i + 1) * c]);
+                    }
+                }
+            },
+            None => {
+                for (dst, &i) in out.chunks_exact_mut(c).zip(indices) {
+                    for (d, &v) in dst.iter_mut().zip(x.index_axis(Axis(0), i).iter()) {
+                        *d = v;
+                    }
+                }
+            }
+        }
     }
-    out
+    into_array(shape, out)
+}
+
+/// [`gather`]'s loop for rows of `C` elements, which the compiler unrolls.
+fn copy_rows<F: Float, const C: usize>(table: &[F], indices: &[usize], out: &mut [F]) {
+    for (dst, &i) in out.chunks_exact_mut(C).zip(indices) {
+        dst.copy_from_slice(&table[i * C..(i + 1) * C]);
+    }
+}
+
+/// Row `k` of `x` added into row `indices[k]` of `rows` zero rows (indices already checked).
+fn scatter_add<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize], rows: usize) -> Result<ArrayD<F>, OpError> {
+    let (shape, c) = rows_shape(x.shape(), rows);
+    let len = rows * c;
+    let standard = x.as_standard_layout();
+    let Some(xs) = standard.as_slice() else {
+        return Err(OpError::InvalidArgument("could not lay the input out in rows".into()));
+    };
+    if c == 0 {
+        return into_array(shape, zeroed(len));
+    }
+    // f32 sums go through f64: a row can receive thousands of terms.
+    let out = if F::NAME == f64::NAME {
+        let mut out = zeroed::<F>(len);
+        add_rows(&mut out, xs, indices, c);
+        out
+    } else {
+        let mut wide = vec![0.0f64; len];
+        add_rows(&mut wide, xs, indices, c);
+        let mut out = scratch::<F>(len);
+        for (o, &w) in out.iter_mut().zip(&wide) {
+            *o = F::lit(w);
+        }
+        out
+    };
+    into_array(shape, out)
+}
+
+/// `acc[indices[k]] += xs[k]` row by row, in index order, the terms widened to `A`.
+fn add_rows<A: Float, F: Float>(acc: &mut [A], xs: &[F], indices: &[usize], c: usize) {
+    match c {
+        1 => add_rows_of::<A, F, 1>(acc, xs, indices),
+        2 => add_rows_of::<A, F, 2>(acc, xs, indices),
+        3 => add_rows_of::<A, F, 3>(acc, xs, indices),
+        4 => add_rows_of::<A, F, 4>(acc, xs, indices),
+        _ => {
+            for (src, &i) in xs.chunks_exact(c).zip(indices) {
+                for (a, &v) in acc[i * c..(i + 1) * c].iter_mut().zip(src) {
+                    *a += A::lit(v.as_f64());
+                }
+            }
+        }
+    }
+}
+
+/// [`add_rows`] for rows of `C` elements.
+fn add_rows_of<A: Float, F: Float, const C: usize>(acc: &mut [A], xs: &[F], indices: &[usize]) {
+    for (src, &i) in xs.chunks_exact(C).zip(indices) {
+        for (a, &v) in acc[i * C..(i + 1) * C].iter_mut().zip(src) {
+            *a += A::lit(v.as_f64());
+        }
+    }
 }
 
 fn first_input<'a, 'b, F: Float>(inputs: &'a [ArrayViewD<'b, F>]) -> Result<&'a ArrayViewD<'b, F>, OpError> {
@@ -63,7 +172,7 @@ impl<F: Float> CustomOp<F> for Gather {
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
         let x = first_input(inputs)?;
         check_indices(&self.0, x.shape()[0])?;
-        Ok((vec![gather(x, &self.0)], ()))
+        Ok((vec![gather(x, &self.0)?], ()))
     }
     fn backward(
         &self,
@@ -71,7 +180,7 @@ impl<F: Float> CustomOp<F> for Gather {
         grads: &[Option<ArrayViewD<'_, F>>],
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let Some(g) = &grads[0] else { return Ok(vec![None]) };
-        Ok(vec![Some(scatter_add(g, &self.0, ctx.input(0).shape()[0]))])
+        Ok(vec![Some(scatter_add(g, &self.0, ctx.input(0).shape()[0])?)])
     }
 }
 
@@ -89,7 +198,7 @@ impl<F: Float> CustomOp<F> for ScatterAdd {
             });
         }
         check_indices(&self.indices, self.rows)?;
-        Ok((vec![scatter_add(x, &self.indices, self.rows)], ()))
+        Ok((vec![scatter_add(x, &self.indices, self.rows)?], ()))
     }
     fn backward(
         &self,
@@ -97,7 +206,7 @@ impl<F: Float> CustomOp<F> for ScatterAdd {
         grads: &[Option<ArrayViewD<'_, F>>],
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let Some(g) = &grads[0] else { return Ok(vec![None]) };
-        Ok(vec![Some(gather(g, &self.indices))])
+        Ok(vec![Some(gather(g, &self.indices)?)])
     }
 }
 
@@ -123,7 +232,96 @@ impl<F: Float> Tape<F> {
 mod tests {
     use super::super::test_util::assert_gradcheck;
     use crate::{Tape, TapeError};
-    use ndarray::{arr1, arr2, ArrayD};
+    use ndarray::{arr1, arr2, ArrayD, Axis, IxDyn};
+    use rand::{Rng, SeedableRng};
+
+    /// The tables of the oracle tests: every row length with its own loop (1 to 4), a longer
+    /// one, rows of several axes, and empty rows; each in standard layout and as the
+    /// column-major layout of the same values (a strided value on the tape).
+    fn tables(rng: &mut rand::rngs::StdRng) -> Vec<ArrayD<f64>> {
+        let shapes: [&[usize]; 8] = [&[5], &[5, 1], &[5, 2], &[5, 3], &[5, 4], &[5, 7], &[5, 2, 3], &[5, 0]];
+        let mut out = Vec::new();
+        for shape in shapes {
+            let x = ArrayD::from_shape_fn(IxDyn(shape), |_| rng.gen_range(-1.0..1.0));
+            let column_major = x
+                .clone()
+                .reversed_axes()
+                .as_standard_layout()
+                .into_owned()
+                .reversed_axes();
+            assert_eq!(column_major, x);
+            if shape[1..].iter().product::<usize>() > 1 {
+                assert!(
+                    !column_major.is_standard_layout(),
+                    "{shape:?} must take the strided path"
+                );
+            }
+            out.push(x);
+            out.push(column_major);
+        }
+        out
+    }
+
+    /// Row by row through ndarray's indexing, summed in index order as the op does.
+    fn scatter_oracle(x: &ArrayD<f64>, indices: &[usize], rows: usize) -> ArrayD<f64> {
+        let mut shape = x.shape().to_vec();
+        shape[0] = rows;
+        let mut out = ArrayD::zeros(IxDyn(&shape));
+        for (k, &i) in indices.iter().enumerate() {
+            let mut row = out.index_axis_mut(Axis(0), i);
+            row += &x.index_axis(Axis(0), k);
+        }
+        out
+    }
+
+    #[test]
+    fn gather_and_scatter_match_an_ndarray_oracle_for_every_row_length_and_layout() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        for x in tables(&mut rng) {
+            let indices: Vec<usize> = (0..23).map(|_| rng.gen_range(0..5)).collect();
+            let mut t = Tape::<f64>::new();
+            let xv = t.param(x.clone());
+            let g = t.gather(xv, &indices).unwrap();
+            assert_eq!(
+                t.value(g).unwrap(),
+                x.select(Axis(0), &indices),
+                "gather {:?}",
+                x.shape()
+            );
+            // The backward of gather is a scatter of the upstream rows.
+            let seed = ArrayD::from_shape_fn(IxDyn(t.shape(g).unwrap()), |_| rng.gen_range(-1.0..1.0));
+            let grads = t.backward_with(g, seed.clone()).unwrap();
+            assert_eq!(
+                grads.get(xv).unwrap(),
+                scatter_oracle(&seed, &indices, 5),
+                "d gather {:?}",
+                x.shape()
+            );
+            // scatter_add forward from a strided or contiguous input, into 7 rows.
+            let targets: Vec<usize> = (0..5).map(|_| rng.gen_range(0..7)).collect();
+            let s = t.scatter_add(xv, &targets, 7).unwrap();
+            assert_eq!(
+                t.value(s).unwrap(),
+                scatter_oracle(&x, &targets, 7),
+                "scatter {:?}",
+                x.shape()
+            );
+        }
+    }
+
+    #[test]
+    fn f32_scatter_keeps_small_terms_after_a_large_one() {
+        // Row 0 receives 1e8 and then a thousand ones: 100001000, a multiple of 8 and so exactly
+        // an f32 (the spacing of f32 at 1e8 is 8). Summed in f32, each 1e8 + 1 rounds back to 1e8.
+        let mut values = vec![1.0f32; 1001];
+        values[0] = 1e8;
+        let naive = values.iter().fold(0.0f32, |a, &v| a + v);
+        assert_eq!(naive, 1e8, "the f32 sum must really lose the ones");
+        let mut t = Tape::<f32>::new();
+        let x = t.param(arr1(&values));
+        let s = t.scatter_add(x, &[0; 1001], 2).unwrap();
+        assert_eq!(t.value(s).unwrap().as_slice().unwrap(), &[100_001_000.0f32, 0.0]);
+    }
 
     #[test]
     fn values_and_adjointness() {
@@ -164,6 +362,14 @@ mod tests {
         ));
         let s = t.scalar(1.0);
         assert!(t.gather(s, &[0]).is_err());
+        // The message names the index, its position and the rows; the tape is unchanged.
+        let before = t.stats();
+        let e = t.gather(x, &[0, 1, 5]).unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "gather: index 5 at position 2 is out of range for 2 rows"
+        );
+        assert_eq!(t.stats(), before);
     }
 
     #[test]

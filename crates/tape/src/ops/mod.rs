@@ -1,8 +1,10 @@
 //! The built-in ops, one family per file. Each is a [`CustomOp`](crate::CustomOp) like any
 //! user's op, plus a `Tape` method that applies it.
 
+pub mod activation;
 pub mod binary;
 pub mod index;
+pub mod matmul;
 pub mod reduce;
 pub mod segment;
 pub mod select;

@@ -15,14 +15,13 @@
 //! transmittance (it rounds to 0 or loses every digit as `1 - alpha` approaches 0); use the
 //! exclusive cumsum of optical depth and `exp` instead.
 
-use std::borrow::Cow;
-
 use ndarray::{ArrayD, ArrayViewD, IxDyn};
 
-use crate::buffer::zeroed;
+use crate::buffer::{flat, zeroed};
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
+use crate::offsets::Offsets;
 use crate::tape::Tape;
 use crate::var::Var;
 
@@ -43,7 +42,7 @@ pub enum SegmentFn {
 #[derive(Debug, Clone)]
 pub struct Segment {
     kind: SegmentFn,
-    offsets: Vec<usize>,
+    offsets: Offsets,
 }
 
 impl SegmentFn {
@@ -61,38 +60,17 @@ impl Segment {
     /// Validates `offsets`: at least one entry, starting at 0, non-decreasing.
     /// (That the last equals the number of rows is checked when the op is applied.)
     pub fn new(kind: SegmentFn, offsets: &[usize]) -> Result<Self, OpError> {
-        match offsets.first() {
-            None => {
-                return Err(OpError::InvalidArgument(
-                    "offsets must hold at least one entry (0)".into(),
-                ))
-            }
-            Some(&o) if o != 0 => return Err(OpError::InvalidArgument(format!("offsets must start at 0, got {o}"))),
-            _ => {}
-        }
-        if let Some(r) = offsets.windows(2).position(|w| w[1] < w[0]) {
-            return Err(OpError::InvalidArgument(format!(
-                "offsets decrease at segment {r}: {} then {}",
-                offsets[r],
-                offsets[r + 1]
-            )));
-        }
-        Ok(Segment {
-            kind,
-            offsets: offsets.to_vec(),
-        })
+        let offsets = Offsets::new(offsets).map_err(|e| OpError::InvalidArgument(e.to_string()))?;
+        Ok(Segment { kind, offsets })
+    }
+
+    /// The op over an already validated packing.
+    pub fn packed(kind: SegmentFn, offsets: Offsets) -> Self {
+        Segment { kind, offsets }
     }
 
     fn segments(&self) -> impl Iterator<Item = std::ops::Range<usize>> + '_ {
-        self.offsets.windows(2).map(|w| w[0]..w[1])
-    }
-}
-
-/// The elements in row-major order, borrowed when the view is already contiguous.
-fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
-    match x.as_slice() {
-        Some(s) => Cow::Borrowed(s),
-        None => Cow::Owned(x.iter().copied().collect()),
+        self.offsets.ranges()
     }
 }
 

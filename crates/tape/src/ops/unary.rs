@@ -138,9 +138,7 @@ impl<F: Float> CustomOp<F> for Unary<F> {
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
-        let [x] = inputs else {
-            return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
-        };
+        let x = only_input(inputs)?;
         if let UnaryFn::Clamp(lo, hi) = self.0 {
             if lo.is_nan() || hi.is_nan() || lo > hi {
                 return Err(OpError::InvalidArgument(format!("needs lo <= hi, got [{lo}, {hi}]")));
@@ -155,10 +153,28 @@ impl<F: Float> CustomOp<F> for Unary<F> {
         ctx: &BackwardCtx<'_, F, ()>,
         grads: &[Option<ArrayViewD<'_, F>>],
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
-        let Some(g) = &grads[0] else { return Ok(vec![None]) };
         let f = self.0;
-        let gx = map3(g, &ctx.input(0), &ctx.output(0), |g, x, y| strong_mul(g, f.df(x, y)));
-        Ok(vec![Some(gx)])
+        elementwise_backward(ctx, grads, |x, y| f.df(x, y))
+    }
+}
+
+/// The backward of an element-wise function of one input: `g * df(x, y)` under the strong-zero
+/// rule, from the derivative `df` at the input `x` given the output `y`.
+pub(crate) fn elementwise_backward<F: Float, S>(
+    ctx: &BackwardCtx<'_, F, S>,
+    grads: &[Option<ArrayViewD<'_, F>>],
+    df: impl Fn(F, F) -> F,
+) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
+    let Some(g) = &grads[0] else { return Ok(vec![None]) };
+    let gx = map3(g, &ctx.input(0), &ctx.output(0), |g, x, y| strong_mul(g, df(x, y)));
+    Ok(vec![Some(gx)])
+}
+
+/// The one input of an element-wise function, or the error that names how many were given.
+pub(crate) fn only_input<'a, 'b, F: Float>(inputs: &'a [ArrayViewD<'b, F>]) -> Result<&'a ArrayViewD<'b, F>, OpError> {
+    match inputs {
+        [x] => Ok(x),
+        _ => Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len()))),
     }
 }
 

@@ -1,0 +1,192 @@
+//! Value tests of the pinhole camera against directions derived by hand.
+
+use super::*;
+use crate::error::GeometryError;
+
+fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
+}
+fn unit(v: [f64; 3]) -> [f64; 3] {
+    let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+    v.map(|x| x / n)
+}
+
+/// The brief's formula for a square image with fx = fy = W / (2 tan(fov/2)), cx = cy = W/2:
+/// direction(a, b) = normalise(forward + u right + v up), u = ((b+0.5)/W*2-1) tan(fov/2),
+/// v = -((a+0.5)/W*2-1) tan(fov/2), with right = normalise(forward x up) and the image's
+/// up = right x forward.
+#[test]
+fn look_at_directions_match_the_field_of_view_formula() {
+    let w = 16;
+    let fov = 40f64.to_radians();
+    let k = Intrinsics::from_vertical_fov(w, w, fov).unwrap();
+    assert_eq!(k.fx, w as f64 / (2.0 * (fov / 2.0).tan()));
+    let views = [
+        ([0.0, -3.0, 0.0], [0.0, 0.0, 1.0]),
+        ([2.0, 1.0, 1.5], [0.0, 0.0, 1.0]),
+        ([0.0, 0.0, 3.0], [0.0, 1.0, 0.0]),
+        ([0.3, -0.2, -2.9], [0.0, 1.0, 0.0]),
+    ];
+    let tan = (fov / 2.0).tan();
+    for (eye, world_up) in views {
+        let cam = PinholeCamera::look_at(k, eye, [0.0; 3], world_up).unwrap();
+        let forward = unit(sub([0.0; 3], eye));
+        let right = unit(cross(forward, world_up));
+        let up = cross(right, forward);
+        let rays = cam.rays::<f64>();
+        assert_eq!(rays.len(), w * w);
+        for a in 0..w {
+            for b in 0..w {
+                let u = ((b as f64 + 0.5) / w as f64 * 2.0 - 1.0) * tan;
+                let v = -((a as f64 + 0.5) / w as f64 * 2.0 - 1.0) * tan;
+                let want = unit(std::array::from_fn(|i| forward[i] + u * right[i] + v * up[i]));
+                let got = rays.directions().row(a * w + b).to_vec();
+                for i in 0..3 {
+                    assert!(
+                        (got[i] - want[i]).abs() < 1e-14,
+                        "eye {eye:?} pixel ({a}, {b}): {got:?} vs {want:?}"
+                    );
+                }
+                assert_eq!(rays.origins().row(a * w + b).to_vec(), eye.to_vec());
+            }
+        }
+    }
+}
+
+#[test]
+fn general_intrinsics_and_transform() {
+    // Identity rotation, centre (1, 2, 3): the camera frame is the world frame shifted.
+    // Pixel (row 1, col 3) with fx = 2, fy = 4, cx = 1, cy = 0.5: camera direction
+    // ((3.5 - 1) / 2, (1.5 - 0.5) / 4, 1) = (1.25, 0.25, 1), length sqrt(2.625).
+    let k = Intrinsics {
+        fx: 2.0,
+        fy: 4.0,
+        cx: 1.0,
+        cy: 0.5,
+        width: 5,
+        height: 3,
+    };
+    let m = [
+        [1.0, 0.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0, 2.0],
+        [0.0, 0.0, 1.0, 3.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let cam = PinholeCamera::new(k, m).unwrap();
+    let n = 2.625f64.sqrt();
+    let d = cam.direction(1, 3);
+    for (g, w) in d.iter().zip([1.25 / n, 0.25 / n, 1.0 / n]) {
+        assert!((g - w).abs() < 1e-15);
+    }
+    assert_eq!(cam.camera_to_world(), m);
+    assert_eq!(cam.centre(), [1.0, 2.0, 3.0]);
+    // A scaled transform gives the same unit directions.
+    let mut scaled = m;
+    (0..3).for_each(|i| (0..3).for_each(|j| scaled[i][j] *= 2.5));
+    let d2 = PinholeCamera::new(k, scaled).unwrap().direction(1, 3);
+    assert!(d.iter().zip(d2).all(|(a, b)| (a - b).abs() < 1e-15));
+}
+
+#[test]
+fn opengl_pose_is_the_opencv_pose_with_y_and_z_flipped() {
+    let k = Intrinsics::from_vertical_fov(6, 4, 0.8).unwrap();
+    let cv = PinholeCamera::look_at(k, [1.0, -2.0, 0.5], [0.1, 0.2, 0.0], [0.0, 0.0, 1.0]).unwrap();
+    let mut gl = cv.camera_to_world();
+    for row in gl.iter_mut().take(3) {
+        row[1] = -row[1];
+        row[2] = -row[2];
+    }
+    let from_gl = PinholeCamera::from_opengl(k, gl).unwrap();
+    assert_eq!(from_gl.rays::<f64>(), cv.rays::<f64>());
+}
+
+#[test]
+fn chosen_pixels_and_pairs_pick_rows_of_the_full_batch() {
+    let k = Intrinsics::from_vertical_fov(7, 5, 0.7).unwrap();
+    let a = PinholeCamera::look_at(k, [0.0, -3.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
+    let b = PinholeCamera::look_at(k, [3.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
+    let (all_a, all_b) = (a.rays::<f32>(), b.rays::<f32>());
+    let picked = a.rays_for_pixels::<f32>(&[34, 0, 34, 12]).unwrap();
+    for (i, p) in [34, 0, 34, 12].into_iter().enumerate() {
+        assert_eq!(picked.directions().row(i), all_a.directions().row(p));
+    }
+    let pairs = [
+        CameraPixel { camera: 1, pixel: 3 },
+        CameraPixel { camera: 0, pixel: 20 },
+    ];
+    let mixed = rays_for_camera_pixels::<f32>(&[a.clone(), b.clone()], &pairs).unwrap();
+    assert_eq!(mixed.directions().row(0), all_b.directions().row(3));
+    assert_eq!(mixed.origins().row(1), all_a.origins().row(20));
+    assert_eq!(
+        a.rays_for_pixels::<f32>(&[35]).unwrap_err(),
+        GeometryError::OutOfRange {
+            what: "pixel",
+            index: 35,
+            len: 35
+        }
+    );
+    assert_eq!(
+        rays_for_camera_pixels::<f32>(&[a, b], &[CameraPixel { camera: 2, pixel: 0 }]).unwrap_err(),
+        GeometryError::OutOfRange {
+            what: "camera",
+            index: 2,
+            len: 2
+        }
+    );
+}
+
+#[test]
+fn bad_cameras_are_errors() {
+    let k = Intrinsics::from_vertical_fov(4, 4, 1.0).unwrap();
+    let id = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 0.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    assert_eq!(
+        Intrinsics::from_vertical_fov(0, 4, 1.0),
+        Err(GeometryError::EmptyImage { width: 0, height: 4 })
+    );
+    assert!(Intrinsics::from_vertical_fov(4, 4, 0.0).is_err());
+    assert!(Intrinsics::from_vertical_fov(4, 4, 3.2).is_err());
+    assert!(PinholeCamera::new(Intrinsics { fx: 0.0, ..k }, id).is_err());
+    assert!(PinholeCamera::new(Intrinsics { cx: f64::NAN, ..k }, id).is_err());
+    assert!(PinholeCamera::new(Intrinsics { height: 0, ..k }, id).is_err());
+    let mut nan = id;
+    nan[1][3] = f64::NAN;
+    assert!(matches!(PinholeCamera::new(k, nan), Err(GeometryError::Transform(_))));
+    let mut singular = id;
+    singular[2] = [1.0, 0.0, 0.0, 0.0]; // third row = first: rank 2
+    assert!(matches!(
+        PinholeCamera::new(k, singular),
+        Err(GeometryError::Transform(_))
+    ));
+    let mut projective = id;
+    projective[3][0] = 0.5;
+    assert!(matches!(
+        PinholeCamera::new(k, projective),
+        Err(GeometryError::Transform(_))
+    ));
+    let look = |eye, target, up| PinholeCamera::look_at(k, eye, target, up);
+    assert!(matches!(
+        look([1.0; 3], [1.0; 3], [0.0, 0.0, 1.0]),
+        Err(GeometryError::Degenerate(_))
+    ));
+    assert!(matches!(
+        look([0.0, 0.0, 3.0], [0.0; 3], [0.0, 0.0, 1.0]),
+        Err(GeometryError::Degenerate(_))
+    ));
+    assert!(matches!(
+        look([0.0, 0.0, 3.0], [0.0; 3], [0.0; 3]),
+        Err(GeometryError::Degenerate(_))
+    ));
+    assert!(look([f64::INFINITY, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0]).is_err());
+}

@@ -1,0 +1,260 @@
+//! The occupancy grid: a coarse bitfield over a box marking the cells where the scene may
+//! have matter, kept from a decaying per-cell density estimate, so that the marcher
+//! (`OccupancyGrid::march`) skips empty space.
+
+use std::fmt::Display;
+
+use fogray_tape::Float;
+use ndarray::{Array1, Array2, ArrayView2, ArrayView3};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use rayon::prelude::*;
+
+use super::occupancy_config::{config_error, CellPoints, OccupancyConfig};
+use crate::error::SampleError;
+use crate::rays::Aabb;
+
+/// An axis of the grid.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GridAxis {
+    /// x (the first cell index).
+    X,
+    /// y (the second).
+    Y,
+    /// z (the third).
+    Z,
+}
+
+/// A plane of cells, for plotting: indexed by the two other axes in order (a slice across
+/// y is `[ix, iz]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancySlice {
+    /// Whether each cell is occupied.
+    pub occupied: Array2<bool>,
+    /// Each cell's density estimate.
+    pub estimate: Array2<f32>,
+}
+
+/// `r^3` cells over a box, cell `(ix, iy, iz)` covering
+/// `min + (ix, iy, iz) * size .. min + (ix + 1, iy + 1, iz + 1) * size`, stored at
+/// `(ix * r + iy) * r + iz`. Every cell starts occupied (nothing is known yet) with estimate 0.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancyGrid {
+    pub(crate) bounds: Aabb,
+    pub(crate) resolution: usize,
+    pub(crate) cell: [f64; 3],
+    estimate: Vec<f32>,
+    bits: Vec<u64>,
+    config: OccupancyConfig,
+}
+
+/// Cells per call of the density function (and per parallel task) in an update.
+const CHUNK: usize = 4096;
+
+impl OccupancyGrid {
+    /// `resolution^3` cells over `bounds`. Errors: `resolution` outside `1..=1024`.
+    pub fn new(bounds: Aabb, resolution: usize, config: OccupancyConfig) -> Result<Self, SampleError> {
+        if !(1..=1024).contains(&resolution) {
+            return Err(config_error("resolution", resolution as f64, "must be in 1..=1024"));
+        }
+        let cells = resolution.pow(3);
+        let (lo, hi) = (bounds.min(), bounds.max());
+        Ok(OccupancyGrid {
+            bounds,
+            resolution,
+            cell: std::array::from_fn(|a| (hi[a] - lo[a]) / resolution as f64),
+            estimate: vec![0.0; cells],
+            bits: vec![u64::MAX; cells.div_ceil(64)],
+            config,
+        })
+    }
+
+    /// Cells per axis.
+    pub fn resolution(&self) -> usize {
+        self.resolution
+    }
+
+    /// The box.
+    pub fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> OccupancyConfig {
+        self.config
+    }
+
+    fn index(&self, c: [usize; 3]) -> usize {
+        (c[0] * self.resolution + c[1]) * self.resolution + c[2]
+    }
+
+    /// Whether cell `c` is occupied (false for a cell outside the grid).
+    pub fn is_occupied(&self, c: [usize; 3]) -> bool {
+        if c.iter().any(|&i| i >= self.resolution) {
+            return false;
+        }
+        self.is_occupied_linear(self.index(c))
+    }
+
+    /// Whether the cell at linear index `i` is occupied. Panics if `i >= r^3`.
+    pub(crate) fn is_occupied_linear(&self, i: usize) -> bool {
+        self.bits[i / 64] >> (i % 64) & 1 == 1
+    }
+
+    /// The cell holding point `p` (points on the upper faces belong to the last cells), or
+    /// `None` outside the box or for a non-finite point.
+    pub fn cell_of(&self, p: [f64; 3]) -> Option<[usize; 3]> {
+        if !self.bounds.contains(p) {
+            return None;
+        }
+        let lo = self.bounds.min();
+        Some(std::array::from_fn(|a| {
+            (((p[a] - lo[a]) / self.cell[a]).floor() as usize).min(self.resolution - 1)
+        }))
+    }
+
+    /// Whether point `p` lies in an occupied cell (false outside the box).
+    pub fn is_occupied_at(&self, p: [f64; 3]) -> bool {
+        self.cell_of(p).is_some_and(|c| self.is_occupied(c))
+    }
+
+    /// The share of occupied cells, in `[0, 1]`.
+    pub fn occupied_fraction(&self) -> f64 {
+        let ones: u64 = (0..self.estimate.len())
+            .map(|i| self.bits[i / 64] >> (i % 64) & 1)
+            .sum();
+        ones as f64 / self.estimate.len() as f64
+    }
+
+    /// The density estimates `[r, r, r]`, indexed `[ix, iy, iz]`.
+    pub fn estimate(&self) -> ArrayView3<'_, f32> {
+        let r = self.resolution;
+        ArrayView3::from_shape((r, r, r), &self.estimate).expect("r^3 estimates")
+    }
+
+    /// The plane of cells with index `index` along `axis`. Errors: `index >= resolution`.
+    pub fn slice(&self, axis: GridAxis, index: usize) -> Result<OccupancySlice, SampleError> {
+        let r = self.resolution;
+        if index >= r {
+            return Err(SampleError::Shape {
+                what: "slice index",
+                expected: format!("below the resolution {r}"),
+                got: format!("{index}"),
+            });
+        }
+        let cell = |i: usize, j: usize| match axis {
+            GridAxis::X => [index, i, j],
+            GridAxis::Y => [i, index, j],
+            GridAxis::Z => [i, j, index],
+        };
+        Ok(OccupancySlice {
+            occupied: Array2::from_shape_fn((r, r), |(i, j)| self.is_occupied(cell(i, j))),
+            estimate: Array2::from_shape_fn((r, r), |(i, j)| self.estimate[self.index(cell(i, j))]),
+        })
+    }
+
+    /// The centre or a random point of cell `i` (linear index).
+    fn point(&self, i: usize, random: Option<&mut StdRng>) -> [f64; 3] {
+        let r = self.resolution;
+        let c = [i / (r * r), i / r % r, i % r];
+        let lo = self.bounds.min();
+        let mut frac = [0.5; 3];
+        if let Some(rng) = random {
+            frac = std::array::from_fn(|_| rng.gen::<f64>());
+        }
+        std::array::from_fn(|a| (c[a] as f64 + frac[a]).mul_add(self.cell[a], lo[a]))
+    }
+
+    /// The new density of each cell of `cells`: the largest the caller's function gives at
+    /// the cell's points.
+    fn densities<F, D, E>(
+        &self,
+        cells: std::ops::Range<usize>,
+        density: &D,
+        points: CellPoints,
+    ) -> Result<Vec<f64>, SampleError>
+    where
+        F: Float,
+        D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E>,
+        E: Display,
+    {
+        let (centre, seed) = match points {
+            CellPoints::Centre => (true, None),
+            CellPoints::Random { seed } => (false, Some(seed)),
+            CellPoints::CentreAndRandom { seed } => (true, Some(seed)),
+        };
+        // One generator per chunk, seeded by the chunk's first cell: the same points
+        // whatever the number of threads.
+        let mut rng = seed.map(|s| StdRng::seed_from_u64(s ^ (cells.start as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)));
+        let per_cell = usize::from(centre) + usize::from(seed.is_some());
+        let mut xyz = Vec::with_capacity(3 * per_cell * cells.len());
+        for i in cells.clone() {
+            if centre {
+                xyz.extend(self.point(i, None).map(F::lit));
+            }
+            if let Some(rng) = rng.as_mut() {
+                xyz.extend(self.point(i, Some(rng)).map(F::lit));
+            }
+        }
+        let m = xyz.len() / 3;
+        let xyz = Array2::from_shape_vec((m, 3), xyz).expect("three coordinates per point");
+        let sigma = density(xyz.view()).map_err(|e| SampleError::Density(e.to_string()))?;
+        if sigma.len() != m {
+            return Err(SampleError::Density(format!(
+                "returned {} densities for {m} points",
+                sigma.len()
+            )));
+        }
+        let sigma: Vec<f64> = sigma.iter().map(|s| s.as_f64()).collect();
+        let mut out = Vec::with_capacity(cells.len());
+        for (k, i) in cells.enumerate() {
+            let mut best = 0.0f64;
+            for &s in &sigma[k * per_cell..(k + 1) * per_cell] {
+                if !(s.is_finite() && s >= 0.0) {
+                    return Err(SampleError::InvalidValue {
+                        ray: i,
+                        what: "density at a point of this cell".into(),
+                        value: s,
+                        rule: "must be finite and non-negative",
+                    });
+                }
+                best = best.max(s);
+            }
+            out.push(best);
+        }
+        Ok(out)
+    }
+
+    /// Evaluates `density` (positions `[m, 3]` to densities `[m]`, e.g. a closure over a
+    /// density grid) at `points` of every cell, sets `estimate = max(estimate * decay, new)`
+    /// and marks the cells above the threshold occupied. Calls `density` on chunks of cells
+    /// in parallel; the result does not depend on the number of threads.
+    ///
+    /// Errors (the grid is unchanged then): `density` failing, returning the wrong number of
+    /// values, or a value that is negative or not finite (named by cell index).
+    pub fn update<F, D, E>(&mut self, density: D, points: CellPoints) -> Result<(), SampleError>
+    where
+        F: Float,
+        D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E> + Sync,
+        E: Display,
+    {
+        let cells = self.estimate.len();
+        let chunks: Vec<Vec<f64>> = (0..cells.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| self.densities(c * CHUNK..((c + 1) * CHUNK).min(cells), &density, points))
+            .collect::<Result<_, _>>()?;
+        let decay = self.config.decay() as f32;
+        let threshold = self.config.density_threshold();
+        for (est, new) in self.estimate.iter_mut().zip(chunks.into_iter().flatten()) {
+            // Densities beyond f32 saturate rather than become infinite.
+            *est = (*est * decay).max(new.min(f64::from(f32::MAX)) as f32);
+        }
+        self.bits.iter_mut().for_each(|w| *w = 0);
+        for (i, &est) in self.estimate.iter().enumerate() {
+            if f64::from(est) > threshold {
+                self.bits[i / 64] |= 1 << (i % 64);
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,153 @@
+//! The occupancy grid's update against thresholds and decays worked by hand.
+
+use std::convert::Infallible;
+
+use super::*;
+use crate::rays::Aabb;
+use crate::SampleError;
+use ndarray::{Array1, ArrayView2};
+
+fn cube() -> Aabb {
+    Aabb::new([-1.0; 3], [1.0; 3]).unwrap()
+}
+
+fn constant(value: f64) -> impl Fn(ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> + Sync {
+    move |p| Ok(Array1::from_elem(p.nrows(), value))
+}
+
+#[test]
+fn opacity_threshold_by_hand() {
+    // One step of 0.1 at least 1 % opaque: density > -ln(0.99) / 0.1 = 0.1005033585...
+    let c = OccupancyConfig::opacity(0.1, 0.01).unwrap();
+    assert!((c.density_threshold() - 0.100_503_358_535_014_4).abs() < 1e-15);
+    // For tiny opacities -ln(1 - a) = a + a^2/2: 1 - a rounds, ln_1p(-a) does not.
+    let tiny = OccupancyConfig::opacity(1.0, 1e-12).unwrap();
+    assert!((tiny.density_threshold() - (1e-12 + 0.5e-24)).abs() < 1e-27);
+    assert!((-(1.0f64 - 1e-12).ln() - 1e-12).abs() > 1e-17);
+    let mut grid = OccupancyGrid::new(cube(), 4, c).unwrap();
+    grid.update(constant(0.1), CellPoints::Centre).unwrap();
+    assert_eq!(grid.occupied_fraction(), 0.0);
+    grid.update(constant(0.11), CellPoints::Centre).unwrap();
+    assert_eq!(grid.occupied_fraction(), 1.0);
+}
+
+#[test]
+fn estimates_decay_and_keep_the_maximum() {
+    let config = OccupancyConfig::density(3.0).unwrap().with_decay(0.5).unwrap();
+    let mut grid = OccupancyGrid::new(cube(), 2, config).unwrap();
+    // Before any update every cell is occupied with estimate 0.
+    assert_eq!(grid.occupied_fraction(), 1.0);
+    grid.update(constant(10.0), CellPoints::Centre).unwrap();
+    // max(0 * 0.5, 10) = 10, then max(10 * 0.5, 0) = 5 > 3, then 2.5 <= 3: empty.
+    assert!(grid.estimate().iter().all(|&e| e == 10.0));
+    grid.update(constant(0.0), CellPoints::Centre).unwrap();
+    assert!(grid.estimate().iter().all(|&e| e == 5.0));
+    assert_eq!(grid.occupied_fraction(), 1.0);
+    grid.update(constant(0.0), CellPoints::Centre).unwrap();
+    assert!(grid.estimate().iter().all(|&e| e == 2.5));
+    assert_eq!(grid.occupied_fraction(), 0.0);
+    // A new density above the decayed estimate replaces it.
+    grid.update(constant(4.0), CellPoints::Centre).unwrap();
+    assert!(grid.estimate().iter().all(|&e| e == 4.0));
+}
+
+#[test]
+fn ball_occupancy_matches_a_cell_by_cell_loop() {
+    let r = 16;
+    let mut grid = OccupancyGrid::new(cube(), r, OccupancyConfig::density(0.5).unwrap()).unwrap();
+    let ball = |p: ArrayView2<'_, f32>| {
+        Ok::<_, Infallible>(Array1::from_iter(p.rows().into_iter().map(|q| {
+            if q.dot(&q) < 0.36 {
+                1.0
+            } else {
+                0.0
+            }
+        })))
+    };
+    grid.update(ball, CellPoints::Centre).unwrap();
+    let mut count = 0;
+    for ix in 0..r {
+        for iy in 0..r {
+            for iz in 0..r {
+                let c = [ix, iy, iz].map(|i| -1.0 + (i as f64 + 0.5) * 2.0 / r as f64);
+                let inside = c.iter().map(|x| x * x).sum::<f64>() < 0.36;
+                assert_eq!(grid.is_occupied([ix, iy, iz]), inside, "cell {ix} {iy} {iz}");
+                assert_eq!(grid.is_occupied_at(c), inside);
+                count += usize::from(inside);
+            }
+        }
+    }
+    assert_eq!(grid.occupied_fraction(), count as f64 / (r * r * r) as f64);
+    // A slice across z at the middle: the disc of cells whose centres are within 0.6 of the
+    // axis (centre z = 0.0625 adds 0.0039 to the squared distance).
+    let s = grid.slice(GridAxis::Z, r / 2).unwrap();
+    assert_eq!(s.occupied.dim(), (r, r));
+    for ((i, j), &o) in s.occupied.indexed_iter() {
+        assert_eq!(o, grid.is_occupied([i, j, r / 2]));
+        assert_eq!(s.estimate[[i, j]], grid.estimate()[[i, j, r / 2]]);
+    }
+    assert!(s.occupied[[r / 2, r / 2]] && !s.occupied[[0, 0]]);
+    assert!(grid.slice(GridAxis::X, r).is_err());
+}
+
+#[test]
+fn random_points_stay_in_their_cells_and_are_seeded() {
+    // The density is the point's x: each cell's estimate is its random point's x, which must
+    // lie within the cell's x range, and differ between cells of one x column.
+    let r = 8;
+    let config = OccupancyConfig::density(0.0).unwrap().with_decay(0.0).unwrap();
+    let mut grid = OccupancyGrid::new(Aabb::new([0.0; 3], [2.0; 3]).unwrap(), r, config).unwrap();
+    let x = |p: ArrayView2<'_, f64>| Ok::<_, Infallible>(p.column(0).to_owned());
+    grid.update(x, CellPoints::Random { seed: 3 }).unwrap();
+    let est = grid.estimate().to_owned();
+    for ((ix, _, _), &e) in est.indexed_iter() {
+        let lo = ix as f32 * 0.25;
+        assert!(lo <= e && e <= lo + 0.25, "cell x {ix}: {e}");
+    }
+    assert_ne!(est[[3, 0, 0]], est[[3, 1, 0]]);
+    let mut again = OccupancyGrid::new(Aabb::new([0.0; 3], [2.0; 3]).unwrap(), r, config).unwrap();
+    again.update(x, CellPoints::Random { seed: 3 }).unwrap();
+    assert_eq!(again, grid);
+    // With the centre too, the larger x wins: at least the centre's.
+    again.update(x, CellPoints::CentreAndRandom { seed: 4 }).unwrap();
+    for ((ix, _, _), &e) in again.estimate().indexed_iter() {
+        assert!(e >= ix as f32 * 0.25 + 0.125);
+    }
+}
+
+#[test]
+fn bad_densities_are_errors_and_change_nothing() {
+    let mut grid = OccupancyGrid::new(cube(), 4, OccupancyConfig::density(1.0).unwrap()).unwrap();
+    grid.update(constant(2.0), CellPoints::Centre).unwrap();
+    let before = grid.clone();
+    let nan_at_7 = |p: ArrayView2<'_, f64>| {
+        Ok::<_, Infallible>(Array1::from_iter((0..p.nrows()).map(|i| {
+            if i == 7 {
+                f64::NAN
+            } else {
+                0.0
+            }
+        })))
+    };
+    assert!(matches!(
+        grid.update(nan_at_7, CellPoints::Centre),
+        Err(SampleError::InvalidValue { ray: 7, .. })
+    ));
+    assert!(grid.update(constant(-1.0), CellPoints::Centre).is_err());
+    let short = |p: ArrayView2<'_, f64>| Ok::<_, Infallible>(Array1::zeros(p.nrows() - 1));
+    assert!(matches!(
+        grid.update(short, CellPoints::Centre),
+        Err(SampleError::Density(_))
+    ));
+    let failing = |_: ArrayView2<'_, f64>| Err::<Array1<f64>, _>("no grid yet");
+    assert_eq!(
+        grid.update(failing, CellPoints::Centre),
+        Err(SampleError::Density("no grid yet".into()))
+    );
+    assert_eq!(grid, before);
+    assert!(OccupancyGrid::new(cube(), 0, OccupancyConfig::density(1.0).unwrap()).is_err());
+    assert!(OccupancyConfig::opacity(0.0, 0.01).is_err());
+    assert!(OccupancyConfig::opacity(0.1, 1.0).is_err());
+    assert!(OccupancyConfig::density(f64::NAN).is_err());
+    assert!(OccupancyConfig::density(1.0).unwrap().with_decay(1.5).is_err());
+}

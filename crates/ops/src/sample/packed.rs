@@ -1,0 +1,257 @@
+//! Packed samples: every ray's samples in one run of flat arrays, with offsets, ready for the
+//! composite (`Composite::new(&s.offsets)`, `delta`, `t`) and a field op (`positions`).
+
+use fogray_tape::{Float, Offsets, Tape, TapeError, Var};
+use ndarray::{Array1, Array2};
+use rayon::prelude::*;
+
+use crate::error::SampleError;
+use crate::rays::{RayBatch, RayIntervals};
+
+/// The samples of `R` rays, packed: ray `r` owns samples `offsets[r]..offsets[r + 1]`, in
+/// increasing depth.
+///
+/// Sample `k` stands for the piece `[t[k] - delta[k] / 2, t[k] + delta[k] / 2]` of its ray
+/// (its depth is the piece's midpoint); a ray's pieces never overlap. Every ray of the input
+/// has a range, in order; a ray that misses (or whose piece is all empty space) has an empty
+/// one.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PackedSamples<F: Float> {
+    /// Sample positions `[n, 3]`: `origin + t * direction` of the sample's ray.
+    pub positions: Array2<F>,
+    /// Depths `[n]`: distance along the ray (directions are unit).
+    pub t: Array1<F>,
+    /// Lengths `[n]` of the pieces the samples stand for (the composite's `delta`).
+    pub delta: Array1<F>,
+    /// `R + 1` offsets, starting at 0, never decreasing (the composite's packing: pass it to
+    /// `Composite::packed` to share it, or to `Composite::new` as a slice).
+    pub offsets: Offsets,
+    /// The ray of each sample, `[n]`.
+    pub ray: Vec<usize>,
+}
+
+/// The tape constants made by [`PackedSamples::to_tape`].
+#[derive(Debug, Clone, Copy)]
+pub struct SampleVars {
+    /// Positions `[n, 3]`.
+    pub positions: Var,
+    /// Depths `[n]`.
+    pub t: Var,
+    /// Lengths `[n]`.
+    pub delta: Var,
+}
+
+impl<F: Float> PackedSamples<F> {
+    /// Number of rays.
+    pub fn rays(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t.len()
+    }
+
+    /// Whether there is no sample at all.
+    pub fn is_empty(&self) -> bool {
+        self.t.is_empty()
+    }
+
+    /// The sample range of ray `r`, or `None` if there is no ray `r`.
+    pub fn range(&self, r: usize) -> Option<std::ops::Range<usize>> {
+        self.offsets.range(r)
+    }
+
+    /// Mean samples per ray (0 for no ray).
+    pub fn samples_per_ray(&self) -> f64 {
+        if self.rays() == 0 {
+            0.0
+        } else {
+            self.len() as f64 / self.rays() as f64
+        }
+    }
+
+    /// Records positions, depths and lengths on `tape` as constants (copies), for a taped
+    /// render: feed `positions` to the field and `delta`, `t` to the composite.
+    pub fn to_tape(&self, tape: &mut Tape<F>) -> Result<SampleVars, TapeError> {
+        Ok(SampleVars {
+            positions: tape.constant(self.positions.clone()),
+            t: tape.constant(self.t.clone()),
+            delta: tape.constant(self.delta.clone()),
+        })
+    }
+}
+
+/// A piece `[lo, hi]` of a ray, in f64.
+pub(crate) type Piece = (f64, f64);
+
+/// Checks that a sampler got one interval per ray.
+pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<(), SampleError> {
+    if rays.len() != intervals.len() {
+        return Err(SampleError::Shape {
+            what: "intervals",
+            expected: format!("one per ray ({})", rays.len()),
+            got: format!("{}", intervals.len()),
+        });
+    }
+    Ok(())
+}
+
+/// One parallel task's share of the output: its rays' sample counts and samples, in order.
+struct Chunk<F> {
+    counts: Vec<usize>,
+    positions: Vec<F>,
+    t: Vec<F>,
+    delta: Vec<F>,
+}
+
+/// Rays per parallel task: enough to amortise the task, few enough to balance two cores.
+const RAYS_PER_TASK: usize = 64;
+
+/// Runs `pieces_of(r, out)` (which appends ray `r`'s pieces to `out`) for every ray, in
+/// parallel over chunks of rays, and packs the samples in ray order (so the output does not
+/// depend on the number of threads).
+pub(crate) fn pack<F: Float>(
+    rays: &RayBatch<F>,
+    pieces_of: impl Fn(usize, &mut Vec<Piece>) + Sync,
+) -> PackedSamples<F> {
+    let n_rays = rays.len();
+    let chunks: Vec<Chunk<F>> = (0..n_rays.div_ceil(RAYS_PER_TASK))
+        .into_par_iter()
+        .map(|c| {
+            let mut chunk = Chunk {
+                counts: Vec::with_capacity(RAYS_PER_TASK),
+                positions: Vec::new(),
+                t: Vec::new(),
+                delta: Vec::new(),
+            };
+            let mut pieces = Vec::new();
+            for r in c * RAYS_PER_TASK..((c + 1) * RAYS_PER_TASK).min(n_rays) {
+                pieces.clear();
+                pieces_of(r, &mut pieces);
+                chunk.counts.push(pieces.len());
+                let (o, d) = rays.ray(r);
+                for &(lo, hi) in &pieces {
+                    let mid = 0.5 * (lo + hi);
+                    chunk.positions.extend((0..3).map(|a| F::lit(o[a] + mid * d[a])));
+                    chunk.t.push(F::lit(mid));
+                    chunk.delta.push(F::lit(hi - lo));
+                }
+            }
+            chunk
+        })
+        .collect();
+    let offsets = Offsets::from_lengths(chunks.iter().flat_map(|c| c.counts.iter().copied()));
+    let n = offsets.rows();
+    let ray = (0..n_rays)
+        .flat_map(|r| std::iter::repeat_n(r, offsets[r + 1] - offsets[r]))
+        .collect();
+    let concat = |part: fn(&Chunk<F>) -> &Vec<F>, len: usize| {
+        let mut all = Vec::with_capacity(len);
+        chunks.iter().for_each(|c| all.extend_from_slice(part(c)));
+        all
+    };
+    PackedSamples {
+        positions: Array2::from_shape_vec((n, 3), concat(|c| &c.positions, 3 * n))
+            .expect("three coordinates per sample"),
+        t: Array1::from(concat(|c| &c.t, n)),
+        delta: Array1::from(concat(|c| &c.delta, n)),
+        offsets,
+        ray,
+    }
+}
+
+/// Cuts `[lo, hi]` at the edges `origin + (i + shift) * step` (any integer `i`) that lie
+/// inside it, appending the pieces. Edges within `step * 1e-6` of an end are not used, so
+/// no piece is a rounding sliver unless the whole segment is (then it is one piece); a
+/// zero-length segment gives nothing.
+pub(crate) fn cut(lo: f64, hi: f64, origin: f64, step: f64, shift: f64, out: &mut Vec<Piece>) {
+    if hi <= lo {
+        return;
+    }
+    let eps = step * 1e-6;
+    let mut start = lo;
+    let mut i = ((lo + eps - origin) / step - shift).ceil();
+    loop {
+        // Not mul_add: without FMA in the target it is a library call in this hot loop.
+        let edge = origin + (i + shift) * step;
+        if edge >= hi - eps {
+            break;
+        }
+        if edge > start + eps {
+            out.push((start, edge));
+            start = edge;
+        }
+        i += 1.0;
+    }
+    out.push((start, hi));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cut_at_a_grid_by_hand() {
+        let mut p = Vec::new();
+        // [0.1, 0.75] cut at multiples of 0.25: edges 0.25, 0.5.
+        cut(0.1, 0.75, 0.0, 0.25, 0.0, &mut p);
+        assert_eq!(p, vec![(0.1, 0.25), (0.25, 0.5), (0.5, 0.75)]);
+        // The same grid shifted by 0.2 steps: edges 0.3, 0.55 (0.05 is before the segment).
+        p.clear();
+        cut(0.1, 0.75, 0.0, 0.25, 0.2, &mut p);
+        assert_eq!(p.len(), 3);
+        assert!((p[0].1 - 0.3).abs() < 1e-15 && (p[1].1 - 0.55).abs() < 1e-15 && p[2].1 == 0.75);
+        // An edge a rounding error past an end is not a piece.
+        p.clear();
+        cut(0.0, 0.5 + 1e-15, 0.0, 0.25, 0.0, &mut p);
+        assert_eq!(p, vec![(0.0, 0.25), (0.25, 0.5 + 1e-15)]);
+        // Shorter than a step: one piece; empty: none.
+        p.clear();
+        cut(0.3, 0.31, 0.0, 0.25, 0.0, &mut p);
+        cut(0.4, 0.4, 0.0, 0.25, 0.0, &mut p);
+        assert_eq!(p, vec![(0.3, 0.31)]);
+    }
+}
+
+#[cfg(test)]
+mod tape_tests {
+    use super::*;
+    use crate::rays::Aabb;
+    use crate::sample::{Spacing, Uniform};
+    use crate::{Background, Composite, CompositeInputs};
+    use ndarray::arr2;
+
+    #[test]
+    fn samples_drive_a_taped_render() {
+        // One ray along +x across [-1, 1]^3 (t in [2, 4]), density sigma = a * (x + 1) with
+        // a = 0.5 at the sample positions; opacity 1 - exp(-sum sigma_k delta_k). The midpoint
+        // rule is exact for a linear density: the integral of 0.5 (x + 1) over x in [-1, 1] is
+        // 1, so opacity = 1 - 1/e and d opacity / da = exp(-1) * 2 (the integral of x + 1).
+        let rays = RayBatch::new(arr2(&[[-3.0f64, 0.0, 0.0]]), arr2(&[[1.0, 0.0, 0.0]])).unwrap();
+        let clip = Aabb::new([-1.0; 3], [1.0; 3]).unwrap().clip(&rays);
+        let s = Uniform::new(Spacing::Step(0.3)).unwrap().sample(&rays, &clip).unwrap();
+        let mut tape = Tape::<f64>::new();
+        let vars = s.to_tape(&mut tape).unwrap();
+        let a = tape.param(ndarray::arr1(&[0.5]));
+        let x = s.positions.column(0).mapv(|x| x + 1.0);
+        let x1 = tape.constant(x);
+        let sigma = tape.mul(x1, a).unwrap();
+        let color = tape.constant(ndarray::Array2::<f64>::ones((s.len(), 1)));
+        let op = Composite::new(&s.offsets).unwrap().background(Background::None);
+        let inputs = CompositeInputs {
+            sigma,
+            delta: vars.delta,
+            color,
+            background: None,
+            t: None,
+        };
+        let out = op.apply(&mut tape, &inputs).unwrap();
+        let opacity = tape.value(out.opacity).unwrap()[0];
+        assert!((opacity - (1.0 - (-1.0f64).exp())).abs() < 1e-12, "{opacity}");
+        let g = tape.backward(out.opacity).unwrap();
+        let da = g.get(a).unwrap()[0];
+        assert!((da - 2.0 * (-1.0f64).exp()).abs() < 1e-12, "{da}");
+        assert_eq!(tape.value(vars.t).unwrap().len(), s.len());
+    }
+}
