@@ -9,3 +9,8 @@ pub use fogray_ops as ops;
 pub use fogray_tape as tape;
 
 pub mod stamp;
+
+/// The README's examples, compiled and run as doctests so that the front page stays true.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+pub struct ReadmeDoctests;

@@ -1,4 +1,4 @@
-//! `fogray`: the command line of the fogray workspace (design.md §4).
+//! `fogray`: the command line of the fogray workspace (contracts in `docs/cli.md`).
 
 mod cli;
 
@@ -7,7 +7,7 @@ use std::io::Read;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{Parser, Subcommand, ValueEnum};
 use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use cli::evaluate::Method;
@@ -19,6 +19,15 @@ use cli::evaluate::Method;
 static PEAK: &PeakMemAlloc<System> = &INSTRUMENTED_SYSTEM;
 
 struct Allocator;
+
+/// Which op `fogray bench` measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum BenchOp {
+    /// The emission-absorption composite and its taped twins.
+    Composite,
+    /// The trilinear grid field and its taped twin.
+    Grid,
+}
 
 impl cli::bench::Memory for Allocator {
     fn reset(&self) {
@@ -52,13 +61,44 @@ enum Command {
         /// JSON input file, or - for standard input.
         #[arg(long, default_value = "-")]
         input: PathBuf,
+        /// Print only these fields of each ray (comma-separated, in output order whatever the
+        /// order given); default: every field.
+        #[arg(long, value_enum, value_delimiter = ',', conflicts_with = "per_ray")]
+        fields: Vec<cli::composite::Field>,
+        /// Print only the per-ray fields: color, opacity, depth, grad_background (no array
+        /// as long as the ray). The same as --fields color,opacity,depth,grad_background.
+        #[arg(long)]
+        per_ray: bool,
     },
-    /// Compare the gradients of the fused op, the stable taped twin and central finite
-    /// differences (f64) on a JSON input, and print the worst disagreements.
+    /// Check the fused op's gradient (in the input's precision) against the stable taped twin
+    /// and finite differences (f64); exit status 1 if any entry is outside the tolerance.
+    #[command(long_about = GRADCHECK_HELP)]
     Gradcheck {
         /// JSON input file (the format of `fogray composite`), or - for standard input.
         #[arg(long, default_value = "-")]
         input: PathBuf,
+        /// Absolute tolerance [default: 1e-6 for f64 input, 1e-4 for f32].
+        #[arg(long)]
+        atol: Option<f64>,
+        /// Relative tolerance [default: 1e-5 for f64 input, 1e-3 for f32].
+        #[arg(long)]
+        rtol: Option<f64>,
+        /// Check random directional derivatives instead of every element: time linear in the
+        /// number of samples (full mode costs each ray's squared length).
+        #[arg(long)]
+        fast: bool,
+        /// Number of random directions with --fast.
+        #[arg(long, default_value_t = 8)]
+        projections: usize,
+        /// Seed of the random directions.
+        #[arg(long, default_value_t = 0)]
+        seed: u64,
+        /// How many of the worst comparisons to print.
+        #[arg(long, default_value_t = 5)]
+        worst: usize,
+        /// Print the report as JSON.
+        #[arg(long)]
+        json: bool,
     },
     /// Samples per second (forward+backward with the spread of the runs, and forward alone) of
     /// the fused op on 1 and all threads and of the stable and naive taped twins, also in a
@@ -69,7 +109,16 @@ enum Command {
     /// optical depth ~5), each beside its error against an independent compensated f64
     /// reference on the same rays and its peak extra memory; then the tape's own cost per
     /// recorded op and per byte.
+    ///
+    /// With --op grid: lookups per second of the fused trilinear grid field (1 thread and all)
+    /// and of its taped twin (1 thread, a quarter of the lookups), forward + backward into the
+    /// grid and forward alone, 4,194,304 lookups at uniform random positions in 128^3 x 4 and
+    /// 64^3 x 4 grids, f32 and f64, each beside its error against a plain f64 loop on the same
+    /// lookups and its peak extra memory.
     Bench {
+        /// Which op to measure.
+        #[arg(long, value_enum, default_value = "composite")]
+        op: BenchOp,
         /// A single run per measurement, without warm-up, instead of the median of at least five
         /// runs (and at least 0.3 s of them) after a warm-up run.
         #[arg(long)]
@@ -77,7 +126,8 @@ enum Command {
         /// Print {"results": [...], "tape_overhead": [...]} as JSON.
         #[arg(long)]
         json: bool,
-        /// Only this workload, as RxS (rays x samples per ray).
+        /// Only this workload, as RxS (rays x samples per ray) for the composite, or N (an N^3 x 4
+        /// grid) for the grid field.
         #[arg(long)]
         workload: Option<String>,
         /// Have glibc keep freed memory for reuse (a training loop's steady state) instead of
@@ -86,10 +136,48 @@ enum Command {
         /// glibc only.
         #[arg(long)]
         keep_freed_memory: bool,
+        /// Also write the report as markdown into this directory (bench-composite.md or
+        /// bench-grid.md), stamped with the date, the machine and the command.
+        #[arg(long)]
+        markdown: Option<PathBuf>,
+        /// With --markdown: also put the headline rows into this README, between its
+        /// <!-- headline:composite:start/end --> (or grid) markers.
+        #[arg(long, requires = "markdown")]
+        readme: Option<PathBuf>,
     },
 }
 
-const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model of lesson 8).
+/// Where `fogray bench` writes its generated report, if anywhere.
+struct Publish<'a> {
+    dir: Option<&'a std::path::Path>,
+    readme: Option<&'a std::path::Path>,
+    command: String,
+}
+
+impl Publish<'_> {
+    /// Writes `DIR/bench-NAME.md` and the README's headline block.
+    fn write(
+        &self,
+        name: &str,
+        title: &str,
+        tables: &str,
+        headline: impl Fn(&fogray::stamp::Stamp) -> String,
+    ) -> Result<(), String> {
+        let Some(dir) = self.dir else { return Ok(()) };
+        let stamp = fogray::stamp::Stamp::now(&self.command);
+        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        let path = dir.join(format!("bench-{name}.md"));
+        std::fs::write(&path, cli::markdown::report(title, &stamp, tables))
+            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        match self.readme {
+            Some(readme) => cli::markdown::update_readme(readme, name, &headline(&stamp)),
+            None => Ok(()),
+        }
+    }
+}
+
+const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model: w_k = T_k (1 - exp(-sigma_k delta_k)),
+C = sum w_k c_k + T_end c_bg).
 
 Input (JSON):
   { "precision": "f64",            "f32" or "f64" (default f64)
@@ -100,19 +188,48 @@ Input (JSON):
                 "background": [r,g,b],   optional, default all zeros
                 "t": [..],         optional sample depths: enables "depth"
                 "grad_color": [gr,gg,gb] optional dL/dC: enables the grad_* outputs
+                "grad_depth": g    optional dL/ddepth (needs t): adds g * depth to the
+                                   loss and enables grad_t
               } ] }
 
 Output (JSON, one object per ray):
   { "rays": [ { "color": [..], "opacity": x, "depth": x or null,
                 "weights": [..], "transmittance": [..],      T before each sample
                 "grad_sigma": [..], "grad_delta": [..],
-                "grad_color": [[..], ..], "grad_background": [..] } ] }
+                "grad_color": [[..], ..], "grad_background": [..],
+                "grad_t": [..] } ] }                       (rays with grad_depth)
+
+--fields color,opacity,... prints only those fields; --per-ray only color, opacity, depth
+and grad_background (a ray of ten million samples then prints a few numbers).
 
 depth is the unnormalised expected depth sum w_k t_k. Bad input: exit status 2, one line on
 stderr naming the ray and sample, nothing on stdout.
 
 Example:
   echo '{"rays":[{"sigma":[0,0.5,2,8],"delta":[0.5,0.5,0.5,0.5],"color":[[0.9],[0.2],[0.9],[0.4]],"background":[1],"grad_color":[1]}]}' | fogray composite"#;
+
+const GRADCHECK_HELP: &str = r#"Check the fused composite's gradient on a JSON input (the format of fogray composite).
+
+The loss is L = sum(grad_color . color) + sum(grad_depth depth), with the input's grad_color
+and grad_depth; where a ray gives none, ones are used and the output says so (a note line).
+The gradients of sigma, delta, color, background and t (rays with t) are computed by the fused
+op in the input's precision ("precision": "f32" computes in f32, at the input rounded to f32)
+and compared with
+  - the stable taped twin in f64, every element;
+  - finite differences of the fused op in f64, every element, ray by ray (central, step 1e-6
+    relative; one-sided where sigma or delta is within a step of 0, their lower bound), or
+    with --fast along random unit directions through every input (step 1e-5; one-sided and
+    inward when any sigma or delta is near 0), in time linear in the number of samples.
+Each comparison passes if |fused - reference| <= atol + rtol |reference|. Defaults: atol 1e-6,
+rtol 1e-5 for f64 input; atol 1e-4, rtol 1e-3 for f32 input.
+
+Output: a table per input and reference (checked, failing, worst difference and where: ray,
+sample, channel, or direction), the worst comparisons, and PASS or FAIL (--json: the same
+as JSON). Exit status: 0 if every comparison passes, 1 if any fails, 2 on bad input (one line
+on stderr, e.g. the composite's own message for a negative density).
+
+Example:
+  echo '{"rays":[{"sigma":[0,0.5,2,8],"delta":[0.5,0.5,0.5,0.5],"color":[[0.9],[0.2],[0.9],[0.4]],"background":[1],"grad_color":[1]}]}' | fogray gradcheck"#;
 
 fn read_input(path: &PathBuf) -> Result<String, String> {
     let mut text = String::new();
@@ -126,7 +243,43 @@ fn read_input(path: &PathBuf) -> Result<String, String> {
     Ok(text)
 }
 
-fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, String> {
+fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, String> {
+    let grids = match workload {
+        Some(w) => vec![w
+            .parse::<usize>()
+            .ok()
+            .filter(|&n| n >= 2)
+            .ok_or_else(|| format!("grid workload {w:?} is not a node count of at least 2 (for example 128)"))?],
+        None => cli::grid_bench::GRIDS.to_vec(),
+    };
+    let mut log = |m: &cli::grid_bench::GridMeasurement| {
+        if !json {
+            eprintln!(
+                "  grid {} {} {} thread(s) {}^3x{}: {:.2} M lookups/s",
+                m.method,
+                m.precision,
+                m.threads,
+                m.grid,
+                m.channels,
+                m.lookups_per_sec / 1e6
+            );
+        }
+    };
+    let results = cli::grid_bench::run(&grids, quick, &Allocator, &mut log)?;
+    publish.write(
+        "grid",
+        "The grid field: lookups per second and errors",
+        &cli::grid_bench::table(&results),
+        |s| cli::markdown::grid_headline(&results, s),
+    )?;
+    if json {
+        serde_json::to_string_pretty(&serde_json::json!({ "results": results })).map_err(|e| e.to_string())
+    } else {
+        Ok(cli::grid_bench::table(&results))
+    }
+}
+
+fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, String> {
     let workloads = match workload {
         Some(w) => vec![cli::bench::parse_workload(w)?],
         None => cli::bench::WORKLOADS.to_vec(),
@@ -146,6 +299,13 @@ fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, Stri
     };
     let results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
     let tape = cli::tape_cost::run(quick)?;
+    let tables = cli::bench::table(&results) + &cli::tape_cost::table(&tape);
+    publish.write(
+        "composite",
+        "The composite: samples per second and errors",
+        &tables,
+        |s| cli::markdown::composite_headline(&results, s),
+    )?;
     if json {
         serde_json::to_string_pretty(&serde_json::json!({ "results": results, "tape_overhead": tape }))
             .map_err(|e| e.to_string())
@@ -154,14 +314,27 @@ fn bench(quick: bool, json: bool, workload: Option<&str>) -> Result<String, Stri
     }
 }
 
+/// The report's destination and the command line that asked for it (for the stamp).
+fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Publish<'a> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    Publish {
+        dir: markdown.as_deref(),
+        readme: readme.as_deref(),
+        command: format!("fogray {}", args.join(" ")),
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let (name, result) = match &cli.command {
         Command::Bench {
+            op,
             quick,
             json,
             workload,
             keep_freed_memory,
+            markdown,
+            readme,
         } => (
             "bench",
             if *keep_freed_memory {
@@ -169,20 +342,61 @@ fn main() -> ExitCode {
             } else {
                 Ok(())
             }
-            .and_then(|()| bench(*quick, *json, workload.as_deref())),
+            .and_then(|()| match op {
+                BenchOp::Composite => bench(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
+                BenchOp::Grid => bench_grid(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
+            }),
         ),
-        Command::Composite { method, input } => (
-            "composite",
-            read_input(input)
+        Command::Composite {
+            method,
+            input,
+            fields,
+            per_ray,
+        } => {
+            use cli::composite::Field;
+            let fields: &[Field] = match (fields.is_empty(), per_ray) {
+                (_, true) => &Field::PER_RAY,
+                (true, false) => &Field::ALL,
+                (false, false) => fields,
+            };
+            (
+                "composite",
+                read_input(input)
+                    .and_then(|t| cli::input::parse(&t))
+                    .and_then(|p| cli::composite::run(&p, *method, fields)),
+            )
+        }
+        Command::Gradcheck {
+            input,
+            atol,
+            rtol,
+            fast,
+            projections,
+            seed,
+            worst,
+            json,
+        } => {
+            let settings = cli::gradcheck::Settings {
+                atol: *atol,
+                rtol: *rtol,
+                fast: *fast,
+                projections: *projections,
+                seed: *seed,
+                json: *json,
+                worst: *worst,
+            };
+            let outcome = read_input(input)
                 .and_then(|t| cli::input::parse(&t))
-                .and_then(|p| cli::composite::run(&p, *method)),
-        ),
-        Command::Gradcheck { input } => (
-            "gradcheck",
-            read_input(input)
-                .and_then(|t| cli::input::parse(&t))
-                .and_then(|p| cli::gradcheck::run(&p)),
-        ),
+                .and_then(|p| cli::gradcheck::run(p, &settings));
+            match outcome {
+                // Exit status 1: the check ran and found a disagreement.
+                Ok(o) => {
+                    println!("{}", o.text);
+                    return if o.passed { ExitCode::SUCCESS } else { ExitCode::from(1) };
+                }
+                Err(e) => ("gradcheck", Err(e)),
+            }
+        }
     };
     match result {
         Ok(out) => {

@@ -1,4 +1,5 @@
-//! The `fogray` binary on good and bad inputs: the JSON contract of design.md §4.
+//! The `fogray` binary on good and bad inputs: the JSON contract `fogray composite --help`
+//! documents, and `fogray gradcheck`'s verdicts and exit statuses.
 
 use std::io::Write;
 use std::process::{Command, Stdio};
@@ -153,22 +154,209 @@ fn help_explains_the_format() {
     }
 }
 
+/// `fogray gradcheck --json` on `input` with `args`: exit status and the parsed report.
+fn gradcheck(args: &[&str], input: &str) -> (i32, serde_json::Value) {
+    let mut all = vec!["gradcheck", "--json"];
+    all.extend_from_slice(args);
+    let (code, out, err) = fogray(&all, input);
+    assert!(code == 0 || code == 1, "{input}: exit {code}: {err}");
+    (code, serde_json::from_str(&out).unwrap())
+}
+
+/// The row of the report for `input` against `against`.
+fn row<'a>(report: &'a serde_json::Value, against: &str, input: &str) -> &'a serde_json::Value {
+    report["inputs"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["against"] == against && r["input"] == input)
+        .unwrap_or_else(|| panic!("no {against} row for {input} in {report}"))
+}
+
 #[test]
-fn gradcheck_prints_small_disagreements() {
-    let input = r#"{"rays":[{"sigma":[1,3,5],"delta":[0.4,0.4,0.4],"color":[[0.2],[0.6],[1.0]],"background":[0.5]}]}"#;
-    let (code, out, err) = fogray(&["gradcheck"], input);
-    assert_eq!(code, 0, "{err}");
-    for line in out.lines().filter(|l| l.starts_with("sigma") || l.starts_with("color")) {
-        let cols: Vec<f64> = line
-            .split_whitespace()
-            .skip(1)
-            .step_by(2)
-            .map(|x| x.parse().unwrap())
-            .collect();
-        assert!(cols.iter().all(|&e| e < 1e-8), "{line}");
+fn gradcheck_passes_the_lesson_ray_with_its_zero_density() {
+    // sigma_0 = 0: a central difference would step to -1e-6, which the op rejects.
+    let (code, out, err) = fogray(&["gradcheck"], LESSON);
+    assert_eq!(code, 0, "{out}{err}");
+    assert!(
+        out.trim_end()
+            .ends_with("PASS: all 26 comparisons within the tolerance"),
+        "{out}"
+    );
+    assert!(out.contains("(one-sided)"), "{out}");
+    assert!(!out.contains("grad_color not given"), "{out}");
+    let (code, report) = gradcheck(&[], LESSON);
+    assert_eq!(code, 0);
+    // The one-sided difference at sigma = 0 against the closed form (lesson value 0.147).
+    let sigma = row(&report, "finite_differences", "sigma");
+    assert_eq!(sigma["checked"], 4);
+    let zero = report["worst"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|w| w["input"] == "sigma" && w["sample"] == 0 && w["against"] == "finite_differences")
+        .expect("sample 0 of sigma among the worst");
+    assert_eq!(zero["one_sided"], true);
+    assert!((zero["reference"].as_f64().unwrap() - 0.147).abs() < 5e-4, "{zero}");
+    // A zero step too.
+    let input =
+        r#"{"rays":[{"sigma":[1,2],"delta":[0,0.5],"color":[[0.3],[0.6]],"background":[0.2],"grad_color":[1]}]}"#;
+    assert_eq!(gradcheck(&[], input).0, 0);
+}
+
+#[test]
+fn gradcheck_fails_with_exit_1_when_differences_cannot_agree() {
+    // Finite differences of exp(-sigma delta) carry rounding (about 1e-11 here): at a zero
+    // tolerance they cannot agree with the exact gradient.
+    let input = r#"{"rays":[{"sigma":[1,3],"delta":[0.3,1],"color":[[1],[0.5]],"background":[0],"grad_color":[1]}]}"#;
+    let (code, out, _) = fogray(&["gradcheck", "--atol", "0", "--rtol", "0"], input);
+    assert_eq!(code, 1, "{out}");
+    assert!(out.contains("FAIL: "), "{out}");
+    assert!(out.contains("finite diff  delta at ray 0, sample"), "{out}");
+    let (code, report) = gradcheck(&["--atol", "0", "--rtol", "0"], input);
+    assert_eq!(code, 1);
+    assert_eq!(report["passed"], false);
+    let worst = &report["worst"][0];
+    assert_eq!(worst["against"], "finite_differences");
+    assert_eq!(worst["ray"], 0);
+    assert!(worst["abs_diff"].as_f64().unwrap() > 0.0, "{worst}");
+    // The same input passes the defaults, and a tolerance just above the worst difference.
+    assert_eq!(gradcheck(&[], input).0, 0);
+    let above = format!("{:e}", 2.0 * worst["abs_diff"].as_f64().unwrap());
+    let (code, _) = gradcheck(&["--atol", &above, "--rtol", "0"], input);
+    assert_eq!(code, 0);
+    // Fast mode fails at a zero tolerance too, naming directions.
+    let (code, report) = gradcheck(&["--fast", "--atol", "0", "--rtol", "0"], input);
+    assert_eq!(code, 1);
+    let fd = row(&report, "finite_differences", "all inputs");
+    assert_eq!((fd["checked"].as_u64(), fd["failing"].as_u64()), (Some(8), Some(8)));
+    assert!(fd["worst"]["direction"].is_u64(), "{fd}");
+}
+
+#[test]
+fn gradcheck_checks_t_and_f32_and_says_what_it_defaulted() {
+    // Two channels, t with grad_depth on ray 0; ray 1 gives grad_color only.
+    let input = r#"{"rays":[{"sigma":[0,0.5,2],"delta":[0.5,0.5,0.5],"color":[[0.9,0.1],[0.2,0.3],[0.9,1]],"t":[1,2,3],"grad_depth":0.5,"background":[1,0]},{"sigma":[1,3],"delta":[0.2,0.2],"color":[[0.9,0.1],[0.2,0.3]],"grad_color":[1,-2]}]}"#;
+    let (code, report) = gradcheck(&[], input);
+    assert_eq!(code, 0, "{report}");
+    // t only for the ray that gives it; dL/dt_k = w_k grad_depth.
+    assert_eq!(row(&report, "finite_differences", "t")["checked"], 3);
+    assert_eq!(row(&report, "taped_twin", "t")["checked"], 3);
+    assert_eq!(row(&report, "finite_differences", "color")["checked"], 10);
+    let notes = report["notes"].to_string();
+    assert!(
+        notes.contains("grad_color not given: ones for 1 of the rays (0)"),
+        "{notes}"
+    );
+    assert!(!notes.contains("grad_depth"), "{notes}");
+    let without = input.replace(r#""grad_depth":0.5,"#, "");
+    let (_, report) = gradcheck(&[], &without);
+    assert!(report["notes"].to_string().contains("grad_depth not given"), "{report}");
+    // f32: the fused gradient is computed in f32 (differences well above f64 rounding) and
+    // judged with the f32 defaults.
+    let f32_input = input.replacen('{', r#"{"precision":"f32","#, 1);
+    let (code, report) = gradcheck(&[], &f32_input);
+    assert_eq!(code, 0, "{report}");
+    assert_eq!(report["precision"], "f32");
+    assert_eq!(
+        (report["atol"].as_f64(), report["rtol"].as_f64()),
+        (Some(1e-4), Some(1e-3))
+    );
+    let twin = row(&report, "taped_twin", "sigma")["worst"]["abs_diff"]
+        .as_f64()
+        .unwrap();
+    assert!(twin > 1e-12 && twin < 1e-6, "f32 against the f64 twin: {twin}");
+    let (_, report) = gradcheck(&[], input);
+    let twin = row(&report, "taped_twin", "sigma")["worst"]["abs_diff"]
+        .as_f64()
+        .unwrap();
+    assert!(twin < 1e-14, "f64 against the f64 twin: {twin}");
+    // Under the f64 tolerance, f32 cannot pass.
+    assert_eq!(gradcheck(&["--atol", "1e-12", "--rtol", "0"], &f32_input).0, 1);
+}
+
+#[test]
+fn gradcheck_rejects_bad_input_with_the_composites_own_message() {
+    for (input, args, needle) in [
+        (
+            r#"{"rays":[{"sigma":[1,-2],"delta":[1,1],"color":[[1],[1]]}]}"#,
+            &[][..],
+            "ray 0, sample 1: sigma is -2",
+        ),
+        (
+            r#"{"rays":[{"sigma":[1],"delta":[-1],"color":[[1]]}]}"#,
+            &["--fast"][..],
+            "ray 0, sample 0: delta is -1",
+        ),
+        (LESSON, &["--atol=-1"][..], "--atol must be finite and >= 0"),
+        (LESSON, &["--fast", "--projections", "0"][..], "--projections"),
+    ] {
+        let mut all = vec!["gradcheck"];
+        all.extend_from_slice(args);
+        let (code, out, err) = fogray(&all, input);
+        assert_eq!(code, 2, "{input}: {out}{err}");
+        assert!(out.is_empty(), "{out}");
+        assert_eq!(err.trim_end().lines().count(), 1, "{err}");
+        assert!(err.contains(needle), "{needle}: {err}");
     }
-    let (code, _, err) = fogray(&["gradcheck"], LESSON);
-    assert_eq!(code, 2, "sigma = 0 cannot be differenced both ways: {err}");
+    let (code, out, _) = fogray(&["gradcheck", "--help"], "");
+    assert_eq!(code, 0);
+    for needle in [
+        "--atol",
+        "--rtol",
+        "atol 1e-6",
+        "atol 1e-4",
+        "--fast",
+        "Exit status",
+        "grad_depth",
+    ] {
+        assert!(out.contains(needle), "{needle} missing from gradcheck --help");
+    }
+}
+
+#[test]
+fn composite_prints_only_the_fields_asked_for() {
+    let input = LESSON.replace(r#""background""#, r#""t":[1,2,3,4],"grad_depth":2,"background""#);
+    let (code, all, err) = fogray(&["composite"], &input);
+    assert_eq!(code, 0, "{err}");
+    let all: serde_json::Value = serde_json::from_str(&all).unwrap();
+    // dL/dt_k = w_k grad_depth.
+    let w = numbers(&all["rays"][0]["weights"]);
+    for (g, w) in numbers(&all["rays"][0]["grad_t"]).iter().zip(&w) {
+        assert_eq!(*g, 2.0 * w);
+    }
+    for (args, keys) in [
+        (
+            &["--per-ray"][..],
+            &["color", "opacity", "depth", "grad_background"][..],
+        ),
+        (&["--fields", "weights,color"][..], &["color", "weights"][..]),
+        (&["--fields", "depth"][..], &["depth"][..]),
+    ] {
+        let mut cmd = vec!["composite"];
+        cmd.extend_from_slice(args);
+        let (code, out, err) = fogray(&cmd, &input);
+        assert_eq!(code, 0, "{err}");
+        let json: serde_json::Value = serde_json::from_str(&out).unwrap();
+        let ray = json["rays"][0].as_object().unwrap();
+        let got: Vec<&str> = ray.keys().map(String::as_str).collect();
+        let mut want = keys.to_vec();
+        want.sort();
+        let mut got_sorted = got.clone();
+        got_sorted.sort();
+        assert_eq!(got_sorted, want, "{args:?}");
+        for k in keys {
+            assert_eq!(ray[*k], all["rays"][0][*k], "{args:?} {k}");
+        }
+    }
+    // Without t, depth is still printed as null when asked for.
+    let (_, out, _) = fogray(&["composite", "--fields", "depth"], LESSON);
+    assert_eq!(out.trim(), r#"{"rays":[{"depth":null}]}"#);
+    let (code, _, err) = fogray(&["composite", "--fields", "colour"], LESSON);
+    assert_eq!(code, 2, "{err}");
+    let (code, out, _) = fogray(&["composite", "--help"], "");
+    assert_eq!(code, 0);
+    assert!(out.contains("--per-ray") && out.contains("--fields"), "{out}");
 }
 
 #[test]
@@ -233,4 +421,13 @@ fn bench_reports_speed_beside_error_and_memory() {
     let (code, _, err) = fogray(&["bench", "--workload", "64by32"], "");
     assert_eq!(code, 2);
     assert!(err.contains("RxS"), "{err}");
+}
+
+#[test]
+fn grid_bench_rejects_a_bad_grid_size() {
+    for bad in ["1", "64x32", "many"] {
+        let (code, out, err) = fogray(&["bench", "--op", "grid", "--workload", bad], "");
+        assert_eq!(code, 2, "{bad}: {err}");
+        assert!(out.is_empty() && err.contains("node count"), "{bad}: {err}");
+    }
 }

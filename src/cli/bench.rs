@@ -1,6 +1,6 @@
 //! `fogray bench`: samples per second of the fused op (1 thread and all) and of the stable and
 //! naive taped twins, in f32 and f64, each beside its error against an independent f64
-//! reference on the same rays and its peak extra memory (design.md §6).
+//! reference on the same rays and its peak extra memory (`docs/performance.md`).
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -341,7 +341,7 @@ fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memo
 }
 
 /// Runs `f` in `pool`, or in the global pool when `None`.
-fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
+pub fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R + Send) -> R {
     match pool {
         Some(p) => p.install(f),
         None => f(),

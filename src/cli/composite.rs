@@ -1,19 +1,80 @@
-//! `fogray composite`: JSON in, JSON out (design.md §4; scripts depend on the format).
+//! `fogray composite`: JSON in, JSON out (the format `fogray composite --help` documents;
+//! scripts depend on it), every field or only those asked for.
 
 use fogray_tape::Float;
 use serde::Serialize;
 
-use super::evaluate::{evaluate, Method};
+use super::evaluate::{evaluate, Method, Upstream, Wanted};
 use super::input::{Packed, Precision};
 
-/// One ray of the output. Numbers are written in the computing precision's shortest form.
+/// A field of a ray's output, named as in the JSON.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Field {
+    /// Pixel colour.
+    #[value(name = "color")]
+    Color,
+    /// `1 - T_end`.
+    #[value(name = "opacity")]
+    Opacity,
+    /// Unnormalised expected depth (null without t).
+    #[value(name = "depth")]
+    Depth,
+    /// Per-sample weights.
+    #[value(name = "weights")]
+    Weights,
+    /// Per-sample transmittance.
+    #[value(name = "transmittance")]
+    Transmittance,
+    /// dL/dsigma per sample.
+    #[value(name = "grad_sigma")]
+    GradSigma,
+    /// dL/ddelta per sample.
+    #[value(name = "grad_delta")]
+    GradDelta,
+    /// dL/dcolor per sample.
+    #[value(name = "grad_color")]
+    GradColor,
+    /// dL/dbackground of the ray.
+    #[value(name = "grad_background")]
+    GradBackground,
+    /// dL/dt per sample (rays that give grad_depth).
+    #[value(name = "grad_t")]
+    GradT,
+}
+
+impl Field {
+    /// Every field, in output order: the default.
+    pub const ALL: [Field; 10] = [
+        Field::Color,
+        Field::Opacity,
+        Field::Depth,
+        Field::Weights,
+        Field::Transmittance,
+        Field::GradSigma,
+        Field::GradDelta,
+        Field::GradColor,
+        Field::GradBackground,
+        Field::GradT,
+    ];
+    /// The fields with one value (or one colour) per ray, whatever the ray's length.
+    pub const PER_RAY: [Field; 4] = [Field::Color, Field::Opacity, Field::Depth, Field::GradBackground];
+}
+
+/// One ray of the output. Numbers are written in the computing precision's shortest form;
+/// a field that was not asked for is left out.
 #[derive(Debug, Serialize)]
 struct RayOut<F> {
-    color: Vec<F>,
-    opacity: F,
-    depth: Option<F>,
-    weights: Vec<F>,
-    transmittance: Vec<F>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    color: Option<Vec<F>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    opacity: Option<F>,
+    /// `Some(None)` prints `null` (a ray without t).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    depth: Option<Option<F>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    weights: Option<Vec<F>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    transmittance: Option<Vec<F>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     grad_sigma: Option<Vec<F>>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -22,6 +83,8 @@ struct RayOut<F> {
     grad_color: Option<Vec<Vec<F>>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     grad_background: Option<Vec<F>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    grad_t: Option<Vec<F>>,
 }
 
 #[derive(Debug, Serialize)]
@@ -29,38 +92,76 @@ struct Output<F> {
     rays: Vec<RayOut<F>>,
 }
 
-fn split<F: Float + Serialize>(p: &Packed, method: Method) -> Result<String, String> {
-    let e = evaluate::<F>(p, method, None)?;
+fn split<F: Float + Serialize>(p: &Packed, method: Method, fields: &[Field]) -> Result<String, String> {
+    let on = |f: Field| fields.contains(&f);
+    let per_sample = on(Field::Weights) || on(Field::Transmittance);
+    let any_grad = [
+        Field::GradSigma,
+        Field::GradDelta,
+        Field::GradColor,
+        Field::GradBackground,
+        Field::GradT,
+    ]
+    .into_iter()
+    .any(on);
+    let zeros;
+    let upstream = if any_grad && (p.grad_color.is_some() || p.grad_depth.is_some()) {
+        let color = match &p.grad_color {
+            Some(g) => &g[..],
+            None => {
+                zeros = vec![0.0; (p.offsets.len() - 1) * p.ch];
+                &zeros[..]
+            }
+        };
+        Some(Upstream {
+            color,
+            depth: p.grad_depth.as_deref(),
+        })
+    } else {
+        None
+    };
+    let e = evaluate::<F>(
+        p,
+        method,
+        Wanted {
+            per_sample,
+            grads: upstream,
+        },
+    )?;
     let ch = p.ch;
+    let pick = |f: Field, v: Option<&Vec<F>>, s: std::ops::Range<usize>| v.filter(|_| on(f)).map(|v| v[s].to_vec());
     let rays = (0..p.offsets.len() - 1)
         .map(|r| {
             let s = p.offsets[r]..p.offsets[r + 1];
-            let grads = e.grads.as_ref().filter(|_| p.has_grad[r]);
+            let grads = e.grads.as_ref().filter(|_| p.has_grad[r] || p.has_grad_depth[r]);
+            let grad = |f: Field, v: fn(&super::evaluate::InputGrads<F>) -> &Vec<F>, s| {
+                grads.and_then(|g| pick(f, Some(v(g)), s))
+            };
             RayOut {
-                color: e.color[r * ch..(r + 1) * ch].to_vec(),
-                opacity: e.opacity[r],
-                depth: e.depth.as_ref().filter(|_| p.has_t[r]).map(|d| d[r]),
-                weights: e.weights[s.clone()].to_vec(),
-                transmittance: e.transmittance[s.clone()].to_vec(),
-                grad_sigma: grads.map(|g| g.sigma[s.clone()].to_vec()),
-                grad_delta: grads.map(|g| g.delta[s.clone()].to_vec()),
-                grad_color: grads.map(|g| {
-                    g.color[s.start * ch..s.end * ch]
-                        .chunks(ch)
-                        .map(<[F]>::to_vec)
-                        .collect()
-                }),
-                grad_background: grads.map(|g| g.background[r * ch..(r + 1) * ch].to_vec()),
+                color: pick(Field::Color, Some(&e.color), r * ch..(r + 1) * ch),
+                opacity: on(Field::Opacity).then(|| e.opacity[r]),
+                depth: on(Field::Depth).then(|| e.depth.as_ref().filter(|_| p.has_t[r]).map(|d| d[r])),
+                weights: pick(Field::Weights, e.weights.as_ref(), s.clone()),
+                transmittance: pick(Field::Transmittance, e.transmittance.as_ref(), s.clone()),
+                grad_sigma: grad(Field::GradSigma, |g| &g.sigma, s.clone()),
+                grad_delta: grad(Field::GradDelta, |g| &g.delta, s.clone()),
+                grad_color: grad(Field::GradColor, |g| &g.color, s.start * ch..s.end * ch)
+                    .map(|c| c.chunks(ch).map(<[F]>::to_vec).collect()),
+                grad_background: grad(Field::GradBackground, |g| &g.background, r * ch..(r + 1) * ch),
+                grad_t: grads
+                    .filter(|_| p.has_grad_depth[r])
+                    .and_then(|g| pick(Field::GradT, g.t.as_ref(), s.clone())),
             }
         })
         .collect();
     serde_json::to_string(&Output { rays }).map_err(|e| e.to_string())
 }
 
-/// The output JSON for the input, or the one-line reason it cannot be computed.
-pub fn run(p: &Packed, method: Method) -> Result<String, String> {
+/// The output JSON for the input with the fields asked for (in output order, whatever the
+/// order given), or the one-line reason it cannot be computed.
+pub fn run(p: &Packed, method: Method, fields: &[Field]) -> Result<String, String> {
     match p.precision {
-        Precision::F32 => split::<f32>(p, method),
-        Precision::F64 => split::<f64>(p, method),
+        Precision::F32 => split::<f32>(p, method, fields),
+        Precision::F64 => split::<f64>(p, method, fields),
     }
 }

@@ -17,7 +17,7 @@ pub enum Method {
     TapedNaive,
 }
 
-/// Gradients of `L = sum(grad_color * C)`.
+/// Gradients of `L = sum(grad_color * C) + sum(grad_depth * depth)`.
 #[derive(Debug, Clone)]
 pub struct InputGrads<F> {
     pub sigma: Vec<F>,
@@ -26,6 +26,26 @@ pub struct InputGrads<F> {
     pub color: Vec<F>,
     /// `[R * ch]`.
     pub background: Vec<F>,
+    /// `[n]`, when the input has `t`.
+    pub t: Option<Vec<F>>,
+}
+
+/// The upstream gradients of a loss `L = sum(color * C) + sum(depth * D)`.
+#[derive(Debug, Clone, Copy)]
+pub struct Upstream<'a> {
+    /// `dL/dC`, `[R * ch]`.
+    pub color: &'a [f64],
+    /// `dL/dD`, `[R]` (needs the input's `t`); `None` for no depth term.
+    pub depth: Option<&'a [f64]>,
+}
+
+/// Which outputs to compute beyond colour, opacity and (with `t`) depth.
+#[derive(Debug, Clone, Copy)]
+pub struct Wanted<'a> {
+    /// Weights and transmittance per sample.
+    pub per_sample: bool,
+    /// The input gradients for these upstream gradients.
+    pub grads: Option<Upstream<'a>>,
 }
 
 /// Every output of one evaluation, flat.
@@ -35,8 +55,8 @@ pub struct Evaluation<F> {
     pub color: Vec<F>,
     pub opacity: Vec<F>,
     pub depth: Option<Vec<F>>,
-    pub weights: Vec<F>,
-    pub transmittance: Vec<F>,
+    pub weights: Option<Vec<F>>,
+    pub transmittance: Option<Vec<F>>,
     pub grads: Option<InputGrads<F>>,
 }
 
@@ -48,8 +68,8 @@ fn flat<F: Float>(v: ndarray::ArrayViewD<'_, F>) -> Vec<F> {
     v.iter().copied().collect()
 }
 
-/// Evaluates `p` with `method` in precision `F`; `seed` overrides the input's `grad_color`.
-pub fn evaluate<F: Float>(p: &Packed, method: Method, seed: Option<&[f64]>) -> Result<Evaluation<F>, String> {
+/// Evaluates `p` with `method` in precision `F`, the outputs and gradients `want` asks for.
+pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Result<Evaluation<F>, String> {
     let (n, rays, ch) = (p.sigma.len(), p.offsets.len() - 1, p.ch);
     let shape_err = |e: ndarray::ShapeError| e.to_string();
     let mut tape = Tape::<F>::new();
@@ -62,9 +82,10 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, seed: Option<&[f64]>) -> R
         .map_err(|e| e.to_string())?
         .background(Background::PerRay)
         .min_transmittance(p.min_transmittance)
-        .map_err(|e| e.to_string())?
-        .with_weights()
-        .with_transmittance();
+        .map_err(|e| e.to_string())?;
+    if want.per_sample {
+        op = op.with_weights().with_transmittance();
+    }
     if t.is_some() {
         op = op.with_depth();
     }
@@ -84,12 +105,27 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, seed: Option<&[f64]>) -> R
         Method::TapedNaive => twins::naive(&mut tape, &op, &inputs),
     }
     .map_err(|e| e.to_string())?;
-    let value = |v| tape.value(v).map(flat).map_err(|e| e.to_string());
-    let grads = match seed.or(p.grad_color.as_deref()) {
+    let grads = match want.grads {
         None => None,
-        Some(seed) => {
-            let seed = ndarray::ArrayD::from_shape_vec(vec![rays, ch], cast::<F>(seed)).map_err(shape_err)?;
-            let g = tape.backward_with(out.color, seed).map_err(|e| e.to_string())?;
+        Some(up) => {
+            let array = |v: &[f64], shape: Vec<usize>| ndarray::ArrayD::from_shape_vec(shape, cast::<F>(v));
+            let seed = array(up.color, vec![rays, ch]).map_err(shape_err)?;
+            let g = match (up.depth, out.depth) {
+                (Some(gd), Some(depth)) => {
+                    // L = sum(gC * C) + sum(gD * D) (the same gradients as two seeded sweeps).
+                    let gc = tape.constant(seed);
+                    let gd = tape.constant(array(gd, vec![rays]).map_err(shape_err)?);
+                    let loss = (|| {
+                        let wc = tape.mul(out.color, gc)?;
+                        let wd = tape.mul(depth, gd)?;
+                        let (lc, ld) = (tape.sum(wc)?, tape.sum(wd)?);
+                        let l = tape.add(lc, ld)?;
+                        tape.backward(l)
+                    })();
+                    loss.map_err(|e| e.to_string())?
+                }
+                _ => tape.backward_with(out.color, seed).map_err(|e| e.to_string())?,
+            };
             let grad = |v| {
                 g.get_or_zeros(&tape, v)
                     .map(|a| flat(a.view()))
@@ -100,15 +136,17 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, seed: Option<&[f64]>) -> R
                 delta: grad(delta)?,
                 color: grad(color)?,
                 background: grad(background)?,
+                t: t.map(grad).transpose()?,
             })
         }
     };
+    let value = |v| tape.value(v).map(flat).map_err(|e| e.to_string());
     Ok(Evaluation {
         color: value(out.color)?,
         opacity: value(out.opacity)?,
         depth: out.depth.map(value).transpose()?,
-        weights: value(out.weights.ok_or("weights were not produced")?)?,
-        transmittance: value(out.transmittance.ok_or("transmittance was not produced")?)?,
+        weights: out.weights.map(value).transpose()?,
+        transmittance: out.transmittance.map(value).transpose()?,
         grads,
     })
 }

@@ -1,5 +1,5 @@
-//! The JSON input of `fogray composite` and `fogray gradcheck` (design.md §4), parsed and
-//! checked into packed arrays. Every problem is one line naming the ray and sample.
+//! The JSON input of `fogray composite` and `fogray gradcheck` (the format `fogray composite
+//! --help` documents), parsed and checked into packed arrays. Every problem is one line naming the ray and sample.
 
 use serde::Deserialize;
 
@@ -13,6 +13,7 @@ struct RayJson {
     background: Option<Vec<f64>>,
     t: Option<Vec<f64>>,
     grad_color: Option<Vec<f64>>,
+    grad_depth: Option<f64>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -49,6 +50,9 @@ pub struct Packed {
     /// `[R * ch]` when any ray gives `grad_color` (zeros for the others), and which rays did.
     pub grad_color: Option<Vec<f64>>,
     pub has_grad: Vec<bool>,
+    /// `[R]` when any ray gives `grad_depth` (zeros for the others), and which rays did.
+    pub grad_depth: Option<Vec<f64>>,
+    pub has_grad_depth: Vec<bool>,
 }
 
 fn check_finite(values: &[f64], precision: Precision, what: impl Fn(usize) -> String) -> Result<(), String> {
@@ -89,6 +93,7 @@ pub fn parse(text: &str) -> Result<Packed, String> {
     }
     let any_t = input.rays.iter().any(|r| r.t.is_some());
     let any_grad = input.rays.iter().any(|r| r.grad_color.is_some());
+    let any_grad_depth = input.rays.iter().any(|r| r.grad_depth.is_some());
     let mut p = Packed {
         precision,
         min_transmittance,
@@ -102,6 +107,8 @@ pub fn parse(text: &str) -> Result<Packed, String> {
         has_t: Vec::new(),
         grad_color: any_grad.then(Vec::new),
         has_grad: Vec::new(),
+        grad_depth: any_grad_depth.then(Vec::new),
+        has_grad_depth: Vec::new(),
     };
     for (r, ray) in input.rays.iter().enumerate() {
         let n = ray.sigma.len();
@@ -153,7 +160,18 @@ pub fn parse(text: &str) -> Result<Packed, String> {
                 None => t.extend(std::iter::repeat_n(0.0, n)),
             }
         }
+        if let Some(g) = p.grad_depth.as_mut() {
+            match (ray.grad_depth, &ray.t) {
+                (Some(_), None) => return Err(format!("ray {r}: grad_depth needs t (the depth needs sample depths)")),
+                (Some(gd), Some(_)) => {
+                    check_finite(&[gd], precision, |_| format!("ray {r}: grad_depth"))?;
+                    g.push(gd);
+                }
+                (None, _) => g.push(0.0),
+            }
+        }
         p.has_t.push(ray.t.is_some());
+        p.has_grad_depth.push(ray.grad_depth.is_some());
         p.has_grad.push(ray.grad_color.is_some());
         p.sigma.extend_from_slice(&ray.sigma);
         p.delta.extend_from_slice(&ray.delta);
@@ -203,6 +221,10 @@ mod tests {
             ),
             (r#"{"rays":[{"delta":[1],"color":[[1]]}]}"#, "missing field `sigma`"),
             (r#"{"rays":[]}"#, "at least one ray"),
+            (
+                r#"{"rays":[{"sigma":[1],"delta":[1],"color":[[1]],"grad_depth":1}]}"#,
+                "ray 0: grad_depth needs t",
+            ),
         ] {
             let e = parse(bad).unwrap_err();
             assert!(e.contains(needle), "{bad}: {e}");

@@ -156,6 +156,49 @@ pub enum SampleError {
     Density(String),
 }
 
+/// Why a grid field's configuration or input was rejected. Nothing is computed (and nothing
+/// of the caller's is changed) when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum GridError {
+    /// A box axis with a non-finite bound or `min >= max`.
+    #[error("box axis {axis}: [{min}, {max}] must be finite with min < max")]
+    InvalidBox {
+        /// The axis (0 = x, 1 = y, 2 = z).
+        axis: usize,
+        /// Its lower bound.
+        min: f64,
+        /// Its upper bound.
+        max: f64,
+    },
+    /// A shape that does not fit: the grid's (fewer than 2 nodes on an axis, no channel, the
+    /// wrong number of axes), or an input's against the op's.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input or setting.
+        what: &'static str,
+        /// What is required.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A position with a NaN coordinate (a position outside the box, infinite or not, is
+    /// valid: it reads zero).
+    #[error("position {sample}: coordinate {axis} is NaN")]
+    NanPosition {
+        /// Index of the position (row of `positions`).
+        sample: usize,
+        /// Which coordinate.
+        axis: usize,
+    },
+}
+
+impl From<GridError> for TapeError {
+    fn from(e: GridError) -> Self {
+        TapeError::from_op("grid_field", OpError::typed(e))
+    }
+}
+
 impl From<GeometryError> for TapeError {
     fn from(e: GeometryError) -> Self {
         TapeError::from_op("rays", OpError::typed(e))

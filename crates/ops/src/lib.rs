@@ -13,7 +13,10 @@
 //! - [`hard`]: the hard "first hit" renderer that the soft one generalises;
 //! - [`rays`]: pinhole cameras, batches of rays, and ray / box clipping;
 //! - [`sample`]: samplers that turn clipped rays into packed samples for the composite
-//!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space.
+//!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space;
+//! - [`grid`]: a dense grid field over a box, looked up bilinearly (2-D) or trilinearly (3-D)
+//!   at packed positions, as a fused op ([`GridField`]) with a deterministic parallel backward
+//!   into the grid values and the positions, and its taped twin.
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
@@ -39,11 +42,13 @@
 
 pub mod composite;
 mod error;
+pub mod grid;
 pub mod hard;
 pub mod rays;
 pub mod sample;
 pub mod twins;
 
 pub use composite::{Background, Composite, CompositeInputs, CompositeVars};
-pub use error::{CompositeError, GeometryError, SampleError};
+pub use error::{CompositeError, GeometryError, GridError, SampleError};
+pub use grid::{GridBox, GridField, GridGradients, GridWanted};
 pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

@@ -2,6 +2,8 @@
 
 use std::fmt;
 
+use super::domain::Difference;
+
 /// One comparison of an analytic derivative with its finite-difference estimate.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GradcheckEntry {
@@ -13,6 +15,8 @@ pub struct GradcheckEntry {
     pub numeric: f64,
     /// The tape's value.
     pub analytic: f64,
+    /// The formula of `numeric` (one-sided at an end of the input's domain).
+    pub difference: Difference,
 }
 
 impl GradcheckEntry {
@@ -49,6 +53,9 @@ pub struct GradcheckReport {
     pub atol: f64,
     /// The relative tolerance of the options it was run with.
     pub rtol: f64,
+    /// The input names the options gave (possibly fewer than the inputs; see
+    /// [`GradcheckReport::input_name`]).
+    pub names: Vec<String>,
 }
 
 impl GradcheckReport {
@@ -59,6 +66,31 @@ impl GradcheckReport {
     /// The comparison with the largest relative error (NaN counts as largest).
     pub fn worst_rel(&self) -> Option<&GradcheckEntry> {
         self.worst_by(GradcheckEntry::rel_err)
+    }
+
+    /// The caller's name of input `i`, quoted (`"sigma"`), or its index (`2`) if it has none.
+    pub fn input_name(&self, i: usize) -> String {
+        match self.names.get(i) {
+            Some(name) => format!("\"{name}\""),
+            None => i.to_string(),
+        }
+    }
+
+    /// Where `entry` was measured, in words: `input "sigma" at [3]` (full mode) or
+    /// `direction 3 (all inputs)` (fast mode), with `, one-sided` after a one-sided difference.
+    pub fn locate(&self, entry: &GradcheckEntry) -> String {
+        let side = match entry.difference {
+            Difference::Central => "",
+            Difference::Forward => ", one-sided forward",
+            Difference::Backward => ", one-sided backward",
+        };
+        match entry.input {
+            Some(i) => format!("input {} at {:?}{side}", self.input_name(i), entry.index),
+            None => format!(
+                "direction {} (all inputs){side}",
+                entry.index.first().copied().unwrap_or(0)
+            ),
+        }
     }
 
     fn worst_by(&self, key: impl Fn(&GradcheckEntry) -> f64) -> Option<&GradcheckEntry> {
@@ -106,9 +138,8 @@ impl fmt::Display for GradcheckReport {
             if let Some(e) = e {
                 writeln!(
                     f,
-                    "  {what}: input {:?} index {:?}: numeric {:.12e}, analytic {:.12e} (abs {:.3e}, rel {:.3e})",
-                    e.input,
-                    e.index,
+                    "  {what}: {}: numeric {:.12e}, analytic {:.12e} (abs {:.3e}, rel {:.3e})",
+                    self.locate(e),
                     e.numeric,
                     e.analytic,
                     e.abs_err(),

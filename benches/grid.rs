@@ -1,0 +1,89 @@
+//! Criterion benches: the fused grid field against its taped twin, forward + backward into
+//! the grid values (and the fused forward alone), 4,194,304 lookups (the twin: a quarter of
+//! them, its memory being about a hundred times the op's) at uniform random positions in
+//! 128^3 x 4 and 64^3 x 4 grids, as `fogray bench --op grid` measures them.
+//!
+//! `cargo bench --bench grid` runs them all; `cargo bench --bench grid -- fused/f32` selects.
+//! `fogray bench --op grid` gives the same speeds beside each method's error and memory.
+
+use std::hint::black_box;
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use fogray::ops::grid::twin;
+use fogray::ops::{GridBox, GridField, GridWanted};
+use fogray::tape::{Float, Tape};
+use ndarray::{Array2, ArrayD, IxDyn};
+use rand::{Rng, SeedableRng};
+
+const LOOKUPS: usize = 1 << 22;
+const CHANNELS: usize = 4;
+
+struct Inputs<F: Float> {
+    field: GridField,
+    grid: ArrayD<F>,
+    positions: Array2<F>,
+    upstream: ArrayD<F>,
+}
+
+/// Grid values and dL/doutput ~ U[-1, 1], positions uniform in the unit cube.
+fn inputs<F: Float>(nodes: usize, lookups: usize) -> Inputs<F> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let mut u = |lo: f64, hi: f64, len: usize| -> Vec<F> { (0..len).map(|_| F::lit(rng.gen_range(lo..hi))).collect() };
+    let shape = [nodes, nodes, nodes, CHANNELS];
+    let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).unwrap();
+    Inputs {
+        field: GridField::new(bbox, &shape).unwrap(),
+        grid: ArrayD::from_shape_vec(IxDyn(&shape), u(-1.0, 1.0, nodes.pow(3) * CHANNELS)).unwrap(),
+        positions: Array2::from_shape_vec((lookups, 3), u(0.0, 1.0, 3 * lookups)).unwrap(),
+        upstream: ArrayD::from_shape_vec(vec![lookups, CHANNELS], u(-1.0, 1.0, lookups * CHANNELS)).unwrap(),
+    }
+}
+
+fn fused<F: Float>(x: &Inputs<F>, backward: bool) {
+    let p = x.positions.view().into_dyn();
+    let out = x.field.evaluate(&x.grid.view(), &p).unwrap();
+    if backward {
+        let wanted = GridWanted {
+            grid: true,
+            positions: false,
+        };
+        black_box(x.field.vjp(&x.grid.view(), &p, &x.upstream.view(), wanted).unwrap());
+    }
+    black_box(out);
+}
+
+fn taped<F: Float>(x: &Inputs<F>) {
+    let mut tape = Tape::new();
+    let grid = tape.param(x.grid.clone());
+    let positions = tape.constant(x.positions.clone());
+    let out = twin::lookup(&mut tape, &x.field, grid, positions).unwrap();
+    let g = tape.backward_with(out, x.upstream.clone()).unwrap();
+    black_box(g.get(grid));
+}
+
+fn bench_precision<F: Float>(c: &mut Criterion) {
+    for nodes in [128, 64] {
+        let id = format!("{nodes}^3x{CHANNELS}");
+        let mut group = c.benchmark_group(format!("grid/{}", F::NAME));
+        group.sample_size(10);
+        let x = inputs::<F>(nodes, LOOKUPS);
+        group.throughput(Throughput::Elements(LOOKUPS as u64));
+        group.bench_with_input(BenchmarkId::new("fused", &id), &x, |b, x| b.iter(|| fused(x, true)));
+        group.bench_with_input(BenchmarkId::new("fused-forward", &id), &x, |b, x| {
+            b.iter(|| fused(x, false))
+        });
+        drop(x);
+        let x = inputs::<F>(nodes, LOOKUPS / 4);
+        group.throughput(Throughput::Elements((LOOKUPS / 4) as u64));
+        group.bench_with_input(BenchmarkId::new("taped", &id), &x, |b, x| b.iter(|| taped(x)));
+        group.finish();
+    }
+}
+
+fn benches(c: &mut Criterion) {
+    bench_precision::<f32>(c);
+    bench_precision::<f64>(c);
+}
+
+criterion_group!(grid, benches);
+criterion_main!(grid);

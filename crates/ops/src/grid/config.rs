@@ -1,0 +1,111 @@
+//! The grid field op's configuration (the box and the grid's shape) and how it is applied to
+//! a tape.
+
+use fogray_tape::{Float, Tape, TapeError, Var};
+
+use super::geometry::GridBox;
+use crate::error::GridError;
+
+/// A dense grid of `C` channels over a [`GridBox`], looked up at packed positions: bilinear in
+/// 2-D, trilinear in 3-D (see the [module docs](super) for the conventions).
+///
+/// Holds the box and the grid's shape; the grid values and the positions are tape values
+/// passed to [`GridField::apply`] (or arrays passed to [`GridField::evaluate`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridField {
+    pub(crate) bbox: GridBox,
+    /// `[n0, n1, (n2,) C]`.
+    pub(crate) shape: Vec<usize>,
+}
+
+/// Which gradients [`GridField::vjp`] computes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GridWanted {
+    /// The gradient of the grid values.
+    pub grid: bool,
+    /// The gradient of the positions.
+    pub positions: bool,
+}
+
+/// The gradients [`GridField::vjp`] returns, each `Some` where it was wanted.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridGradients<F: Float> {
+    /// `dL/dgrid`, the grid's shape.
+    pub grid: Option<ndarray::ArrayD<F>>,
+    /// `dL/dpositions`, `[n, D]`.
+    pub positions: Option<ndarray::ArrayD<F>>,
+}
+
+impl GridField {
+    /// A field over `bbox` whose grid values have shape `shape`: `[n0, n1, n2, C]` for a 3-D
+    /// box, `[n0, n1, C]` for a 2-D one (channels last; axis 0 along x).
+    ///
+    /// Errors ([`GridError::Shape`]): `shape` without exactly one entry more than the box has
+    /// axes, an axis with fewer than 2 nodes (zero included), no channel, or more values than
+    /// memory can address.
+    pub fn new(bbox: GridBox, shape: &[usize]) -> Result<Self, GridError> {
+        let dims = bbox.dims();
+        let fail = |expected: String| GridError::Shape {
+            what: "grid shape",
+            expected,
+            got: format!("{shape:?}"),
+        };
+        if shape.len() != dims + 1 {
+            return Err(fail(format!("{} entries (nodes per axis, then channels)", dims + 1)));
+        }
+        if let Some(a) = shape[..dims].iter().position(|&n| n < 2) {
+            return Err(fail(format!(
+                "at least 2 nodes on every axis (axis {a} has {})",
+                shape[a]
+            )));
+        }
+        if shape[dims] == 0 {
+            return Err(fail("at least one channel".into()));
+        }
+        let size = shape.iter().try_fold(1usize, |acc, &n| acc.checked_mul(n));
+        if size.is_none_or(|s| s > isize::MAX as usize / 8) {
+            return Err(fail("fewer values than memory can address".into()));
+        }
+        Ok(GridField {
+            bbox,
+            shape: shape.to_vec(),
+        })
+    }
+
+    /// The box.
+    pub fn bbox(&self) -> &GridBox {
+        &self.bbox
+    }
+
+    /// Number of axes (2 or 3).
+    pub fn dims(&self) -> usize {
+        self.bbox.dims()
+    }
+
+    /// Nodes per axis.
+    pub fn nodes(&self) -> &[usize] {
+        &self.shape[..self.dims()]
+    }
+
+    /// Channels per node (`C`).
+    pub fn channels(&self) -> usize {
+        self.shape[self.dims()]
+    }
+
+    /// The grid values' shape, `[n0, n1, (n2,) C]`.
+    pub fn shape(&self) -> &[usize] {
+        &self.shape
+    }
+
+    /// Records the lookup of `grid` (of [`GridField::shape`]) at `positions` (`[n, D]`) on
+    /// `tape`, through the tape's public custom-op interface; the output is `[n, C]`. Its
+    /// backward gives the gradients of the grid values and of the positions, each where the
+    /// tape needs it.
+    ///
+    /// Errors (the tape is unchanged): the shapes do not fit the op, or a position has a NaN
+    /// coordinate (the [`GridError`] in words, as [`TapeError::InvalidArgument`]), or a
+    /// handle is stale.
+    pub fn apply<F: Float>(&self, tape: &mut Tape<F>, grid: Var, positions: Var) -> Result<Var, TapeError> {
+        tape.apply1(self.clone(), &[grid, positions])
+    }
+}

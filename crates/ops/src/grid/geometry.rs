@@ -1,0 +1,265 @@
+//! The box a grid spans and the map from a position to the cell it falls in.
+//!
+//! Nodes are aligned with the box corners (PyTorch's `align_corners=True`): along an axis of
+//! `n >= 2` nodes over `[min, max]`, node `i` sits at `min + i (max - min) / (n - 1)`. A
+//! coordinate `p` in `[min, max]` maps to `u = (p - min) (n - 1) / (max - min)` in `[0, n - 1]`,
+//! to the cell `i = min(floor(u), n - 2)` and the fraction `t = u - i` in `[0, 1]`: a
+//! coordinate on an inner cell face (`u` an integer below `n - 1`) belongs to the cell above
+//! it with `t = 0`, one on the max face to the last cell with `t = 1`. Outside `[min, max]`
+//! (infinities included) there is no cell.
+
+use crate::error::GridError;
+
+/// An axis-aligned box in 2 or 3 dimensions, finite with `min < max` on every axis.
+///
+/// Axis 0 is x, axis 1 is y, axis 2 is z.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridBox {
+    min: [f64; 3],
+    max: [f64; 3],
+    dims: usize,
+}
+
+impl GridBox {
+    /// The box `[min[a], max[a]]` along each axis `a`.
+    ///
+    /// Errors: [`GridError::Shape`] unless `min` and `max` both have 2 or 3 entries (the same
+    /// number); [`GridError::InvalidBox`] on an axis with a non-finite bound or `min >= max`.
+    pub fn new(min: &[f64], max: &[f64]) -> Result<Self, GridError> {
+        if min.len() != max.len() || !(2..=3).contains(&min.len()) {
+            return Err(GridError::Shape {
+                what: "box",
+                expected: "min and max with 2 or 3 coordinates each".into(),
+                got: format!("{} and {}", min.len(), max.len()),
+            });
+        }
+        let mut b = GridBox {
+            min: [0.0; 3],
+            max: [0.0; 3],
+            dims: min.len(),
+        };
+        for (axis, (&lo, &hi)) in min.iter().zip(max).enumerate() {
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(GridError::InvalidBox { axis, min: lo, max: hi });
+            }
+            b.min[axis] = lo;
+            b.max[axis] = hi;
+        }
+        Ok(b)
+    }
+
+    /// Number of axes (2 or 3).
+    pub fn dims(&self) -> usize {
+        self.dims
+    }
+
+    /// The lower corner.
+    pub fn min(&self) -> &[f64] {
+        &self.min[..self.dims]
+    }
+
+    /// The upper corner.
+    pub fn max(&self) -> &[f64] {
+        &self.max[..self.dims]
+    }
+
+    /// Whether `p` (one coordinate per axis) lies in the closed box; false for NaN.
+    pub fn contains(&self, p: &[f64]) -> bool {
+        p.len() == self.dims
+            && p.iter()
+                .zip(self.min())
+                .zip(self.max())
+                .all(|((&x, &lo), &hi)| lo <= x && x <= hi)
+    }
+}
+
+/// One axis of a grid: where its nodes are.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct AxisMap {
+    pub(crate) min: f64,
+    pub(crate) max: f64,
+    /// `(n - 1) / (max - min)`: cells per unit length, `du/dp`.
+    pub(crate) scale: f64,
+    /// `n - 2`, the index of the last cell.
+    pub(crate) last_cell: usize,
+}
+
+impl AxisMap {
+    pub(crate) fn new(min: f64, max: f64, nodes: usize) -> Self {
+        let cells = (nodes - 1) as f64;
+        AxisMap {
+            min,
+            max,
+            scale: cells / (max - min),
+            last_cell: nodes - 2,
+        }
+    }
+
+    /// The cell and the fraction within it of coordinate `p`, or `None` outside the axis's
+    /// range (or for NaN).
+    #[inline(always)]
+    pub(crate) fn locate(&self, p: f64) -> Option<(usize, f64)> {
+        if !(p >= self.min && p <= self.max) {
+            return None;
+        }
+        // u >= 0 here; rounding may carry the max face a hair past n - 1, hence the clamp.
+        let u = ((p - self.min) * self.scale).min((self.last_cell + 1) as f64);
+        let i = (u as usize).min(self.last_cell);
+        Some((i, u - i as f64))
+    }
+}
+
+/// Where a grid's nodes are: the box, the node counts and the strides of the channels-last
+/// storage (`[n0, n1, n2, C]` or `[n0, n1, C]`, row-major).
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Layout<const D: usize> {
+    pub(crate) axes: [AxisMap; D],
+    /// Node strides, in nodes (the last is 1).
+    pub(crate) strides: [usize; D],
+    /// Node offset of each of the `2^D` corners of a cell from its first node; corner `k`
+    /// takes the upper node along axis `a` when bit `D - 1 - a` of `k` is set.
+    pub(crate) corners: [usize; 8],
+}
+
+/// A position's cell: its first node (a linear node index), its index along each axis and the
+/// fraction along each axis.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Cell<const D: usize> {
+    pub(crate) node: usize,
+    pub(crate) index: [usize; D],
+    pub(crate) t: [f64; D],
+}
+
+impl<const D: usize> Layout<D> {
+    pub(crate) fn new(bbox: &GridBox, nodes: &[usize]) -> Self {
+        let axes = std::array::from_fn(|a| AxisMap::new(bbox.min[a], bbox.max[a], nodes[a]));
+        let mut strides = [1; D];
+        for a in (0..D.saturating_sub(1)).rev() {
+            strides[a] = strides[a + 1] * nodes[a + 1];
+        }
+        let mut corners = [0; 8];
+        for (k, c) in corners.iter_mut().enumerate().take(1 << D) {
+            *c = (0..D).filter(|&a| k >> (D - 1 - a) & 1 == 1).map(|a| strides[a]).sum();
+        }
+        Layout { axes, strides, corners }
+    }
+
+    /// The cell of position `p`, or `None` if it lies outside the box.
+    #[inline(always)]
+    pub(crate) fn locate(&self, p: [f64; D]) -> Option<Cell<D>> {
+        let mut node = 0;
+        let mut index = [0; D];
+        let mut t = [0.0; D];
+        for a in 0..D {
+            let (i, f) = self.axes[a].locate(p[a])?;
+            node += i * self.strides[a];
+            index[a] = i;
+            t[a] = f;
+        }
+        Some(Cell { node, index, t })
+    }
+
+    /// The cell index along axis 0 of the position `p` (the slab key of the backward).
+    #[inline(always)]
+    pub(crate) fn cell_along_first_axis(&self, p: [f64; D]) -> Option<usize> {
+        self.locate(p).map(|c| c.index[0])
+    }
+}
+
+/// The `2^D` trilinear (bilinear) weights of a cell's corners, in the corner order of
+/// [`Layout::corners`]: the product over axes of `t` (upper node) or `1 - t` (lower node).
+#[inline(always)]
+pub(crate) fn weights<const D: usize>(t: [f64; D]) -> [f64; 8] {
+    let mut w = [0.0; 8];
+    w[0] = 1.0;
+    // Build up axis by axis: after axis a the first 2^(a+1) entries hold the partial products,
+    // in the order where the earliest axis is the most significant bit.
+    for (a, &ta) in t.iter().enumerate() {
+        let m = 1 << a;
+        for k in (0..m).rev() {
+            w[2 * k + 1] = w[k] * ta;
+            w[2 * k] = w[k] * (1.0 - ta);
+        }
+    }
+    w
+}
+
+/// `dw_k / dt_a` for every corner `k`: the weight with axis `a`'s factor replaced by `+1`
+/// (upper node) or `-1` (lower node).
+#[inline(always)]
+pub(crate) fn weight_derivatives<const D: usize>(t: [f64; D], a: usize) -> [f64; 8] {
+    let mut s = t;
+    // With t_a -> the factor is t_a or 1 - t_a; its derivative is +1 or -1, which is the
+    // weight at t_a = 1 minus the weight at t_a = 0.
+    s[a] = 1.0;
+    let hi = weights(s);
+    s[a] = 0.0;
+    let lo = weights(s);
+    std::array::from_fn(|k| hi[k] - lo[k])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn locate_on_faces_and_outside() {
+        // 5 nodes over [0, 4]: node i at i, cells of length 1.
+        let axis = AxisMap::new(0.0, 4.0, 5);
+        assert_eq!(axis.locate(0.0), Some((0, 0.0)));
+        assert_eq!(axis.locate(2.0), Some((2, 0.0))); // inner face: the cell above, t = 0
+        assert_eq!(axis.locate(2.5), Some((2, 0.5)));
+        assert_eq!(axis.locate(4.0), Some((3, 1.0))); // max face: the last cell, t = 1
+        assert_eq!(axis.locate(-1e-300), None);
+        assert_eq!(axis.locate(4.000000000000001), None);
+        assert_eq!(axis.locate(f64::INFINITY), None);
+        assert_eq!(axis.locate(f64::NAN), None);
+    }
+
+    #[test]
+    fn weights_are_products_and_sum_to_one() {
+        let t = [0.25, 0.5, 0.125];
+        let w = weights(t);
+        // Corner 0b101: upper x, lower y, upper z.
+        assert_eq!(w[0b101], 0.25 * 0.5 * 0.125);
+        assert_eq!(w[0b010], 0.75 * 0.5 * 0.875);
+        assert!((w.iter().sum::<f64>() - 1.0).abs() < 1e-15);
+        // d w_{0b101} / d t_y = -(t_x t_z) (lower y).
+        assert_eq!(weight_derivatives(t, 1)[0b101], -(0.25 * 0.125));
+        let w2 = weights([0.25, 0.5]);
+        assert_eq!(&w2[..4], &[0.375, 0.375, 0.125, 0.125]);
+    }
+
+    #[test]
+    fn corners_follow_the_strides() {
+        let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).unwrap();
+        let l = Layout::<3>::new(&bbox, &[4, 3, 2]);
+        assert_eq!(l.strides, [6, 2, 1]);
+        assert_eq!(&l.corners, &[0, 1, 2, 3, 6, 7, 8, 9]);
+    }
+
+    #[test]
+    fn bad_boxes_are_errors() {
+        assert!(matches!(
+            GridBox::new(&[0.0, 1.0], &[1.0, 1.0]),
+            Err(GridError::InvalidBox { axis: 1, .. })
+        ));
+        assert!(matches!(
+            GridBox::new(&[0.0, 2.0], &[1.0, 1.0]),
+            Err(GridError::InvalidBox { axis: 1, .. })
+        ));
+        assert!(matches!(
+            GridBox::new(&[f64::NAN, 0.0], &[1.0, 1.0]),
+            Err(GridError::InvalidBox { axis: 0, .. })
+        ));
+        assert!(matches!(
+            GridBox::new(&[0.0, 0.0], &[1.0, f64::INFINITY]),
+            Err(GridError::InvalidBox { .. })
+        ));
+        assert!(matches!(GridBox::new(&[0.0], &[1.0]), Err(GridError::Shape { .. })));
+        assert!(matches!(
+            GridBox::new(&[0.0; 3], &[1.0; 2]),
+            Err(GridError::Shape { .. })
+        ));
+    }
+}

@@ -1,0 +1,215 @@
+//! The grid field without a tape ([`GridField::evaluate`], [`GridField::vjp`]) and as a
+//! [`CustomOp`] of the tape, met through the same public interface as any user's op.
+
+use std::borrow::Cow;
+
+use fogray_tape::buffer::{scratch, zeroed};
+use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
+use ndarray::{ArrayD, ArrayViewD, IxDyn};
+use rayon::prelude::*;
+
+use super::backward::position_gradient;
+use super::config::{GridField, GridGradients, GridWanted};
+use super::forward::{forward, CHUNK};
+use super::geometry::Layout;
+use super::scatter::grid_gradient;
+use crate::error::GridError;
+
+/// The values of `x` in row-major order: borrowed when contiguous, copied otherwise.
+fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
+    match x.as_slice() {
+        Some(s) => Cow::Borrowed(s),
+        None => Cow::Owned(x.iter().copied().collect()),
+    }
+}
+
+fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, GridError> {
+    ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| GridError::Shape {
+        what: "output",
+        expected: format!("{shape:?}"),
+        got: e.to_string(),
+    })
+}
+
+/// The checked inputs, flat.
+pub(crate) struct Checked<'a, F: Float> {
+    pub(crate) grid: Cow<'a, [F]>,
+    pub(crate) positions: Cow<'a, [F]>,
+    /// Number of positions.
+    pub(crate) n: usize,
+}
+
+impl GridField {
+    /// Checks the shapes of the grid values and the positions, and the positions for NaN.
+    pub(crate) fn check<'a, F: Float>(
+        &self,
+        grid: &'a ArrayViewD<'_, F>,
+        positions: &'a ArrayViewD<'_, F>,
+    ) -> Result<Checked<'a, F>, GridError> {
+        if grid.shape() != self.shape.as_slice() {
+            return Err(GridError::Shape {
+                what: "grid",
+                expected: format!("{:?}", self.shape),
+                got: format!("{:?}", grid.shape()),
+            });
+        }
+        let d = self.dims();
+        if positions.ndim() != 2 || positions.shape()[1] != d {
+            return Err(GridError::Shape {
+                what: "positions",
+                expected: format!("[n, {d}]"),
+                got: format!("{:?}", positions.shape()),
+            });
+        }
+        let positions = flat(positions);
+        // By chunks: rayon's per-element search costs more than the lookups.
+        let chunk = CHUNK * d;
+        if let Some(c) = positions
+            .par_chunks(chunk)
+            .position_first(|c| c.iter().any(|x| x.is_nan()))
+        {
+            let i = c * chunk + positions[c * chunk..].iter().position(|x| x.is_nan()).unwrap_or(0);
+            return Err(GridError::NanPosition {
+                sample: i / d,
+                axis: i % d,
+            });
+        }
+        Ok(Checked {
+            grid: flat(grid),
+            n: positions.len() / d,
+            positions,
+        })
+    }
+
+    /// Looks the grid up at every position: `grid` has [`GridField::shape`], `positions` is
+    /// `[n, D]` (D the box's axes), the result `[n, C]`. A position outside the box reads 0
+    /// in every channel.
+    ///
+    /// Errors: the shapes do not fit ([`GridError::Shape`]), a NaN coordinate
+    /// ([`GridError::NanPosition`], the first one).
+    pub fn evaluate<F: Float>(
+        &self,
+        grid: &ArrayViewD<'_, F>,
+        positions: &ArrayViewD<'_, F>,
+    ) -> Result<ArrayD<F>, GridError> {
+        let x = self.check(grid, positions)?;
+        let ch = self.channels();
+        // forward writes every value, so no zeros first.
+        let mut out = scratch(x.n * ch);
+        match self.dims() {
+            2 => forward(
+                &Layout::<2>::new(&self.bbox, self.nodes()),
+                &x.grid,
+                &x.positions,
+                ch,
+                &mut out,
+            ),
+            _ => forward(
+                &Layout::<3>::new(&self.bbox, self.nodes()),
+                &x.grid,
+                &x.positions,
+                ch,
+                &mut out,
+            ),
+        }
+        array(&[x.n, ch], out)
+    }
+
+    /// The gradients of a loss `L` with `upstream = dL/doutput` (`[n, C]`) for the lookup of
+    /// `grid` at `positions` (as for [`GridField::evaluate`]), those `wanted`.
+    ///
+    /// Out of the box, a position's gradient is zero and it adds nothing to the grid's. On a
+    /// cell face the position gradient is that of the cell the position belongs to (see the
+    /// [module docs](super)). The grid gradient is bitwise the same whatever the number of
+    /// threads.
+    ///
+    /// Errors: as [`GridField::evaluate`], and an upstream gradient not of shape `[n, C]`.
+    pub fn vjp<F: Float>(
+        &self,
+        grid: &ArrayViewD<'_, F>,
+        positions: &ArrayViewD<'_, F>,
+        upstream: &ArrayViewD<'_, F>,
+        wanted: GridWanted,
+    ) -> Result<GridGradients<F>, GridError> {
+        let x = self.check(grid, positions)?;
+        let ch = self.channels();
+        if upstream.shape() != [x.n, ch] {
+            return Err(GridError::Shape {
+                what: "upstream gradient",
+                expected: format!("[{}, {ch}]", x.n),
+                got: format!("{:?}", upstream.shape()),
+            });
+        }
+        let g = flat(upstream);
+        match self.dims() {
+            2 => self.gradients(&Layout::<2>::new(&self.bbox, self.nodes()), &x, &g, wanted),
+            _ => self.gradients(&Layout::<3>::new(&self.bbox, self.nodes()), &x, &g, wanted),
+        }
+    }
+
+    fn gradients<F: Float, const D: usize>(
+        &self,
+        layout: &Layout<D>,
+        x: &Checked<'_, F>,
+        upstream: &[F],
+        wanted: GridWanted,
+    ) -> Result<GridGradients<F>, GridError> {
+        let ch = self.channels();
+        let grid = if wanted.grid {
+            let mut out = zeroed(x.grid.len());
+            grid_gradient(layout, &x.positions, upstream, ch, &mut out);
+            Some(array(&self.shape, out)?)
+        } else {
+            None
+        };
+        let positions = if wanted.positions {
+            // position_gradient writes every value.
+            let mut out = scratch(x.positions.len());
+            position_gradient(layout, &x.grid, &x.positions, upstream, ch, &mut out);
+            Some(array(&[x.n, D], out)?)
+        } else {
+            None
+        };
+        Ok(GridGradients { grid, positions })
+    }
+}
+
+fn op_error(e: GridError) -> OpError {
+    OpError::InvalidArgument(e.to_string())
+}
+
+impl<F: Float> CustomOp<F> for GridField {
+    /// Nothing: the backward recomputes each position's cell and weights from the inputs the
+    /// tape keeps anyway.
+    type Saved = ();
+
+    fn name(&self) -> &'static str {
+        "grid_field"
+    }
+
+    fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
+        let [grid, positions] = inputs else {
+            return Err(OpError::InvalidArgument(format!(
+                "takes 2 inputs, got {}",
+                inputs.len()
+            )));
+        };
+        Ok((vec![self.evaluate(grid, positions).map_err(op_error)?], ()))
+    }
+
+    fn backward(
+        &self,
+        ctx: &BackwardCtx<'_, F, ()>,
+        grads: &[Option<ArrayViewD<'_, F>>],
+    ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
+        let Some(g) = &grads[0] else {
+            return Ok(vec![None, None]);
+        };
+        let wanted = GridWanted {
+            grid: ctx.needs_input_grad(0),
+            positions: ctx.needs_input_grad(1),
+        };
+        let out = self.vjp(&ctx.input(0), &ctx.input(1), g, wanted).map_err(op_error)?;
+        Ok(vec![out.grid, out.positions])
+    }
+}
