@@ -10,7 +10,11 @@
 //! - [`ring`]: the cameras, `V + T` views over a sphere of radius 3 looking at the origin, and
 //!   which of them are held out for testing;
 //! - [`photographs`]: the exact photographs of every view;
-//! - [`images`]: PNG files and the test PSNR.
+//! - [`images`]: PNG files and the test PSNR;
+//! - [`model`], [`activation`]: the dense grid of raw density and colour, rendered with
+//!   fogray's grid field and composite (fused, or their taped twins);
+//! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
+//! - [`plots`]: test PSNR against training seconds.
 //!
 //! ```
 //! use fogray_grid::{images, photographs::photographs, ring::Ring, scene::Scene};
@@ -24,8 +28,12 @@
 
 #![warn(missing_docs)]
 
+pub mod activation;
 pub mod exact;
+pub mod fit;
 pub mod images;
+pub mod model;
 pub mod photographs;
+pub mod plots;
 pub mod ring;
 pub mod scene;

@@ -12,8 +12,11 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use serde::Serialize;
 
-use fogray_grid::images::{nested, write_png};
+use fogray_grid::fit::{fit, Budget, Dataset, FitConfig, FitResult, Sampling};
+use fogray_grid::images::{nested, write_comparison_png, write_png};
+use fogray_grid::model::Method;
 use fogray_grid::photographs::photographs;
+use fogray_grid::plots;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
@@ -83,12 +86,223 @@ enum Command {
         #[arg(long)]
         out: Option<PathBuf>,
     },
+    /// Fits a dense grid of density and colour to the training views' exact photographs
+    /// (Adam on random batches of rays), measuring the test PSNR on the held-out views.
+    Fit(FitArgs),
     /// Writes the built-in scene as JSON, to edit and pass back with --scene.
     Scene {
         /// File to write; stdout if absent.
         #[arg(long)]
         out: Option<PathBuf>,
     },
+}
+
+#[derive(Args)]
+struct FitArgs {
+    #[command(flatten)]
+    scene: SceneArg,
+    #[command(flatten)]
+    ring: RingArgs,
+    /// Nodes per axis of the grid.
+    #[arg(long, default_value_t = 64)]
+    grid: usize,
+    /// Training seconds (evaluations excluded); 60 unless --steps is given.
+    #[arg(long, conflicts_with = "steps", allow_negative_numbers = true)]
+    seconds: Option<f64>,
+    /// Training steps.
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Training rays per step.
+    #[arg(long, default_value_t = 8192)]
+    batch: usize,
+    /// Fused ops or their taped twins.
+    #[arg(long, value_enum, default_value = "fused")]
+    method: MethodArg,
+    /// Floating-point type of the model and the render.
+    #[arg(long, value_enum, default_value = "f32")]
+    precision: Precision,
+    /// Samples every half voxel across the box, or only in occupied cells.
+    #[arg(long, value_enum, default_value = "uniform")]
+    sampling: SamplingArg,
+    /// Seed of the batches.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Adam's learning rate.
+    #[arg(long, default_value_t = 0.1)]
+    lr: f64,
+    /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
+    /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).
+    #[arg(long)]
+    no_grow: bool,
+    /// Print one JSON object (the log and the final figures) instead of text.
+    #[arg(long)]
+    json: bool,
+    /// Directory for the pictures: each test view's photograph, render and |error| x 4
+    /// (test-view-NNN.png), and test PSNR against training seconds (psnr.svg, psnr.png).
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// File for the final renders of the test views as {"images": [view][row][column][channel]}.
+    #[arg(long)]
+    save_renders: Option<PathBuf>,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum MethodArg {
+    Fused,
+    Taped,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum Precision {
+    F32,
+    F64,
+}
+
+#[derive(Clone, Copy, clap::ValueEnum)]
+enum SamplingArg {
+    Uniform,
+    Occupancy,
+}
+
+impl MethodArg {
+    fn name(self) -> &'static str {
+        match self {
+            MethodArg::Fused => "fused",
+            MethodArg::Taped => "taped",
+        }
+    }
+}
+
+impl Precision {
+    fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+impl SamplingArg {
+    fn name(self) -> &'static str {
+        match self {
+            SamplingArg::Uniform => "uniform",
+            SamplingArg::Occupancy => "occupancy",
+        }
+    }
+}
+
+#[derive(Serialize)]
+struct FitSummary<'a> {
+    log: &'a [fogray_grid::fit::LogEntry],
+    final_test_psnr: f64,
+    seconds: f64,
+    samples_per_ray_mean: f64,
+    occupied_fraction: f64,
+}
+
+fn run_fit(args: FitArgs) -> Result<()> {
+    let (scene, ring) = (args.scene.load()?, args.ring.ring()?);
+    // Before training, so that a bad directory costs nothing.
+    if let Some(dir) = &args.out {
+        create_dir(dir)?;
+    }
+    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background)?;
+    let config = FitConfig {
+        grid: args.grid,
+        batch: args.batch,
+        budget: match (args.steps, args.seconds) {
+            (Some(n), _) => Budget::Steps(n),
+            (None, s) => Budget::Seconds(s.unwrap_or(60.0)),
+        },
+        method: match args.method {
+            MethodArg::Fused => Method::Fused,
+            MethodArg::Taped => Method::Taped,
+        },
+        sampling: match args.sampling {
+            SamplingArg::Uniform => Sampling::Uniform,
+            SamplingArg::Occupancy => Sampling::Occupancy,
+        },
+        seed: args.seed,
+        lr: args.lr,
+        grow: !args.no_grow,
+        ..FitConfig::default()
+    };
+    let bar = if args.json {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let bar = indicatif::ProgressBar::new(1000);
+        if let Ok(style) = indicatif::ProgressStyle::with_template("fit [{bar:40}] {msg} ({elapsed})") {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        bar
+    };
+    let mut progress = |p: fogray_grid::fit::Progress| {
+        bar.set_position((p.fraction * 1000.0) as u64);
+        bar.set_message(format!("step {}", p.step));
+    };
+    match args.precision {
+        Precision::F32 => report_fit(&args, &data, fit::<f32>(&data, &config, &mut progress)?, &bar),
+        Precision::F64 => report_fit(&args, &data, fit::<f64>(&data, &config, &mut progress)?, &bar),
+    }
+}
+
+fn report_fit<F: fogray::tape::Float>(
+    args: &FitArgs,
+    data: &Dataset,
+    result: FitResult<F>,
+    bar: &indicatif::ProgressBar,
+) -> Result<()> {
+    bar.finish_and_clear();
+    if let Some(file) = &args.save_renders {
+        let images = Images {
+            images: result.renders.iter().map(|im| nested(im.view())).collect(),
+        };
+        let text = serde_json::to_string(&images)?;
+        std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))?;
+    }
+    if let Some(dir) = &args.out {
+        for (t, render) in data.test.iter().zip(&result.renders) {
+            let path = dir.join(format!("test-view-{:03}.png", t.view));
+            write_comparison_png(&path, t.photograph.view(), render.view(), 4.0, 4)?;
+        }
+        let label = format!(
+            "{} {} {}",
+            args.method.name(),
+            args.precision.name(),
+            args.sampling.name()
+        );
+        plots::psnr_curves(
+            &dir.join("psnr"),
+            &[plots::Curve {
+                label,
+                log: &result.log,
+            }],
+        )?;
+    }
+    let summary = FitSummary {
+        log: &result.log,
+        final_test_psnr: result.final_test_psnr,
+        seconds: result.seconds,
+        samples_per_ray_mean: result.samples_per_ray_mean,
+        occupied_fraction: result.occupied_fraction,
+    };
+    if args.json {
+        return write_stdout(|w| Ok(serde_json::to_writer(w, &summary)?));
+    }
+    for e in &result.log {
+        println!(
+            "step {:>6}  {:>8.2} s  train loss {:.3e}  test PSNR {:.2} dB",
+            e.step, e.seconds, e.train_loss, e.test_psnr
+        );
+    }
+    println!(
+        "final test PSNR {:.2} dB after {:.1} s of training; {:.1} samples per ray; {:.1} % of cells occupied",
+        result.final_test_psnr,
+        result.seconds,
+        result.samples_per_ray_mean,
+        100.0 * result.occupied_fraction
+    );
+    Ok(())
 }
 
 #[derive(Serialize)]
@@ -142,6 +356,7 @@ fn run(cli: Cli) -> Result<()> {
                 println!("written: {}/view-000.png .. {}", dir.display(), last.display());
             }
         }
+        Command::Fit(args) => run_fit(args)?,
         Command::Scene { out } => {
             let text = Scene::default().to_json_pretty() + "\n";
             match out {
@@ -172,7 +387,7 @@ fn main() -> ExitCode {
                     ExitCode::SUCCESS
                 }
                 ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand | ErrorKind::MissingSubcommand => {
-                    fail("a subcommand is required (photographs, scene); see --help")
+                    fail("a subcommand is required (photographs, fit, scene); see --help")
                 }
                 _ => {
                     // clap's message is its first line; the rest is usage and a hint.

@@ -127,6 +127,56 @@ fn photographs_out_writes_one_png_per_view() {
 }
 
 #[test]
+fn fit_prints_its_log_and_writes_renders_and_pictures() {
+    let dir = temp_dir("fit");
+    let renders = dir.join("renders.json");
+    let out = ok(&[
+        "fit",
+        "--views",
+        "8",
+        "--test-views",
+        "2",
+        "--size",
+        "10",
+        "--grid",
+        "10",
+        "--steps",
+        "6",
+        "--batch",
+        "256",
+        "--json",
+        "--out",
+        dir.to_str().unwrap(),
+        "--save-renders",
+        renders.to_str().unwrap(),
+    ]);
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let log = v["log"].as_array().unwrap();
+    assert_eq!(log[0]["step"], 0);
+    assert_eq!(log.last().unwrap()["step"], 6);
+    for e in log {
+        for key in ["step", "seconds", "train_loss", "test_psnr"] {
+            assert!(e.get(key).is_some(), "{key} in {e}");
+        }
+    }
+    assert!(v["final_test_psnr"].as_f64().unwrap() > 5.0);
+    assert!(v["seconds"].as_f64().unwrap() > 0.0);
+    assert!(v["samples_per_ray_mean"].as_f64().unwrap() > 1.0);
+    assert_eq!(v["occupied_fraction"], 1.0);
+    // 10 views in all, e = 5, test views 2 and 7: [view][row][column][channel].
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&renders).unwrap()).unwrap();
+    let images = r["images"].as_array().unwrap();
+    assert_eq!(images.len(), 2);
+    assert_eq!(images[1].as_array().unwrap().len(), 10);
+    assert_eq!(images[1][9].as_array().unwrap().len(), 10);
+    assert_eq!(images[1][9][9].as_array().unwrap().len(), 3);
+    for name in ["test-view-002.png", "test-view-007.png", "psnr.png", "psnr.svg"] {
+        assert!(dir.join(name).exists(), "{name}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn bad_input_exits_2_with_one_line() {
     let dir = temp_dir("bad");
     let sphere = r#"{"kind": "sphere", "center": [0, 0, 0], "radius": 0.5, "density": 2, "color": [1, 0, 0]}"#;
@@ -164,6 +214,16 @@ fn bad_input_exits_2_with_one_line() {
         &["photographs", "--colour"][..],
         &["scene", "--out", "/nonexistent/dir/scene.json"][..],
         &["photographs", "--size", "2", "--out", "/proc/fogray-grid"][..],
+        &["fit", "--size", "4", "--grid", "1"][..],
+        &["fit", "--size", "4", "--grid", "0"][..],
+        &["fit", "--size", "4", "--steps", "0"][..],
+        &["fit", "--size", "4", "--batch", "0"][..],
+        &["fit", "--size", "4", "--seconds", "-1"][..],
+        &["fit", "--size", "4", "--seconds", "nan"][..],
+        &["fit", "--size", "4", "--steps", "3", "--seconds", "3"][..],
+        &["fit", "--size", "4", "--test-views", "0"][..],
+        &["fit", "--size", "4", "--method", "magic"][..],
+        &["fit", "--size", "0"][..],
         &["paint"][..],
         &[][..],
     ] {
