@@ -13,6 +13,7 @@
 //! - [`images`]: PNG files and the test PSNR;
 //! - [`model`], [`activation`]: the dense grid of raw density and colour, rendered with
 //!   fogray's grid field and composite (fused, or their taped twins);
+//! - [`dataset`]: the training rays and colours, the test views;
 //! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
 //! - [`plots`]: test PSNR against training seconds.
 //!
@@ -29,6 +30,7 @@
 #![warn(missing_docs)]
 
 pub mod activation;
+pub mod dataset;
 pub mod exact;
 pub mod fit;
 pub mod images;

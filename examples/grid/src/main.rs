@@ -12,7 +12,8 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use serde::Serialize;
 
-use fogray_grid::fit::{fit, Budget, Dataset, FitConfig, FitResult, Sampling};
+use fogray_grid::dataset::Dataset;
+use fogray_grid::fit::{fit, Budget, FitConfig, FitResult, Sampling};
 use fogray_grid::images::{nested, write_comparison_png, write_png};
 use fogray_grid::model::Method;
 use fogray_grid::photographs::photographs;

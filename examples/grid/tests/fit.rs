@@ -4,7 +4,8 @@
 use fogray::ops::rays::{Aabb, RayBatch};
 use fogray::ops::sample::{Spacing, Uniform};
 use fogray::tape::{gradcheck, GradcheckOptions, Tape, Var};
-use fogray_grid::fit::{fit, Budget, Dataset, FitConfig, Sampling};
+use fogray_grid::dataset::Dataset;
+use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
 use fogray_grid::model::{GridModel, Method};
 use fogray_grid::photographs::photographs;
 use fogray_grid::ring::Ring;
