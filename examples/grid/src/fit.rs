@@ -1,0 +1,379 @@
+//! The fit: Adam on the raw grid of a [`GridModel`], minimising the mean squared error of
+//! random batches of training rays against the exact photographs, with the test PSNR on the
+//! held-out views measured at intervals (outside the training clock).
+//!
+//! ```
+//! use fogray_grid::dataset::Dataset;
+//! use fogray_grid::fit::{fit, Budget, FitConfig};
+//! use fogray_grid::{photographs::photographs, ring::Ring, scene::Scene};
+//!
+//! let ring = Ring::new(8, 2, 12)?;
+//! let data = Dataset::new(&ring, &photographs(&Scene::default(), &ring), Scene::default().background)?;
+//! let config = FitConfig { grid: 12, batch: 256, budget: Budget::Steps(5), ..FitConfig::default() };
+//! let result = fit::<f32>(&data, &config, &mut |_| {})?;
+//! assert_eq!(result.log.last().unwrap().step, 5);
+//! assert_eq!(result.renders.len(), 2); // one per test view
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use std::time::Instant;
+
+use fogray::ops::rays::{Aabb, RayBatch};
+use fogray::ops::sample::{CellPoints, Jitter, OccupancyConfig, OccupancyGrid, PackedSamples, Spacing, Uniform};
+use fogray::ops::{GeometryError, GridError, SampleError};
+use fogray::tape::optim::{Adam, AdamConfig};
+use fogray::tape::params::ParamError;
+use fogray::tape::{Float, Tape, TapeError};
+use ndarray::{Array2, Array3, Axis};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use serde::Serialize;
+use thiserror::Error;
+
+use crate::dataset::Dataset;
+use crate::images::{psnr, ImageError};
+use crate::model::{GridModel, Method, BOUNDS};
+
+/// Why a fit could not run.
+#[non_exhaustive]
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum FitError {
+    /// A setting outside its range.
+    #[error("{0}")]
+    Config(String),
+    /// From the tape or an op on it.
+    #[error(transparent)]
+    Tape(#[from] TapeError),
+    /// From a sampler or the occupancy grid.
+    #[error(transparent)]
+    Sample(#[from] SampleError),
+    /// From the rays.
+    #[error(transparent)]
+    Geometry(#[from] GeometryError),
+    /// From the grid field.
+    #[error(transparent)]
+    Grid(#[from] GridError),
+    /// From the parameter store or the optimiser.
+    #[error(transparent)]
+    Param(#[from] ParamError),
+    /// From the test PSNR.
+    #[error(transparent)]
+    Image(#[from] ImageError),
+}
+
+/// Where samples go along each ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Sampling {
+    /// Every half voxel across the box.
+    Uniform,
+    /// Every half voxel, but only in the cells of an occupancy grid (one cell per voxel) that
+    /// the current density marks as occupied; every cell counts as occupied for the first
+    /// [`OCCUPANCY_WARMUP`] steps, then the grid is refreshed every [`OCCUPANCY_EVERY`].
+    Occupancy,
+}
+
+/// Steps before the first refresh of the occupancy grid: a fresh model is a thin fog with no
+/// cell above the threshold, and a cell once empty gets no samples to grow back from, so the
+/// density must first have gathered where the matter is.
+pub const OCCUPANCY_WARMUP: usize = 64;
+
+/// Steps between refreshes of the occupancy grid.
+pub const OCCUPANCY_EVERY: usize = 16;
+
+/// When training stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Budget {
+    /// After this many steps.
+    Steps(usize),
+    /// Once this many seconds of training (evaluations excluded) have passed.
+    Seconds(f64),
+}
+
+/// The fit's settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FitConfig {
+    /// Nodes per axis of the grid (at least 2).
+    pub grid: usize,
+    /// Training rays per step (at least 1).
+    pub batch: usize,
+    /// When to stop.
+    pub budget: Budget,
+    /// Fused ops or taped twins.
+    pub method: Method,
+    /// Uniform or occupancy sampling.
+    pub sampling: Sampling,
+    /// Seed of the batches.
+    pub seed: u64,
+    /// Adam's learning rate.
+    pub lr: f64,
+    /// The density's shift (raw 0 is density `softplus(shift)`).
+    pub shift: f64,
+    /// Test evaluations over the budget (evenly spaced, plus one at the start and the end).
+    pub evaluations: usize,
+    /// Coarse to fine: start at a quarter of `grid` nodes per axis, double at [`GROWTH`]
+    /// fractions of the budget (trilinear resampling, fresh Adam moments).
+    pub grow: bool,
+}
+
+/// Fractions of the budget at which a growing grid doubles its nodes per axis.
+pub const GROWTH: [f64; 2] = [0.1, 0.3];
+
+/// The grid's nodes per axis from each fraction of the budget on.
+fn stages(config: &FitConfig) -> Vec<(f64, usize)> {
+    let n = config.grid;
+    if !config.grow || n < 8 {
+        return vec![(0.0, n)];
+    }
+    vec![(0.0, n.div_ceil(4)), (GROWTH[0], n.div_ceil(2)), (GROWTH[1], n)]
+}
+
+impl Default for FitConfig {
+    fn default() -> Self {
+        FitConfig {
+            grid: 64,
+            batch: 8192,
+            budget: Budget::Seconds(60.0),
+            method: Method::Fused,
+            sampling: Sampling::Uniform,
+            seed: 0,
+            lr: 0.1,
+            shift: -4.0,
+            evaluations: 20,
+            grow: true,
+        }
+    }
+}
+
+/// One line of the log.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LogEntry {
+    /// Steps done.
+    pub step: usize,
+    /// Training seconds so far (evaluations excluded).
+    pub seconds: f64,
+    /// The last step's loss (mean over rays and channels of the squared error); NaN at step 0.
+    pub train_loss: f64,
+    /// Test PSNR (dB) over all test views.
+    pub test_psnr: f64,
+}
+
+/// What a fit returns.
+#[derive(Debug)]
+pub struct FitResult<F: Float> {
+    /// The evaluations, in order.
+    pub log: Vec<LogEntry>,
+    /// Test PSNR at the end.
+    pub final_test_psnr: f64,
+    /// Training seconds, evaluations excluded.
+    pub seconds: f64,
+    /// Mean samples per training ray over all steps.
+    pub samples_per_ray_mean: f64,
+    /// Fraction of occupied cells at the end (1 with uniform sampling).
+    pub occupied_fraction: f64,
+    /// Final renders of the test views `[W][W][3]`, unclamped, in view order.
+    pub renders: Vec<Array3<f64>>,
+    /// The fitted model.
+    pub model: GridModel<F>,
+}
+
+/// Progress reported after every step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Steps done.
+    pub step: usize,
+    /// Fraction of the budget used, in `[0, 1]`.
+    pub fraction: f64,
+}
+
+/// The sampler of a fit.
+enum Sampler {
+    Uniform,
+    Occupancy(OccupancyGrid),
+}
+
+impl Sampler {
+    fn sample<F: Float>(&self, rays: &RayBatch<F>, step: f64) -> Result<PackedSamples<F>, FitError> {
+        let clip = Aabb::new(BOUNDS.0, BOUNDS.1)?.clip(rays);
+        Ok(match self {
+            Sampler::Uniform => Uniform::new(Spacing::Step(step))?.sample(rays, &clip)?,
+            Sampler::Occupancy(g) => g.march(rays, &clip, step, Jitter::None)?,
+        })
+    }
+}
+
+fn batch_of<F: Float>(o: &Array2<f64>, d: &Array2<f64>, rows: &[usize]) -> Result<RayBatch<F>, FitError> {
+    let pick = |a: &Array2<f64>| a.select(Axis(0), rows).mapv(F::lit);
+    Ok(RayBatch::new(pick(o), pick(d))?)
+}
+
+/// Renders rays in chunks without recording a backward, as `[R, 3]` f64.
+fn render_rays<F: Float>(
+    model: &GridModel<F>,
+    sampler: &Sampler,
+    origins: &Array2<f64>,
+    directions: &Array2<f64>,
+    background: [f64; 3],
+    method: Method,
+) -> Result<Array2<f64>, FitError> {
+    const CHUNK: usize = 8192;
+    let n = origins.nrows();
+    let mut out = Array2::zeros((n, 3));
+    let mut tape = Tape::<F>::new();
+    for start in (0..n).step_by(CHUNK) {
+        let rows: Vec<usize> = (start..(start + CHUNK).min(n)).collect();
+        let rays = batch_of::<F>(origins, directions, &rows)?;
+        let samples = sampler.sample(&rays, model.voxel() / 2.0)?;
+        let color = model.render(&mut tape, &samples, background, method)?;
+        let values = tape.value(color)?;
+        for (k, &r) in rows.iter().enumerate() {
+            for c in 0..3 {
+                out[[r, c]] = values[[k, c]].as_f64();
+            }
+        }
+        tape.clear();
+    }
+    Ok(out)
+}
+
+/// Renders every test view, `[W][W][3]` each, unclamped.
+pub fn render_test_views<F: Float>(
+    model: &GridModel<F>,
+    data: &Dataset,
+    method: Method,
+) -> Result<Vec<Array3<f64>>, FitError> {
+    let sampler = Sampler::Uniform;
+    data.test
+        .iter()
+        .map(|t| {
+            let w = t.photograph.shape()[0];
+            let flat = render_rays(model, &sampler, &t.origins, &t.directions, data.background, method)?;
+            flat.into_shape_with_order((w, w, 3))
+                .map_err(|e| FitError::Config(e.to_string()))
+        })
+        .collect()
+}
+
+fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
+    let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
+    let e: Vec<_> = data.test.iter().map(|t| t.photograph.view()).collect();
+    Ok(psnr(&r, &e)?)
+}
+
+fn check(config: &FitConfig) -> Result<(), FitError> {
+    let bad = |what: &str| Err(FitError::Config(what.into()));
+    if config.grid < 2 {
+        return bad("--grid must be at least 2");
+    }
+    if config.batch == 0 {
+        return bad("--batch must be at least 1");
+    }
+    match config.budget {
+        Budget::Steps(0) => bad("--steps must be at least 1"),
+        Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => bad("--seconds must be finite and positive"),
+        _ => Ok(()),
+    }
+}
+
+/// Fits a grid to `data` (see the [module docs](self)); calls `progress` after every step.
+///
+/// Test views are rendered with uniform samples whatever the training sampling, so that the
+/// PSNR of the two samplings measures the same thing.
+///
+/// Errors: a setting out of range ([`FitError::Config`]), or an error of the ops.
+pub fn fit<F: Float>(
+    data: &Dataset,
+    config: &FitConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<FitResult<F>, FitError> {
+    check(config)?;
+    let stages = stages(config);
+    let mut model = GridModel::<F>::new(stages[0].1, config.shift)?;
+    let mut next_stage = 1;
+    // The final grid's half voxel: the occupancy threshold means the same at every stage.
+    let final_step = 1.0 / (config.grid - 1) as f64;
+    let mut sampler = match config.sampling {
+        Sampling::Uniform => Sampler::Uniform,
+        Sampling::Occupancy => Sampler::Occupancy(OccupancyGrid::new(
+            Aabb::new(BOUNDS.0, BOUNDS.1)?,
+            config.grid - 1,
+            OccupancyConfig::opacity(final_step, 0.01)?,
+        )?),
+    };
+    let adam_config = AdamConfig {
+        lr: config.lr,
+        ..AdamConfig::default()
+    };
+    let mut adam = Adam::new(adam_config)?;
+    let mut rng = StdRng::seed_from_u64(config.seed);
+    let mut tape = Tape::<F>::new();
+    let pixels = data.origins.nrows();
+    let (mut seconds, mut step, mut loss, mut samples_total) = (0.0, 0usize, f64::NAN, 0usize);
+    let fraction = |step: usize, seconds: f64| match config.budget {
+        Budget::Steps(n) => step as f64 / n as f64,
+        Budget::Seconds(s) => seconds / s,
+    };
+    let evaluate = |model: &GridModel<F>, step, seconds, loss| -> Result<LogEntry, FitError> {
+        let renders = render_test_views(model, data, config.method)?;
+        Ok(LogEntry {
+            step,
+            seconds,
+            train_loss: loss,
+            test_psnr: test_psnr(&renders, data)?,
+        })
+    };
+    let mut log = vec![evaluate(&model, 0, 0.0, loss)?];
+    let mut next_eval = 1;
+    while fraction(step, seconds) < 1.0 {
+        let start = Instant::now();
+        if next_stage < stages.len() && fraction(step, seconds) >= stages[next_stage].0 {
+            model = model.resampled(stages[next_stage].1)?;
+            adam = Adam::new(adam_config)?;
+            next_stage += 1;
+        }
+        let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();
+        let rays = batch_of::<F>(&data.origins, &data.directions, &rows)?;
+        let samples = sampler.sample(&rays, model.voxel() / 2.0)?;
+        samples_total += samples.len();
+        let target = tape.constant(data.colors.select(Axis(0), &rows).mapv(F::lit));
+        let color = model.render(&mut tape, &samples, data.background, config.method)?;
+        let residual = tape.sub(color, target)?;
+        let squared = tape.square(residual)?;
+        let mse = tape.mean(squared)?;
+        loss = tape.value(mse)?.iter().next().map_or(f64::NAN, |v| v.as_f64());
+        let grads = tape.backward(mse)?;
+        tape.clear();
+        adam.step(model.params_mut(), &grads)?;
+        tape.recycle(grads);
+        step += 1;
+        if let Sampler::Occupancy(grid) = &mut sampler {
+            if step >= OCCUPANCY_WARMUP && step % OCCUPANCY_EVERY == 0 {
+                let m = &model;
+                grid.update(|p| m.densities(p), CellPoints::CentreAndRandom { seed: step as u64 })?;
+            }
+        }
+        seconds += start.elapsed().as_secs_f64();
+        progress(Progress {
+            step,
+            fraction: fraction(step, seconds).min(1.0),
+        });
+        let done = fraction(step, seconds) >= 1.0;
+        if done || fraction(step, seconds) * config.evaluations as f64 >= next_eval as f64 {
+            log.push(evaluate(&model, step, seconds, loss)?);
+            next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
+        }
+    }
+    let renders = render_test_views(&model, data, config.method)?;
+    let occupied_fraction = match &sampler {
+        Sampler::Occupancy(g) => g.occupied_fraction(),
+        Sampler::Uniform => 1.0,
+    };
+    Ok(FitResult {
+        final_test_psnr: test_psnr(&renders, data)?,
+        log,
+        seconds,
+        samples_per_ray_mean: samples_total as f64 / (step * config.batch) as f64,
+        occupied_fraction,
+        renders,
+        model,
+    })
+}

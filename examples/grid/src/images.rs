@@ -1,0 +1,243 @@
+//! Images as arrays `[row][column][channel]` of RGB in `[0, 1]`: PNG files (one image, or a
+//! titled row of them such as photograph, render and error side by side) and the PSNR.
+//!
+//! ```
+//! use fogray_grid::images::psnr;
+//! use ndarray::Array3;
+//!
+//! // Every value off by 0.1: MSE 0.01, PSNR = -10 log10(0.01) = 20 dB.
+//! let exact = Array3::from_elem((4, 4, 3), 0.5);
+//! let render = Array3::from_elem((4, 4, 3), 0.6);
+//! let db = psnr(&[render.view()], &[exact.view()])?;
+//! assert!((db - 20.0).abs() < 1e-9);
+//! # Ok::<(), fogray_grid::images::ImageError>(())
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use ndarray::{Array3, ArrayView3, Zip};
+use plotters::prelude::*;
+use thiserror::Error;
+
+const FONT: &str = "sans-serif";
+/// Height of the title strip above each panel of a row, in PNG pixels.
+const TITLE_HEIGHT: u32 = 26;
+/// Space between panels, in PNG pixels.
+const GAP: u32 = 8;
+
+/// Why an image could not be compared or written.
+#[non_exhaustive]
+#[derive(Debug, Clone, PartialEq, Error)]
+pub enum ImageError {
+    /// Images that should match in shape do not, or an image is not `[rows][columns][3]`.
+    #[error("{what}: expected shape {expected:?}, got {got:?}")]
+    Shape {
+        /// Which image.
+        what: String,
+        /// The shape required.
+        expected: Vec<usize>,
+        /// The shape given.
+        got: Vec<usize>,
+    },
+    /// Nothing to compare or draw.
+    #[error("no images given")]
+    Empty,
+    /// The PNG could not be drawn or written.
+    #[error("cannot write {path}: {message}")]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        message: String,
+    },
+}
+
+/// One titled image of a row.
+#[derive(Debug, Clone)]
+pub struct Panel<'a> {
+    /// Drawn above the image.
+    pub title: String,
+    /// `[rows][columns][3]`, values clamped to `[0, 1]` for display.
+    pub image: ArrayView3<'a, f64>,
+}
+
+/// A value in `[0, 1]` as an 8-bit channel (clamped, rounded to nearest).
+pub fn to_u8(v: f64) -> u8 {
+    // NaN clamps to NaN and casts to 0.
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// The image as nested vectors `[row][column][channel]`, the layout of the JSON outputs.
+pub fn nested(image: ArrayView3<'_, f64>) -> Vec<Vec<Vec<f64>>> {
+    image
+        .outer_iter()
+        .map(|row| row.outer_iter().map(|px| px.to_vec()).collect())
+        .collect()
+}
+
+fn check_rgb(what: &str, image: &ArrayView3<'_, f64>) -> Result<(), ImageError> {
+    let s = image.shape();
+    if s[2] != 3 || s[0] == 0 || s[1] == 0 {
+        return Err(ImageError::Shape {
+            what: what.to_string(),
+            expected: vec![s[0].max(1), s[1].max(1), 3],
+            got: s.to_vec(),
+        });
+    }
+    Ok(())
+}
+
+fn check_same(what: &str, a: &ArrayView3<'_, f64>, b: &ArrayView3<'_, f64>) -> Result<(), ImageError> {
+    if a.shape() != b.shape() {
+        return Err(ImageError::Shape {
+            what: what.to_string(),
+            expected: b.shape().to_vec(),
+            got: a.shape().to_vec(),
+        });
+    }
+    Ok(())
+}
+
+/// `|render - exact|` per pixel and channel. Error: [`ImageError::Shape`] if the shapes differ.
+pub fn abs_error(render: ArrayView3<'_, f64>, exact: ArrayView3<'_, f64>) -> Result<Array3<f64>, ImageError> {
+    check_same("render", &render, &exact)?;
+    Ok(Zip::from(&render).and(&exact).map_collect(|r, e| (r - e).abs()))
+}
+
+/// Test PSNR in dB: `-10 log10` of the mean over all pixels and channels of all image pairs of
+/// `(clamp(render, 0, 1) - exact)^2`. Infinite when every clamped render equals its photograph.
+///
+/// Errors: [`ImageError::Empty`] for no images, [`ImageError::Shape`] if the counts or any
+/// pair's shapes differ.
+pub fn psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
+    if renders.is_empty() {
+        return Err(ImageError::Empty);
+    }
+    if renders.len() != exacts.len() {
+        return Err(ImageError::Shape {
+            what: "number of renders".into(),
+            expected: vec![exacts.len()],
+            got: vec![renders.len()],
+        });
+    }
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (i, (r, e)) in renders.iter().zip(exacts).enumerate() {
+        check_same(&format!("render {i}"), r, e)?;
+        sum += Zip::from(r)
+            .and(e)
+            .fold(0.0, |acc, r, e| acc + (r.clamp(0.0, 1.0) - e).powi(2));
+        count += r.len();
+    }
+    Ok(-10.0 * (sum / count as f64).log10())
+}
+
+fn write_error(path: &Path) -> impl Fn(String) -> ImageError + '_ {
+    move |message| ImageError::Write {
+        path: path.to_path_buf(),
+        message,
+    }
+}
+
+fn rgb(image: &ArrayView3<'_, f64>, row: usize, column: usize) -> RGBColor {
+    let c = |k| to_u8(image[[row, column, k]]);
+    RGBColor(c(0), c(1), c(2))
+}
+
+/// Writes one image as a PNG of its own size, one PNG pixel per image pixel.
+///
+/// Errors: [`ImageError::Shape`] unless `[rows >= 1][columns >= 1][3]`, [`ImageError::Write`].
+pub fn write_png(path: &Path, image: ArrayView3<'_, f64>) -> Result<(), ImageError> {
+    check_rgb("image", &image)?;
+    let (h, w) = (image.shape()[0], image.shape()[1]);
+    let wrap = write_error(path);
+    let root = BitMapBackend::new(path, (w as u32, h as u32)).into_drawing_area();
+    for a in 0..h {
+        for b in 0..w {
+            root.draw_pixel((b as i32, a as i32), &rgb(&image, a, b))
+                .map_err(|e| wrap(e.to_string()))?;
+        }
+    }
+    root.present().map_err(|e| wrap(e.to_string()))
+}
+
+/// Writes images side by side, each magnified `scale` times (nearest neighbour) under its
+/// title, on white. All panels must have one shape.
+///
+/// Errors: [`ImageError::Empty`], [`ImageError::Shape`], [`ImageError::Write`] (including a
+/// `scale` of 0).
+pub fn write_row_png(path: &Path, panels: &[Panel<'_>], scale: u32) -> Result<(), ImageError> {
+    let first = panels.first().ok_or(ImageError::Empty)?;
+    check_rgb(&first.title, &first.image)?;
+    for p in panels {
+        check_same(&p.title, &p.image, &first.image)?;
+    }
+    let wrap = write_error(path);
+    if scale == 0 {
+        return Err(wrap("scale must be at least 1".into()));
+    }
+    let (h, w) = (
+        first.image.shape()[0] as u32 * scale,
+        first.image.shape()[1] as u32 * scale,
+    );
+    let n = panels.len() as u32;
+    let size = (n * w + (n + 1) * GAP, h + TITLE_HEIGHT + GAP);
+    let root = BitMapBackend::new(path, size).into_drawing_area();
+    root.fill(&WHITE).map_err(|e| wrap(e.to_string()))?;
+    for (k, p) in panels.iter().enumerate() {
+        let x0 = GAP + k as u32 * (w + GAP);
+        root.draw(&Text::new(p.title.clone(), (x0 as i32, 4), (FONT, 18).into_font()))
+            .map_err(|e| wrap(e.to_string()))?;
+        // A grey frame just outside the panel, so a white image stands out from the page.
+        let frame = [
+            (x0 as i32 - 1, TITLE_HEIGHT as i32 - 1),
+            ((x0 + w) as i32, (TITLE_HEIGHT + h) as i32),
+        ];
+        root.draw(&Rectangle::new(frame, RGBColor(160, 160, 160)))
+            .map_err(|e| wrap(e.to_string()))?;
+        let (rows, columns) = (p.image.shape()[0], p.image.shape()[1]);
+        for a in 0..rows {
+            for b in 0..columns {
+                let (x, y) = ((x0 + b as u32 * scale) as i32, (TITLE_HEIGHT + a as u32 * scale) as i32);
+                // A filled rectangle covers [x0, x1) x [y0, y1).
+                let s = scale as i32;
+                root.draw(&Rectangle::new([(x, y), (x + s, y + s)], rgb(&p.image, a, b).filled()))
+                    .map_err(|e| wrap(e.to_string()))?;
+            }
+        }
+    }
+    root.present().map_err(|e| wrap(e.to_string()))
+}
+
+/// Writes the exact photograph, the render and `|render - exact|` times `gain` side by side
+/// (see [`write_row_png`]); a gain above 1 makes small errors visible.
+pub fn write_comparison_png(
+    path: &Path,
+    exact: ArrayView3<'_, f64>,
+    render: ArrayView3<'_, f64>,
+    gain: f64,
+    scale: u32,
+) -> Result<(), ImageError> {
+    let error = abs_error(render, exact)? * gain;
+    let panels = [
+        Panel {
+            title: "exact photograph".into(),
+            image: exact.view(),
+        },
+        Panel {
+            title: "render".into(),
+            image: render.view(),
+        },
+        Panel {
+            title: if gain == 1.0 {
+                "|render - exact|".into()
+            } else {
+                format!("|render - exact| x {gain}")
+            },
+            image: error.view(),
+        },
+    ];
+    write_row_png(path, &panels, scale)
+}
+
+#[cfg(test)]
+mod tests;

@@ -1,0 +1,41 @@
+//! # fogray-grid
+//!
+//! A scene with no known shape: a density and a colour at every point of space, which
+//! gradient descent on photographs must find. This crate holds the parts of that experiment
+//! that do not depend on the model:
+//!
+//! - [`scene`]: constant-density spheres and boxes in front of a background, from JSON;
+//! - [`exact`]: the exact emission-absorption render of such a scene along a ray (the medium
+//!   is piecewise constant, so compositing its pieces has no quadrature error);
+//! - [`ring`]: the cameras, `V + T` views over a sphere of radius 3 looking at the origin, and
+//!   which of them are held out for testing;
+//! - [`photographs`]: the exact photographs of every view;
+//! - [`images`]: PNG files and the test PSNR;
+//! - [`model`], [`activation`]: the dense grid of raw density and colour, rendered with
+//!   fogray's grid field and composite (fused, or their taped twins);
+//! - [`dataset`]: the training rays and colours, the test views;
+//! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
+//! - [`plots`]: test PSNR against training seconds.
+//!
+//! ```
+//! use fogray_grid::{images, photographs::photographs, ring::Ring, scene::Scene};
+//!
+//! let ring = Ring::new(4, 1, 8)?;
+//! let exact = photographs(&Scene::default(), &ring);
+//! let db = images::psnr(&[exact[0].view()], &[exact[0].view()])?;
+//! assert_eq!(db, f64::INFINITY); // a photograph is its own perfect render
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+#![warn(missing_docs)]
+
+pub mod activation;
+pub mod dataset;
+pub mod exact;
+pub mod fit;
+pub mod images;
+pub mod model;
+pub mod photographs;
+pub mod plots;
+pub mod ring;
+pub mod scene;

@@ -1,0 +1,208 @@
+//! The model: a dense `N^3` grid over `[-1, 1]^3` of raw density and raw RGB, looked up
+//! trilinearly by fogray-ops' grid field, activated (density `softplus(raw + shift)`, colour
+//! `sigmoid(raw)`, view-independent) and composited over packed samples, either with the fused
+//! ops or with their taped twins.
+//!
+//! ```
+//! use fogray::ops::rays::{Aabb, RayBatch};
+//! use fogray::ops::sample::{Spacing, Uniform};
+//! use fogray::tape::Tape;
+//! use fogray_grid::model::{GridModel, Method};
+//! use ndarray::arr2;
+//!
+//! let model = GridModel::<f32>::new(8, -4.0)?;
+//! let rays = RayBatch::new(arr2(&[[0.0f32, -3.0, 0.0]]), arr2(&[[0.0f32, 1.0, 0.0]]))?;
+//! let clip = Aabb::new([-1.0; 3], [1.0; 3])?.clip(&rays);
+//! let samples = Uniform::new(Spacing::Step(model.voxel() / 2.0))?.sample(&rays, &clip)?;
+//! let mut tape = Tape::new();
+//! let color = model.render(&mut tape, &samples, [1.0, 1.0, 1.0], Method::Fused)?;
+//! // A fresh grid is a thin grey fog: density softplus(-4) = 0.018 over a length of 2.
+//! let c = tape.value(color)?[[0, 0]];
+//! assert!(c > 0.98 && c < 1.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use fogray::ops::sample::PackedSamples;
+use fogray::ops::{twins, Composite, CompositeInputs, GridBox, GridError, GridField};
+use fogray::tape::params::{ParamId, Params};
+use fogray::tape::{Float, Tape, TapeError, Var};
+use ndarray::{Array1, Array2, Array4, ArrayView2, Axis, IxDyn};
+
+use crate::activation::{softplus, Activation, CHANNELS};
+
+/// The box the grid covers.
+pub const BOUNDS: ([f64; 3], [f64; 3]) = ([-1.0; 3], [1.0; 3]);
+
+fn param_error(e: fogray::tape::params::ParamError) -> GridError {
+    GridError::Shape {
+        what: "grid",
+        expected: "the model's parameter, not lent to a tape".into(),
+        got: e.to_string(),
+    }
+}
+
+/// Which implementation of the grid lookup and the composite a render records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Method {
+    /// The fused ops (one record each, hand-written backwards).
+    Fused,
+    /// Their taped twins (built from tape primitives).
+    Taped,
+}
+
+/// A dense grid of raw density and colour, its parameters kept in a [`Params`] store.
+#[derive(Debug)]
+pub struct GridModel<F: Float> {
+    params: Params<F>,
+    grid: ParamId,
+    field: GridField,
+    activation: Activation,
+    nodes: usize,
+}
+
+impl<F: Float> GridModel<F> {
+    /// A grid of `nodes^3` nodes (at least 2) over `[-1, 1]^3`, every raw value 0: density
+    /// `softplus(shift)` and colour grey (0.5) everywhere.
+    ///
+    /// Errors: fewer than 2 nodes, or more than memory can address ([`GridError`]).
+    pub fn new(nodes: usize, shift: f64) -> Result<Self, GridError> {
+        let field = GridField::new(GridBox::new(&BOUNDS.0, &BOUNDS.1)?, &[nodes, nodes, nodes, CHANNELS])?;
+        let mut params = Params::new();
+        let grid = params
+            .add("grid", Array4::<F>::zeros((nodes, nodes, nodes, CHANNELS)))
+            .map_err(|e| GridError::Shape {
+                what: "grid",
+                expected: "a new parameter".into(),
+                got: e.to_string(),
+            })?;
+        Ok(GridModel {
+            params,
+            grid,
+            field,
+            activation: Activation { shift },
+            nodes,
+        })
+    }
+
+    /// The same field on a grid of `nodes^3` nodes: each new node takes the trilinear
+    /// interpolation of this grid's raw values at its position (coarse-to-fine growth).
+    ///
+    /// Errors: as [`GridModel::new`].
+    pub fn resampled(&self, nodes: usize) -> Result<Self, GridError> {
+        let mut grown = GridModel::<F>::new(nodes, self.activation.shift)?;
+        let spacing = grown.voxel();
+        let at = |i: usize| F::lit(BOUNDS.0[0] + i as f64 * spacing);
+        let positions = Array2::from_shape_fn((nodes * nodes * nodes, 3), |(p, axis)| match axis {
+            0 => at(p / (nodes * nodes)),
+            1 => at(p / nodes % nodes),
+            _ => at(p % nodes),
+        });
+        let grid = self.params.get(self.grid).map_err(param_error)?;
+        let raw = self.field.evaluate(&grid, &positions.view().into_dyn())?;
+        let raw = raw
+            .into_shape_with_order(IxDyn(&[nodes, nodes, nodes, CHANNELS]))
+            .map_err(|e| GridError::Shape {
+                what: "resampled grid",
+                expected: format!("[{nodes}, {nodes}, {nodes}, {CHANNELS}]"),
+                got: e.to_string(),
+            })?;
+        grown.params.get_mut(grown.grid).map_err(param_error)?.assign(&raw);
+        Ok(grown)
+    }
+
+    /// Nodes per axis.
+    pub fn nodes(&self) -> usize {
+        self.nodes
+    }
+
+    /// The spacing of the nodes, `2 / (nodes - 1)`.
+    pub fn voxel(&self) -> f64 {
+        2.0 / (self.nodes - 1) as f64
+    }
+
+    /// The parameter store (one parameter, the raw grid `[N, N, N, 4]`).
+    pub fn params(&self) -> &Params<F> {
+        &self.params
+    }
+
+    /// The parameter store, for an optimiser's step.
+    pub fn params_mut(&mut self) -> &mut Params<F> {
+        &mut self.params
+    }
+
+    /// The raw grid's id in the store.
+    pub fn grid_id(&self) -> ParamId {
+        self.grid
+    }
+
+    /// Records the render of `samples` on `tape`: lends the grid to the tape (no copy) and
+    /// renders it with [`GridModel::render_grid`]. Returns the colours `[R, 3]`, one row per
+    /// ray of `samples`.
+    ///
+    /// Errors: from the ops (a tape error naming the op), or the grid already lent elsewhere.
+    pub fn render(
+        &self,
+        tape: &mut Tape<F>,
+        samples: &PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+    ) -> Result<Var, TapeError> {
+        let grid = tape.param_from(&self.params, self.grid)?;
+        self.render_grid(tape, grid, samples, background, method)
+    }
+
+    /// Records the render of `samples` from the raw grid `grid` (a tape value of shape
+    /// `[N, N, N, 4]`, this model's or any other): looks it up at the sample positions,
+    /// activates and composites over `background`. Returns the colours `[R, 3]`.
+    ///
+    /// Errors: from the ops (a tape error naming the op).
+    pub fn render_grid(
+        &self,
+        tape: &mut Tape<F>,
+        grid: Var,
+        samples: &PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+    ) -> Result<Var, TapeError> {
+        let positions = tape.constant(samples.positions.clone());
+        let raw = match method {
+            Method::Fused => self.field.apply(tape, grid, positions)?,
+            Method::Taped => fogray::ops::grid::twin::lookup(tape, &self.field, grid, positions)?,
+        };
+        let activated = match method {
+            Method::Fused => self.activation.apply(tape, raw)?,
+            Method::Taped => self.activation.taped(tape, raw)?,
+        };
+        let op = Composite::packed(samples.offsets.clone());
+        let inputs = CompositeInputs {
+            sigma: activated.sigma,
+            delta: tape.constant(samples.delta.clone()),
+            color: activated.color,
+            background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
+            t: None,
+        };
+        let out = match method {
+            Method::Fused => op.apply(tape, &inputs)?,
+            Method::Taped => twins::stable(tape, &op, &inputs)?,
+        };
+        Ok(out.color)
+    }
+
+    /// The density at `positions` (`[m, 3]`), without a tape: for the occupancy grid and for
+    /// slices. A position outside the box reads raw 0 (density `softplus(shift)`).
+    ///
+    /// Errors: as [`GridField::evaluate`].
+    pub fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, GridError> {
+        let grid = self.params.get(self.grid).map_err(|e| GridError::Shape {
+            what: "grid",
+            expected: "the model's parameter".into(),
+            got: e.to_string(),
+        })?;
+        let raw = self.field.evaluate(&grid, &positions.into_dyn())?;
+        let shift = self.activation.shift;
+        Ok(raw
+            .axis_iter(Axis(0))
+            .map(|row| F::lit(softplus(row[0].as_f64() + shift)))
+            .collect())
+    }
+}

@@ -1,0 +1,128 @@
+//! Test PSNR against training seconds, one curve per configuration, as SVG and PNG.
+//!
+//! ```
+//! use fogray_grid::fit::LogEntry;
+//! use fogray_grid::plots::{psnr_curves, Curve};
+//!
+//! let log = [
+//!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0 },
+//!     LogEntry { step: 50, seconds: 2.0, train_loss: 0.01, test_psnr: 20.0 },
+//! ];
+//! let dir = std::env::temp_dir().join(format!("fogray-grid-plots-doc-{}", std::process::id()));
+//! std::fs::create_dir_all(&dir)?;
+//! psnr_curves(&dir.join("psnr"), &[Curve { label: "fused".into(), log: &log }])?;
+//! assert!(dir.join("psnr.png").exists() && dir.join("psnr.svg").exists());
+//! # std::fs::remove_dir_all(&dir)?;
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use std::path::{Path, PathBuf};
+
+use plotters::coord::Shift;
+use plotters::prelude::*;
+
+use crate::fit::LogEntry;
+use crate::images::ImageError;
+
+const FONT: &str = "sans-serif";
+const COLORS: [RGBColor; 6] = [
+    RGBColor(230, 120, 20),
+    RGBColor(40, 90, 200),
+    RGBColor(40, 160, 70),
+    RGBColor(200, 40, 60),
+    RGBColor(120, 70, 170),
+    RGBColor(90, 90, 90),
+];
+
+/// One configuration's log, with its legend label.
+#[derive(Debug, Clone)]
+pub struct Curve<'a> {
+    /// Shown in the legend.
+    pub label: String,
+    /// The evaluations, in order.
+    pub log: &'a [LogEntry],
+}
+
+fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, curves: &[Curve<'_>]) -> Result<(), String>
+where
+    DB::ErrorType: 'static,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
+    root.fill(&WHITE).map_err(err)?;
+    let points = || {
+        curves
+            .iter()
+            .flat_map(|c| c.log.iter())
+            .filter(|e| e.test_psnr.is_finite())
+    };
+    let t_max = points().map(|e| e.seconds).fold(0.0, f64::max).max(1e-3) * 1.05;
+    let lo = points().map(|e| e.test_psnr).fold(f64::INFINITY, f64::min);
+    let hi = points().map(|e| e.test_psnr).fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = if lo <= hi {
+        ((lo - 1.0).floor(), (hi + 1.0).ceil())
+    } else {
+        (0.0, 1.0)
+    };
+    let mut chart = ChartBuilder::on(root)
+        .caption("test PSNR against training time", (FONT, 20))
+        .margin(12)
+        .x_label_area_size(40)
+        .y_label_area_size(56)
+        .build_cartesian_2d(0.0..t_max, lo..hi)
+        .map_err(err)?;
+    chart
+        .configure_mesh()
+        .x_desc("training seconds (evaluations excluded)")
+        .y_desc("test PSNR (dB)")
+        .light_line_style(WHITE)
+        .draw()
+        .map_err(err)?;
+    for (k, c) in curves.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        let line = c
+            .log
+            .iter()
+            .filter(|e| e.test_psnr.is_finite())
+            .map(|e| (e.seconds, e.test_psnr));
+        chart
+            .draw_series(LineSeries::new(line, color.stroke_width(2)))
+            .map_err(err)?
+            .label(c.label.clone())
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+    }
+    chart
+        .configure_series_labels()
+        .position(SeriesLabelPosition::LowerRight)
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font((FONT, 14))
+        .draw()
+        .map_err(err)?;
+    Ok(())
+}
+
+/// Writes `<stem>.svg` and `<stem>.png` with one curve per entry of `curves` (points whose
+/// PSNR is not finite are left out).
+///
+/// Errors: [`ImageError::Empty`] for no curve, [`ImageError::Write`] if a file cannot be drawn
+/// or written.
+pub fn psnr_curves(stem: &Path, curves: &[Curve<'_>]) -> Result<(), ImageError> {
+    if curves.is_empty() {
+        return Err(ImageError::Empty);
+    }
+    let size = (900, 520);
+    let svg = PathBuf::from(format!("{}.svg", stem.display()));
+    let png = PathBuf::from(format!("{}.png", stem.display()));
+    let wrap = |path: &Path| {
+        let path = path.to_path_buf();
+        move |message| ImageError::Write { path, message }
+    };
+    {
+        let root = SVGBackend::new(&svg, size).into_drawing_area();
+        draw(&root, curves).map_err(wrap(&svg))?;
+        root.present().map_err(|e| wrap(&svg)(e.to_string()))?;
+    }
+    let root = BitMapBackend::new(&png, size).into_drawing_area();
+    draw(&root, curves).map_err(wrap(&png))?;
+    root.present().map_err(|e| wrap(&png)(e.to_string()))
+}
