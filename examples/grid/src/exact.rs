@@ -24,6 +24,8 @@
 //! assert!((px.color[1] - (-2.0f64).exp()).abs() < 1e-15); // only the background has green
 //! ```
 
+use fogray::ops::Aabb;
+
 use crate::scene::{Cuboid, Primitive, Scene, Sphere};
 
 /// A ray `origin + t direction` for `t >= 0`. `direction` need not be unit, but then depths
@@ -92,25 +94,12 @@ pub fn sphere_span(s: &Sphere, ray: &Ray) -> Option<Span> {
     clip(t0, t1)
 }
 
-/// The part of the ray (`t >= 0`) inside the box (slab method), or `None` if it misses.
-///
-/// A direction component of zero is handled apart (the ray is inside that slab everywhere or
-/// nowhere), so `0 * inf` never produces NaN.
+/// The part of the ray (`t >= 0`) inside the box, or `None` if it misses or only grazes it:
+/// fogray-ops' ray/box clipping (the slab method), kept when it has a length. A box that is
+/// flat on some axis holds no medium and has no span.
 pub fn box_span(b: &Cuboid, ray: &Ray) -> Option<Span> {
-    let (mut enter, mut exit) = (f64::NEG_INFINITY, f64::INFINITY);
-    for k in 0..3 {
-        let (o, d) = (ray.origin[k], ray.direction[k]);
-        if d == 0.0 {
-            if o < b.min[k] || o > b.max[k] {
-                return None;
-            }
-            continue;
-        }
-        let (t0, t1) = ((b.min[k] - o) / d, (b.max[k] - o) / d);
-        enter = enter.max(t0.min(t1));
-        exit = exit.min(t0.max(t1));
-    }
-    clip(enter, exit)
+    let (enter, exit) = Aabb::new(b.min, b.max).ok()?.clip_ray(ray.origin, ray.direction)?;
+    (exit > enter).then_some(Span { enter, exit })
 }
 
 fn clip(enter: f64, exit: f64) -> Option<Span> {
