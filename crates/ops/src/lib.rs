@@ -44,6 +44,7 @@ pub mod composite;
 mod error;
 pub mod grid;
 pub mod hard;
+mod math;
 pub mod rays;
 pub mod sample;
 pub mod twins;
