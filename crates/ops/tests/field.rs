@@ -144,7 +144,7 @@ fn values_and_slopes_at_the_extremes_are_those_computed_by_hand() {
     assert_eq!(g.row(1).to_vec(), [1.0, 0.0, 0.0, 0.25]);
     assert_eq!(g.row(2).to_vec()[..3], [0.0, 0.0, 0.0]);
     assert_eq!(g[[3, 0]], out.color[[0, 2]]); // softplus'(-40) = sigmoid(-40)
-    // sigmoid'(710) = e^-710, a subnormal, not 0.
+                                              // sigmoid'(710) = e^-710, a subnormal, not 0.
     assert!((g[[3, 3]] / (-710f64).exp() - 1.0).abs() < 1e-6);
 }
 
