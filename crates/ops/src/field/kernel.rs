@@ -29,18 +29,30 @@ impl Scratch {
     /// Gathers `raw[., 0] + shift` of the chunk's rows (`k` values a row).
     #[inline(always)]
     fn gather_density<F: Float>(&mut self, raw: &[F], k: usize, shift: f64) -> &mut [f64] {
-        self.density.clear();
-        self.density
-            .extend(raw.chunks_exact(k).map(|row| row[0].as_f64() + shift));
+        self.density.resize(raw.len() / k, 0.0);
+        for (d, row) in self.density.iter_mut().zip(raw.chunks_exact(k)) {
+            *d = row[0].as_f64() + shift;
+        }
         &mut self.density
     }
 
     /// Gathers `raw[., 1..k]` of the chunk's rows, row-major.
     #[inline(always)]
     fn gather_color<F: Float>(&mut self, raw: &[F], k: usize) -> &mut [f64] {
-        self.color.clear();
-        for row in raw.chunks_exact(k) {
-            self.color.extend(row[1..].iter().map(|v| v.as_f64()));
+        self.color.resize(raw.len() / k * (k - 1), 0.0);
+        if k == 4 {
+            // The common RGB case with the row length a constant: no inner loop to set up.
+            for (c, row) in self.color.chunks_exact_mut(3).zip(raw.chunks_exact(4)) {
+                c[0] = row[1].as_f64();
+                c[1] = row[2].as_f64();
+                c[2] = row[3].as_f64();
+            }
+        } else {
+            for (c, row) in self.color.chunks_exact_mut(k - 1).zip(raw.chunks_exact(k)) {
+                for (c, v) in c.iter_mut().zip(&row[1..]) {
+                    *c = v.as_f64();
+                }
+            }
         }
         &mut self.color
     }
@@ -176,9 +188,17 @@ fn backward_chunk<F: Float>(
                     *v = g.as_f64() * sigmoid_slope::<false>(*v);
                 }
             }
-            for (row, values) in g_raw.chunks_exact_mut(k).zip(x.chunks_exact(k - 1)) {
-                for (o, &v) in row[1..].iter_mut().zip(values) {
-                    *o = F::lit(v);
+            if k == 4 {
+                for (row, v) in g_raw.chunks_exact_mut(4).zip(x.chunks_exact(3)) {
+                    row[1] = F::lit(v[0]);
+                    row[2] = F::lit(v[1]);
+                    row[3] = F::lit(v[2]);
+                }
+            } else {
+                for (row, values) in g_raw.chunks_exact_mut(k).zip(x.chunks_exact(k - 1)) {
+                    for (o, &v) in row[1..].iter_mut().zip(values) {
+                        *o = F::lit(v);
+                    }
                 }
             }
         }
