@@ -11,18 +11,25 @@ use ndarray::{Array1, Array2, ArrayD, IxDyn};
 fn store<F: Float>() -> (Params<F>, ParamId, ParamId) {
     let mut params = Params::new();
     let w = params
-        .add("w", Array2::from_shape_fn((130, 160), |(i, j)| F::lit(((i * 7 + j) as f64 * 0.13).sin())))
+        .add(
+            "w",
+            Array2::from_shape_fn((130, 160), |(i, j)| F::lit(((i * 7 + j) as f64 * 0.13).sin())),
+        )
         .unwrap();
-    let b = params.add("b", Array1::from_shape_fn(160, |j| F::lit(j as f64 * 0.01))).unwrap();
+    let b = params
+        .add("b", Array1::from_shape_fn(160, |j| F::lit(j as f64 * 0.01)))
+        .unwrap();
     (params, w, b)
 }
 
 /// A copy of `params`'s values in a new store (new identity), as a reload would make.
 fn copy<F: Float>(params: &Params<F>) -> (Params<F>, ParamId, ParamId) {
     let mut fresh = Params::new();
-    let mut ids = params
-        .ids()
-        .map(|id| fresh.add(params.name(id).unwrap(), params.get(id).unwrap().to_owned()).unwrap());
+    let mut ids = params.ids().map(|id| {
+        fresh
+            .add(params.name(id).unwrap(), params.get(id).unwrap().to_owned())
+            .unwrap()
+    });
     let (w, b) = (ids.next().unwrap(), ids.next().unwrap());
     (fresh, w, b)
 }

@@ -192,8 +192,12 @@ impl<F: Float> Adam<F> {
             value,
             range,
         };
-        let t = i32::try_from(state.updates).map_err(|_| invalid("updates", 0, state.updates as f64, "at most 2^31 - 1"))?;
-        let moments = [("first moment", &state.first_moment), ("second moment", &state.second_moment)];
+        let t = i32::try_from(state.updates)
+            .map_err(|_| invalid("updates", 0, state.updates as f64, "at most 2^31 - 1"))?;
+        let moments = [
+            ("first moment", &state.first_moment),
+            ("second moment", &state.second_moment),
+        ];
         for (what, moment) in moments {
             if moment.shape() != entry.value.shape() {
                 return Err(ParamError::StateShape {
@@ -234,4 +238,3 @@ impl<F: Float> Adam<F> {
         self.slots.step(&self.config, self.config.lr, params, grads)
     }
 }
-
