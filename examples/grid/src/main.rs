@@ -289,6 +289,15 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     if let Some(dir) = &args.out {
         create_dir(dir)?;
     }
+    if let Some(file) = &args.save_model {
+        let parent = file
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            anyhow::bail!("cannot write {}: no directory {}", file.display(), parent.display());
+        }
+    }
     let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background)?;
     let saved = SavedFit {
         precision,

@@ -256,6 +256,9 @@ fn rewrite(good: &Path, bad: &Path, edit: impl FnOnce(&mut Vec<(String, TensorDa
     safetensors::serialize_to_file(views, Some(meta), bad).unwrap();
 }
 
+/// A change to a file's tensors and metadata.
+type Edit = dyn FnOnce(&mut Vec<(String, TensorData)>, &mut HashMap<String, String>);
+
 struct TensorData {
     dtype: safetensors::tensor::Dtype,
     shape: Vec<usize>,
@@ -309,10 +312,7 @@ fn bad_files_are_refused_with_a_typed_error() {
     ));
 
     let bad = temp("bad.safetensors");
-    let cases: Vec<(
-        &str,
-        Box<dyn FnOnce(&mut Vec<(String, TensorData)>, &mut HashMap<String, String>)>,
-    )> = vec![
+    let cases: Vec<(&str, Box<Edit>)> = vec![
         (
             "\"grid\" holds NaN",
             Box::new(|t, _| {
