@@ -168,7 +168,7 @@ pub struct FitResult<F: Float> {
     pub final_test_psnr: f64,
     /// Training seconds, evaluations excluded.
     pub seconds: f64,
-    /// Mean samples per training ray over all steps.
+    /// Mean samples per training ray over this call's steps (NaN if it took none).
     pub samples_per_ray_mean: f64,
     /// Fraction of occupied cells at the end (1 with uniform sampling).
     pub occupied_fraction: f64,
@@ -295,9 +295,11 @@ pub fn fit<F: Float>(
 /// counts the steps and seconds of `start` too, is spent or `stop` is raised (checked before
 /// each step, so the step under way is finished). Calls `progress` after every step.
 ///
-/// Continuing a fit stopped at step `k` with the same `config` takes the same steps, bit for
-/// bit, as the fit that was never stopped (with uniform sampling and a budget of steps; an
-/// occupancy grid starts afresh, every cell occupied until its next refresh).
+/// Continuing a fit stopped at step `k` takes the same steps, bit for bit, as the fit that
+/// was never stopped, given the same `config` (growth happens at fractions of the budget, so
+/// the first part must have had the same budget or no growth), uniform sampling (an occupancy
+/// grid is not part of the state: it starts afresh, every cell occupied until its next
+/// refresh) and a budget of steps (a budget of seconds stops where the clock says).
 ///
 /// Test views are rendered with uniform samples whatever the training sampling, so that the
 /// PSNR of the two samplings measures the same thing.
