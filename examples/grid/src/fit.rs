@@ -16,6 +16,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
 use fogray::ops::rays::{Aabb, RayBatch};
@@ -25,14 +26,15 @@ use fogray::tape::optim::{Adam, AdamConfig};
 use fogray::tape::params::ParamError;
 use fogray::tape::{Float, Tape, TapeError};
 use ndarray::{Array2, Array3, Axis};
-use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha12Rng;
 use serde::Serialize;
 use thiserror::Error;
 
 use crate::dataset::Dataset;
 use crate::images::{psnr, ImageError};
 use crate::model::{GridModel, Method, BOUNDS};
+use crate::state::{Start, TrainingState};
 
 /// Why a fit could not run.
 #[non_exhaustive]
@@ -166,7 +168,7 @@ pub struct FitResult<F: Float> {
     pub final_test_psnr: f64,
     /// Training seconds, evaluations excluded.
     pub seconds: f64,
-    /// Mean samples per training ray over all steps.
+    /// Mean samples per training ray over this call's steps (NaN if it took none).
     pub samples_per_ray_mean: f64,
     /// Fraction of occupied cells at the end (1 with uniform sampling).
     pub occupied_fraction: f64,
@@ -174,6 +176,10 @@ pub struct FitResult<F: Float> {
     pub renders: Vec<Array3<f64>>,
     /// The fitted model.
     pub model: GridModel<F>,
+    /// Where the fit stopped, beyond the model: with it, [`fit_from`] continues the fit.
+    pub training: TrainingState<F>,
+    /// Whether the fit stopped early because its stop flag was raised.
+    pub interrupted: bool,
 }
 
 /// Progress reported after every step.
@@ -275,20 +281,52 @@ fn check(config: &FitConfig) -> Result<(), FitError> {
 }
 
 /// Fits a grid to `data` (see the [module docs](self)); calls `progress` after every step.
-///
-/// Test views are rendered with uniform samples whatever the training sampling, so that the
-/// PSNR of the two samplings measures the same thing.
-///
-/// Errors: a setting out of range ([`FitError::Config`]), or an error of the ops.
+/// A fresh fit to its budget: [`fit_from`] with no start and no stop flag.
 pub fn fit<F: Float>(
     data: &Dataset,
     config: &FitConfig,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<FitResult<F>, FitError> {
+    fit_from(data, config, None, None, progress)
+}
+
+/// Fits a grid to `data` from `start` (a saved fit: model, Adam's moments, step, training
+/// seconds, growth stage and position in the batch stream) or afresh, until the budget, which
+/// counts the steps and seconds of `start` too, is spent or `stop` is raised (checked before
+/// each step, so the step under way is finished). Calls `progress` after every step.
+///
+/// Continuing a fit stopped at step `k` takes the same steps, bit for bit, as the fit that
+/// was never stopped, given the same `config` (growth happens at fractions of the budget, so
+/// the first part must have had the same budget or no growth), uniform sampling (an occupancy
+/// grid is not part of the state: it starts afresh, every cell occupied until its next
+/// refresh) and a budget of steps (a budget of seconds stops where the clock says).
+///
+/// Test views are rendered with uniform samples whatever the training sampling, so that the
+/// PSNR of the two samplings measures the same thing.
+///
+/// Errors: a setting out of range ([`FitError::Config`]), or an error of the ops.
+pub fn fit_from<F: Float>(
+    data: &Dataset,
+    config: &FitConfig,
+    start: Option<Start<F>>,
+    stop: Option<&AtomicBool>,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<FitResult<F>, FitError> {
     check(config)?;
     let stages = stages(config);
-    let mut model = GridModel::<F>::new(stages[0].1, config.shift)?;
-    let mut next_stage = 1;
+    let (mut model, resumed) = match start {
+        Some(s) => (s.model, Some(s.training)),
+        None => (GridModel::<F>::new(stages[0].1, config.shift)?, None),
+    };
+    let stage = resumed.as_ref().map_or(0, |t| t.stage);
+    if stages.get(stage).map(|s| s.1) != Some(model.nodes()) {
+        return Err(FitError::Config(format!(
+            "the saved grid ({} nodes per axis, growth stage {stage}) is not a stage of this fit's --grid {}",
+            model.nodes(),
+            config.grid
+        )));
+    }
+    let mut next_stage = stage + 1;
     // The final grid's half voxel: the occupancy threshold means the same at every stage.
     let final_step = 1.0 / (config.grid - 1) as f64;
     let mut sampler = match config.sampling {
@@ -304,10 +342,21 @@ pub fn fit<F: Float>(
         ..AdamConfig::default()
     };
     let mut adam = Adam::new(adam_config)?;
-    let mut rng = StdRng::seed_from_u64(config.seed);
+    // StdRng's generator, named so that its position in the stream can be saved.
+    let mut rng = ChaCha12Rng::seed_from_u64(config.seed);
+    let (mut seconds, mut step) = (0.0, 0usize);
+    if let Some(t) = resumed {
+        rng.set_word_pos(t.batch_stream);
+        (seconds, step) = (t.seconds, t.step);
+        if let Some(state) = t.adam {
+            adam.restore(model.params(), model.grid_id(), state)?;
+        }
+    }
+    let first_step = step;
+    let mut interrupted = false;
     let mut tape = Tape::<F>::new();
     let pixels = data.origins.nrows();
-    let (mut seconds, mut step, mut loss, mut samples_total) = (0.0, 0usize, f64::NAN, 0usize);
+    let (mut loss, mut samples_total) = (f64::NAN, 0usize);
     let fraction = |step: usize, seconds: f64| match config.budget {
         Budget::Steps(n) => step as f64 / n as f64,
         Budget::Seconds(s) => seconds / s,
@@ -321,9 +370,13 @@ pub fn fit<F: Float>(
             test_psnr: test_psnr(&renders, data)?,
         })
     };
-    let mut log = vec![evaluate(&model, 0, 0.0, loss)?];
-    let mut next_eval = 1;
+    let mut log = vec![evaluate(&model, step, seconds, loss)?];
+    let mut next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
     while fraction(step, seconds) < 1.0 {
+        if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+            interrupted = true;
+            break;
+        }
         let start = Instant::now();
         if next_stage < stages.len() && fraction(step, seconds) >= stages[next_stage].0 {
             model = model.resampled(stages[next_stage].1)?;
@@ -367,13 +420,22 @@ pub fn fit<F: Float>(
         Sampler::Occupancy(g) => g.occupied_fraction(),
         Sampler::Uniform => 1.0,
     };
+    let training = TrainingState {
+        step,
+        seconds,
+        stage: next_stage - 1,
+        batch_stream: rng.get_word_pos(),
+        adam: adam.state(model.params(), model.grid_id())?,
+    };
     Ok(FitResult {
         final_test_psnr: test_psnr(&renders, data)?,
         log,
         seconds,
-        samples_per_ray_mean: samples_total as f64 / (step * config.batch) as f64,
+        samples_per_ray_mean: samples_total as f64 / ((step - first_step) * config.batch) as f64,
         occupied_fraction,
         renders,
         model,
+        training,
+        interrupted,
     })
 }

@@ -15,6 +15,10 @@
 //!   density/colour activation and composite (fused, or their taped twins);
 //! - [`dataset`]: the training rays and colours, the test views;
 //! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
+//! - [`state`], [`checkpoint`]: where a fit stands, saved to a safetensors file and read back
+//!   to continue it or render from it;
+//! - [`render`], [`depth`]: any camera of the ring rendered from a model, with its expected
+//!   depth drawn as a PNG;
 //! - [`plots`]: test PSNR against training seconds.
 //!
 //! ```
@@ -29,12 +33,16 @@
 
 #![warn(missing_docs)]
 
+pub mod checkpoint;
 pub mod dataset;
+pub mod depth;
 pub mod exact;
 pub mod fit;
 pub mod images;
 pub mod model;
 pub mod photographs;
 pub mod plots;
+pub mod render;
 pub mod ring;
 pub mod scene;
+pub mod state;

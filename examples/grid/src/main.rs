@@ -7,17 +7,23 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 use anyhow::{Context, Result};
-use clap::{Args, Parser, Subcommand};
+use clap::parser::ValueSource;
+use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use serde::Serialize;
 
+use fogray_grid::checkpoint::{self, Cameras, ModelInfo, SavedFit};
 use fogray_grid::dataset::Dataset;
-use fogray_grid::fit::{fit, Budget, FitConfig, FitResult, Sampling};
+use fogray_grid::depth::write_depth_png;
+use fogray_grid::fit::{fit_from, Budget, FitConfig, FitResult, Sampling};
 use fogray_grid::images::{nested, write_comparison_png, write_png};
 use fogray_grid::model::Method;
-use fogray_grid::photographs::photographs;
+use fogray_grid::photographs::{photograph, photographs};
 use fogray_grid::plots;
+use fogray_grid::render::render_view;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
@@ -69,6 +75,14 @@ impl RingArgs {
     fn ring(&self) -> Result<Ring> {
         Ok(Ring::new(self.views, self.test_views, self.size)?)
     }
+
+    fn cameras(&self) -> Cameras {
+        Cameras {
+            views: self.views,
+            test_views: self.test_views,
+            size: self.size,
+        }
+    }
 }
 
 #[derive(Subcommand)]
@@ -90,6 +104,10 @@ enum Command {
     /// Fits a dense grid of density and colour to the training views' exact photographs
     /// (Adam on random batches of rays), measuring the test PSNR on the held-out views.
     Fit(FitArgs),
+    /// Renders views of the ring from a model saved by `fit --save-model`: per view, the exact
+    /// photograph, the render and |render - exact| x 4 (view-NNN.png) and the expected depth
+    /// (depth-NNN.png), and the PSNR of the render against the photograph.
+    Render(RenderArgs),
     /// Writes the built-in scene as JSON, to edit and pass back with --scene.
     Scene {
         /// File to write; stdout if absent.
@@ -145,6 +163,48 @@ struct FitArgs {
     /// File for the final renders of the test views as {"images": [view][row][column][channel]}.
     #[arg(long)]
     save_renders: Option<PathBuf>,
+    /// Safetensors file for the model and the fit's state (Adam's moments, step, seconds, batch
+    /// stream), written at the end or on Ctrl-C.
+    #[arg(long, value_name = "FILE")]
+    save_model: Option<PathBuf>,
+    /// Continue the fit saved in FILE. --steps / --seconds are the total budget, the saved
+    /// steps / seconds included (the saved budget if neither is given). --grid and --precision
+    /// must match the file's; every other setting, the scene and the cameras are the file's
+    /// unless given.
+    #[arg(long, value_name = "FILE")]
+    resume: Option<PathBuf>,
+}
+
+#[derive(Args)]
+struct RenderArgs {
+    /// Model file written by `fit --save-model`.
+    #[arg(long, value_name = "FILE")]
+    model: PathBuf,
+    /// Scene file for the exact photographs; the scene saved in the model file if absent.
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Training views of the ring; the fit's (saved in the model file) if absent.
+    #[arg(long)]
+    views: Option<usize>,
+    /// Held-out test views of the ring; the fit's if absent.
+    #[arg(long)]
+    test_views: Option<usize>,
+    /// Image width and height in pixels; the fit's if absent.
+    #[arg(long)]
+    size: Option<usize>,
+    /// A view to render (repeat for several); the ring's test views if neither --view nor --all.
+    #[arg(long = "view", value_name = "I")]
+    view: Vec<usize>,
+    /// Render every view of the ring.
+    #[arg(long, conflicts_with = "view")]
+    all: bool,
+    /// Directory for the PNGs (created if missing).
+    #[arg(long, default_value = ".")]
+    out: PathBuf,
+    /// Print the renders as {"images": [view][row][column][channel], "views": [...], "psnr":
+    /// [...]} instead of a summary.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -201,14 +261,62 @@ struct FitSummary<'a> {
     occupied_fraction: f64,
 }
 
-fn run_fit(args: FitArgs) -> Result<()> {
-    let (scene, ring) = (args.scene.load()?, args.ring.ring()?);
+/// What a fit resumes from: the file and its metadata.
+struct Resume {
+    path: PathBuf,
+    info: ModelInfo,
+}
+
+fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
+    let resume = match &args.resume {
+        Some(path) => Some(Resume {
+            path: path.clone(),
+            info: checkpoint::read_info(path)?,
+        }),
+        None => None,
+    };
+    let precision = match args.precision {
+        Precision::F32 => checkpoint::Precision::F32,
+        Precision::F64 => checkpoint::Precision::F64,
+    };
+    let flags = flag_config(&args);
+    let (config, cameras, scene, precision) = match &resume {
+        None => (flags, args.ring.cameras(), args.scene.load()?, precision),
+        Some(r) => resumed_settings(&args, r, flags, precision, given)?,
+    };
+    let ring = cameras.ring()?;
     // Before training, so that a bad directory costs nothing.
     if let Some(dir) = &args.out {
         create_dir(dir)?;
     }
+    if let Some(file) = &args.save_model {
+        let parent = file
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            anyhow::bail!("cannot write {}: no directory {}", file.display(), parent.display());
+        }
+    }
     let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background)?;
-    let config = FitConfig {
+    let saved = SavedFit {
+        precision,
+        config,
+        cameras,
+        scene,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = Arc::clone(&stop);
+    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("cannot catch Ctrl-C")?;
+    match precision {
+        checkpoint::Precision::F32 => fit_and_save::<f32>(&args, &data, &saved, resume.as_ref(), &stop),
+        checkpoint::Precision::F64 => fit_and_save::<f64>(&args, &data, &saved, resume.as_ref(), &stop),
+    }
+}
+
+/// The settings the flags ask for.
+fn flag_config(args: &FitArgs) -> FitConfig {
+    FitConfig {
         grid: args.grid,
         batch: args.batch,
         budget: match (args.steps, args.seconds) {
@@ -227,7 +335,94 @@ fn run_fit(args: FitArgs) -> Result<()> {
         lr: args.lr,
         grow: !args.no_grow,
         ..FitConfig::default()
+    }
+}
+
+/// A resumed fit's settings: the file's, except those given on the command line; --grid and
+/// --precision, if given, must be the file's.
+fn resumed_settings(
+    args: &FitArgs,
+    resume: &Resume,
+    flags: FitConfig,
+    precision: checkpoint::Precision,
+    given: &dyn Fn(&str) -> bool,
+) -> Result<(FitConfig, Cameras, Scene, checkpoint::Precision)> {
+    let saved = &resume.info.fit;
+    let asked_precision = if given("precision") { precision } else { saved.precision };
+    let asked_grid = if given("grid") { flags.grid } else { saved.config.grid };
+    resume.info.check_matches(&resume.path, asked_precision, asked_grid)?;
+    let pick = |id: &str| given(id);
+    let file = saved.config;
+    let config = FitConfig {
+        grid: file.grid,
+        batch: if pick("batch") { flags.batch } else { file.batch },
+        budget: if pick("steps") || pick("seconds") {
+            flags.budget
+        } else {
+            file.budget
+        },
+        method: if pick("method") { flags.method } else { file.method },
+        sampling: if pick("sampling") {
+            flags.sampling
+        } else {
+            file.sampling
+        },
+        seed: if pick("seed") { flags.seed } else { file.seed },
+        lr: if pick("lr") { flags.lr } else { file.lr },
+        grow: if pick("no_grow") { flags.grow } else { file.grow },
+        ..file
     };
+    let cameras = Cameras {
+        views: if pick("views") {
+            args.ring.views
+        } else {
+            saved.cameras.views
+        },
+        test_views: if pick("test_views") {
+            args.ring.test_views
+        } else {
+            saved.cameras.test_views
+        },
+        size: if pick("size") {
+            args.ring.size
+        } else {
+            saved.cameras.size
+        },
+    };
+    let scene = if pick("scene") {
+        args.scene.load()?
+    } else {
+        saved.scene.clone()
+    };
+    Ok((config, cameras, scene, saved.precision))
+}
+
+/// Where an interrupted fit is saved without --save-model.
+fn default_model_path(args: &FitArgs) -> PathBuf {
+    let name = "fogray-grid-model.safetensors";
+    match &args.out {
+        Some(dir) => dir.join(name),
+        None => PathBuf::from(name),
+    }
+}
+
+/// Exit status of a fit stopped by Ctrl-C (after saving it): 128 + SIGINT, as a shell reports.
+const INTERRUPTED: i32 = 130;
+
+fn fit_and_save<F: fogray::tape::Float>(
+    args: &FitArgs,
+    data: &Dataset,
+    saved: &SavedFit,
+    resume: Option<&Resume>,
+    stop: &AtomicBool,
+) -> Result<()> {
+    let start = match resume {
+        Some(r) => Some(checkpoint::load::<F>(&r.path)?.start),
+        None => None,
+    };
+    let save_path = args.save_model.clone().unwrap_or_else(|| default_model_path(args));
+    let first_step = start.as_ref().map_or(0, |s| s.training.step);
+    let config = saved.config;
     let bar = if args.json {
         indicatif::ProgressBar::hidden()
     } else {
@@ -238,13 +433,31 @@ fn run_fit(args: FitArgs) -> Result<()> {
         bar
     };
     let mut progress = |p: fogray_grid::fit::Progress| {
+        if p.step == first_step + 1 {
+            bar.suspend(|| {
+                eprintln!(
+                    "fogray-grid: training; Ctrl-C stops after the current step and saves the fit to {}",
+                    save_path.display()
+                )
+            });
+        }
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!("step {}", p.step));
     };
-    match args.precision {
-        Precision::F32 => report_fit(&args, &data, fit::<f32>(&data, &config, &mut progress)?, &bar),
-        Precision::F64 => report_fit(&args, &data, fit::<f64>(&data, &config, &mut progress)?, &bar),
+    let result = fit_from::<F>(data, &config, start, Some(stop), &mut progress)?;
+    if args.save_model.is_some() || result.interrupted {
+        checkpoint::save(&save_path, &result.model, &result.training, saved)?;
     }
+    if result.interrupted {
+        bar.finish_and_clear();
+        eprintln!(
+            "fogray-grid: interrupted after step {}: the fit is saved to {} (continue it with --resume)",
+            result.training.step,
+            save_path.display()
+        );
+        std::process::exit(INTERRUPTED);
+    }
+    report_fit(args, data, result, &bar)
 }
 
 fn report_fit<F: fogray::tape::Float>(
@@ -322,7 +535,7 @@ fn create_dir(dir: &Path) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("cannot create {}", dir.display()))
 }
 
-fn run(cli: Cli) -> Result<()> {
+fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
     match cli.command {
         Command::Photographs { scene, ring, json, out } => {
             let (scene, ring) = (scene.load()?, ring.ring()?);
@@ -357,7 +570,12 @@ fn run(cli: Cli) -> Result<()> {
                 println!("written: {}/view-000.png .. {}", dir.display(), last.display());
             }
         }
-        Command::Fit(args) => run_fit(args)?,
+        Command::Fit(args) => {
+            let fit = matches.subcommand_matches("fit");
+            let given = |id: &str| fit.and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine);
+            run_fit(args, &given)?
+        }
+        Command::Render(args) => run_render(args)?,
         Command::Scene { out } => {
             let text = Scene::default().to_json_pretty() + "\n";
             match out {
@@ -371,6 +589,87 @@ fn run(cli: Cli) -> Result<()> {
     Ok(())
 }
 
+#[derive(Serialize)]
+struct RenderSummary {
+    images: Vec<Vec<Vec<Vec<f64>>>>,
+    views: Vec<usize>,
+    psnr: Vec<f64>,
+}
+
+fn run_render(args: RenderArgs) -> Result<()> {
+    let info = checkpoint::read_info(&args.model)?;
+    let saved = &info.fit;
+    let cameras = Cameras {
+        views: args.views.unwrap_or(saved.cameras.views),
+        test_views: args.test_views.unwrap_or(saved.cameras.test_views),
+        size: args.size.unwrap_or(saved.cameras.size),
+    };
+    let ring = cameras.ring()?;
+    let scene = match &args.scene {
+        Some(path) => Scene::read(path)?,
+        None => saved.scene.clone(),
+    };
+    let views = if args.all {
+        (0..ring.len()).collect()
+    } else if args.view.is_empty() {
+        ring.test_views()
+    } else {
+        args.view.clone()
+    };
+    if let Some(&bad) = views.iter().find(|&&v| v >= ring.len()) {
+        anyhow::bail!(
+            "--view {bad} is out of range: the ring has views 0 to {}",
+            ring.len() - 1
+        );
+    }
+    if views.is_empty() {
+        anyhow::bail!("no view to render: the ring has no test views; pass --view I or --all");
+    }
+    create_dir(&args.out)?;
+    match saved.precision {
+        checkpoint::Precision::F32 => render_views::<f32>(&args, &ring, &scene, &views),
+        checkpoint::Precision::F64 => render_views::<f64>(&args, &ring, &scene, &views),
+    }
+}
+
+fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &Scene, views: &[usize]) -> Result<()> {
+    let model = checkpoint::load::<F>(&args.model)?.start.model;
+    // PNGs of about 256 pixels a side whatever the image size.
+    let scale = (256 / ring.size()).clamp(1, 16) as u32;
+    let mut summary = RenderSummary {
+        images: Vec::new(),
+        views: views.to_vec(),
+        psnr: Vec::new(),
+    };
+    for &view in views {
+        let r = render_view(&model, ring, view, scene.background)?;
+        let exact = photograph(scene, &ring.camera(view), ring.size());
+        let db = fogray_grid::images::psnr(&[r.color.view()], &[exact.view()])?;
+        let image_path = args.out.join(format!("view-{view:03}.png"));
+        let depth_path = args.out.join(format!("depth-{view:03}.png"));
+        write_comparison_png(&image_path, exact.view(), r.color.view(), 4.0, scale)?;
+        let range = write_depth_png(&depth_path, r.depth.view(), &format!("view {view}"), scale)?;
+        if !args.json {
+            let depth = match range {
+                Some(d) => format!("depth {:.3} to {:.3}", d.near, d.far),
+                None => "no pixel opaque enough for a depth".into(),
+            };
+            println!(
+                "view {view:>3}{}  PSNR {db:.2} dB  {}  {} ({depth})",
+                if ring.is_test(view) { " (test)" } else { "       " },
+                image_path.display(),
+                depth_path.display()
+            );
+        }
+        summary.images.push(nested(r.color.view()));
+        summary.psnr.push(db);
+    }
+    if args.json {
+        return write_stdout(|w| Ok(serde_json::to_writer(w, &summary)?));
+    }
+    Ok(())
+}
+
 /// One line on stderr and status 2.
 fn fail(message: &str) -> ExitCode {
     eprintln!("fogray-grid: error: {}", message.replace('\n', " "));
@@ -378,8 +677,11 @@ fn fail(message: &str) -> ExitCode {
 }
 
 fn main() -> ExitCode {
-    let cli = match Cli::try_parse() {
-        Ok(cli) => cli,
+    let parsed = Cli::command()
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m).map(|cli| (cli, m)));
+    let (cli, matches) = match parsed {
+        Ok(parsed) => parsed,
         Err(e) => {
             use clap::error::ErrorKind;
             return match e.kind() {
@@ -388,7 +690,7 @@ fn main() -> ExitCode {
                     ExitCode::SUCCESS
                 }
                 ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand | ErrorKind::MissingSubcommand => {
-                    fail("a subcommand is required (photographs, fit, scene); see --help")
+                    fail("a subcommand is required (photographs, fit, render, scene); see --help")
                 }
                 _ => {
                     // clap's message is its first line; the rest is usage and a hint.
@@ -399,7 +701,7 @@ fn main() -> ExitCode {
             };
         }
     };
-    match run(cli) {
+    match run(cli, &matches) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => fail(&format!("{e:#}")),
     }

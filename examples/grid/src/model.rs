@@ -24,7 +24,7 @@
 
 use fogray::ops::field::{twin, DensityColor};
 use fogray::ops::sample::PackedSamples;
-use fogray::ops::{twins, Composite, CompositeInputs, FieldError, GridBox, GridError, GridField};
+use fogray::ops::{twins, Composite, CompositeInputs, CompositeVars, FieldError, GridBox, GridError, GridField};
 use fogray::tape::params::{ParamId, Params};
 use fogray::tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
@@ -199,6 +199,34 @@ impl<F: Float> GridModel<F> {
             Method::Taped => twins::stable(tape, &op, &inputs)?,
         };
         Ok(out.color)
+    }
+
+    /// Records the render of `samples` with the fused ops, as [`GridModel::render`] does, and
+    /// also the composite's expected depth `sum w_k t_k` of each ray (unnormalised; divide by
+    /// the opacity for the depth given that the ray stops). Returns the composite's outputs:
+    /// colour `[R, 3]`, opacity `[R]`, depth `[R]`.
+    ///
+    /// Errors: as [`GridModel::render`].
+    pub fn render_with_depth(
+        &self,
+        tape: &mut Tape<F>,
+        samples: &PackedSamples<F>,
+        background: [f64; 3],
+    ) -> Result<CompositeVars, TapeError> {
+        let grid = tape.param_from(&self.params, self.grid)?;
+        let positions = tape.constant(samples.positions.clone());
+        let raw = self.field.apply(tape, grid, positions)?;
+        let activated = self.activation.apply(tape, raw)?;
+        let inputs = CompositeInputs {
+            sigma: activated.sigma,
+            delta: tape.constant(samples.delta.clone()),
+            color: activated.color,
+            background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
+            t: Some(tape.constant(samples.t.clone())),
+        };
+        Composite::packed(samples.offsets.clone())
+            .with_depth()
+            .apply(tape, &inputs)
     }
 
     /// The density at `positions` (`[m, 3]`), without a tape: for the occupancy grid and for

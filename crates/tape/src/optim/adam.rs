@@ -1,6 +1,8 @@
 //! Adam (Kingma and Ba, 2015) with bias-corrected moments.
 
-use super::chunks::zip4;
+use ndarray::{ArrayD, IxDyn};
+
+use super::chunks::{first_non_finite, zip4};
 use super::slots::{Rule, Slots};
 use super::source::GradientSource;
 use super::{check_range, StepSummary};
@@ -41,6 +43,19 @@ impl AdamConfig {
         check_range("beta2", self.beta2, (0.0..1.0).contains(&self.beta2), "in [0, 1)")?;
         check_range("eps", self.eps, self.eps > 0.0, "finite and above 0")
     }
+}
+
+/// One parameter's Adam state, as [`Adam::state`] exports it and [`Adam::restore`] imports
+/// it: enough to continue the optimisation exactly where it stopped (with the same
+/// [`AdamConfig`] and learning-rate scale, which are settings, not state).
+#[derive(Debug, Clone, PartialEq)]
+pub struct AdamState<F> {
+    /// The first moment `m` (running mean of the gradients), the parameter's shape.
+    pub first_moment: ArrayD<F>,
+    /// The second moment `v` (running mean of their squares), the parameter's shape, `>= 0`.
+    pub second_moment: ArrayD<F>,
+    /// Updates so far, `t` of the bias corrections `1 - beta^t`.
+    pub updates: usize,
 }
 
 /// One parameter's moments and its number of updates.
@@ -133,6 +148,78 @@ impl<F: Float> Adam<F> {
     /// How many updates parameter `id` has had (0 before its first).
     pub fn updates(&self, id: ParamId) -> usize {
         self.slots.state(id).map_or(0, |s| s.t as usize)
+    }
+
+    /// Parameter `id`'s state (moments and count of updates), `None` before its first update:
+    /// saved with the parameter, it lets [`Adam::restore`] continue the optimisation exactly.
+    ///
+    /// Errors: [`ParamError::ForeignParam`] if `id` is not of `params` (whose shape the
+    /// moments take), [`ParamError::ForeignStore`] if this optimiser steps another store.
+    pub fn state(&self, params: &Params<F>, id: ParamId) -> Result<Option<AdamState<F>>, ParamError> {
+        self.slots.check_store(params.store)?;
+        let shape = params.entry(id)?.value.shape().to_vec();
+        let Some(s) = self.slots.state(id) else {
+            return Ok(None);
+        };
+        // The moments were made with the parameter's length and a parameter never changes
+        // shape, so the reshape cannot fail.
+        let shaped = |flat: &[F]| {
+            ArrayD::from_shape_vec(IxDyn(&shape), flat.to_vec()).expect("moments have the parameter's length")
+        };
+        Ok(Some(AdamState {
+            first_moment: shaped(&s.m),
+            second_moment: shaped(&s.v),
+            updates: s.t as usize,
+        }))
+    }
+
+    /// Sets parameter `id`'s state (as exported by [`Adam::state`], perhaps by another
+    /// optimiser or another process), so that the next [`Adam::step`] continues from it; binds
+    /// the optimiser to `params`.
+    ///
+    /// Expects both moments in the parameter's shape, finite, the second at least 0, and at
+    /// most `i32::MAX` updates. Errors, checked before anything changes (so on error the
+    /// optimiser is as it was): [`ParamError::StateShape`], [`ParamError::InvalidState`],
+    /// [`ParamError::ForeignParam`], [`ParamError::ForeignStore`].
+    pub fn restore(&mut self, params: &Params<F>, id: ParamId, state: AdamState<F>) -> Result<(), ParamError> {
+        self.slots.check_store(params.store)?;
+        let entry = params.entry(id)?;
+        let name = || entry.name.clone();
+        let invalid = |what, index, value, range| ParamError::InvalidState {
+            name: name(),
+            what,
+            index,
+            value,
+            range,
+        };
+        let t = i32::try_from(state.updates)
+            .map_err(|_| invalid("updates", 0, state.updates as f64, "at most 2^31 - 1"))?;
+        let moments = [
+            ("first moment", &state.first_moment),
+            ("second moment", &state.second_moment),
+        ];
+        for (what, moment) in moments {
+            if moment.shape() != entry.value.shape() {
+                return Err(ParamError::StateShape {
+                    name: name(),
+                    what,
+                    expected: entry.value.shape().to_vec(),
+                    got: moment.shape().to_vec(),
+                });
+            }
+        }
+        // Flattened in logical order, whatever the arrays' layout.
+        let flat = |a: &ArrayD<F>| -> Vec<F> { a.iter().copied().collect() };
+        let (m, v) = (flat(&state.first_moment), flat(&state.second_moment));
+        for (what, values) in [("first moment", &m), ("second moment", &v)] {
+            if let Some(index) = first_non_finite(values) {
+                return Err(invalid(what, index, values[index].as_f64(), "finite"));
+            }
+        }
+        if let Some(index) = v.iter().position(|x| *x < F::zero()) {
+            return Err(invalid("second moment", index, v[index].as_f64(), "at least 0"));
+        }
+        self.slots.restore(params, id, Moments { m, v, t })
     }
 
     /// Updates in place every parameter of `params` that `grads` holds a gradient for.

@@ -61,7 +61,7 @@ mod sgd;
 mod slots;
 mod source;
 
-pub use adam::{Adam, AdamConfig};
+pub use adam::{Adam, AdamConfig, AdamState};
 pub use sgd::{Sgd, SgdConfig};
 pub use source::{GradientSource, ParamGradients};
 

@@ -40,7 +40,7 @@ impl<S> Default for Slots<S> {
 }
 
 impl<S> Slots<S> {
-    fn check_store(&self, store: u64) -> Result<(), ParamError> {
+    pub(crate) fn check_store(&self, store: u64) -> Result<(), ParamError> {
         match self.store {
             Some(s) if s != store => Err(ParamError::ForeignStore),
             _ => Ok(()),
@@ -65,6 +65,19 @@ impl<S> Slots<S> {
             return None;
         }
         self.states.get(id.index())?.as_ref()
+    }
+
+    /// Replaces parameter `id`'s state with `state` (already checked by the caller); binds the
+    /// optimiser to `params`. Errors: `ForeignStore`, `ForeignParam`; nothing changes on error.
+    pub(crate) fn restore<F: Float>(&mut self, params: &Params<F>, id: ParamId, state: S) -> Result<(), ParamError> {
+        self.check_store(params.store)?;
+        params.entry(id)?;
+        self.store = Some(params.store);
+        if self.states.len() < params.len() {
+            self.states.resize_with(params.len(), || None);
+        }
+        self.states[id.index()] = Some(state);
+        Ok(())
     }
 
     /// One step of `rule` at learning rate `lr` on every parameter of `params` that `grads`

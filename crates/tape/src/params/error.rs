@@ -4,6 +4,7 @@ use thiserror::Error;
 
 /// An error from a [`Params`](super::Params) store or an optimiser of
 /// [`crate::optim`]. A call that fails changes no parameter and no optimiser state.
+#[non_exhaustive]
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ParamError {
     /// The [`ParamId`](super::ParamId) was made by another store.
@@ -63,5 +64,32 @@ pub enum ParamError {
         range: &'static str,
         /// The value given.
         value: f64,
+    },
+    /// Optimiser state given to a `restore` does not have its parameter's shape.
+    #[error("optimiser state for parameter {name:?}: {what} has shape {got:?}, the parameter has {expected:?}")]
+    StateShape {
+        /// The parameter's name.
+        name: String,
+        /// Which part of the state.
+        what: &'static str,
+        /// The parameter's shape.
+        expected: Vec<usize>,
+        /// The state's shape.
+        got: Vec<usize>,
+    },
+    /// Optimiser state given to a `restore` holds a value no run of the optimiser can reach
+    /// (a NaN, an infinity, a negative second moment, a count too large).
+    #[error("optimiser state for parameter {name:?}: {what} at flat index {index} is {value}, which must be {range}")]
+    InvalidState {
+        /// The parameter's name.
+        name: String,
+        /// Which part of the state.
+        what: &'static str,
+        /// Position of the first offending element (0 for a count).
+        index: usize,
+        /// The offending value, widened to `f64`.
+        value: f64,
+        /// What it must be, in words.
+        range: &'static str,
     },
 }

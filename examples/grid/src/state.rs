@@ -1,0 +1,34 @@
+//! Where a fit stands between two steps: the model, and the rest of what
+//! [`fit_from`](crate::fit::fit_from) needs to continue it exactly (Adam's moments, the step,
+//! the training seconds, the growth stage, the position in the stream of random batches).
+//! [`checkpoint`](crate::checkpoint) writes both to a file and reads them back.
+
+use fogray::tape::optim::AdamState;
+use fogray::tape::Float;
+
+use crate::model::GridModel;
+
+/// A fit's state beyond its model.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrainingState<F> {
+    /// Steps done.
+    pub step: usize,
+    /// Training seconds so far (evaluations excluded).
+    pub seconds: f64,
+    /// The growth stage of the grid (0, or 0 to 2 for a growing grid: a quarter, half and all
+    /// of `--grid` nodes per axis).
+    pub stage: usize,
+    /// Words of the batch generator's stream (ChaCha12) used so far.
+    pub batch_stream: u128,
+    /// Adam's state for the grid; `None` before the stage's first step.
+    pub adam: Option<AdamState<F>>,
+}
+
+/// A fit to continue: its model and state.
+#[derive(Debug)]
+pub struct Start<F: Float> {
+    /// The grid, at the nodes per axis of `training.stage`.
+    pub model: GridModel<F>,
+    /// The rest of the fit's state.
+    pub training: TrainingState<F>,
+}
