@@ -155,6 +155,8 @@ pub struct LogEntry {
     pub train_loss: f64,
     /// Test PSNR (dB) over all test views.
     pub test_psnr: f64,
+    /// Training samples so far, over all rays of all steps (what a step's cost grows with).
+    pub samples: usize,
 }
 
 /// What a fit returns.
@@ -174,6 +176,8 @@ pub struct FitResult<F: Float> {
     pub renders: Vec<Array3<f64>>,
     /// The fitted model.
     pub model: GridModel<F>,
+    /// The final occupancy grid, with occupancy sampling.
+    pub occupancy: Option<OccupancyGrid>,
 }
 
 /// Progress reported after every step.
@@ -312,16 +316,17 @@ pub fn fit<F: Float>(
         Budget::Steps(n) => step as f64 / n as f64,
         Budget::Seconds(s) => seconds / s,
     };
-    let evaluate = |model: &GridModel<F>, step, seconds, loss| -> Result<LogEntry, FitError> {
+    let evaluate = |model: &GridModel<F>, step, seconds, loss, samples| -> Result<LogEntry, FitError> {
         let renders = render_test_views(model, data, config.method)?;
         Ok(LogEntry {
             step,
             seconds,
             train_loss: loss,
             test_psnr: test_psnr(&renders, data)?,
+            samples,
         })
     };
-    let mut log = vec![evaluate(&model, 0, 0.0, loss)?];
+    let mut log = vec![evaluate(&model, 0, 0.0, loss, 0)?];
     let mut next_eval = 1;
     while fraction(step, seconds) < 1.0 {
         let start = Instant::now();
@@ -358,15 +363,16 @@ pub fn fit<F: Float>(
         });
         let done = fraction(step, seconds) >= 1.0;
         if done || fraction(step, seconds) * config.evaluations as f64 >= next_eval as f64 {
-            log.push(evaluate(&model, step, seconds, loss)?);
+            log.push(evaluate(&model, step, seconds, loss, samples_total)?);
             next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
         }
     }
     let renders = render_test_views(&model, data, config.method)?;
-    let occupied_fraction = match &sampler {
-        Sampler::Occupancy(g) => g.occupied_fraction(),
-        Sampler::Uniform => 1.0,
+    let occupancy = match sampler {
+        Sampler::Occupancy(g) => Some(g),
+        Sampler::Uniform => None,
     };
+    let occupied_fraction = occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction());
     Ok(FitResult {
         final_test_psnr: test_psnr(&renders, data)?,
         log,
@@ -375,5 +381,6 @@ pub fn fit<F: Float>(
         occupied_fraction,
         renders,
         model,
+        occupancy,
     })
 }

@@ -15,7 +15,9 @@
 //!   fogray's grid field and composite (fused, or their taped twins);
 //! - [`dataset`]: the training rays and colours, the test views;
 //! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
-//! - [`plots`]: test PSNR against training seconds.
+//! - [`plots`]: test PSNR against training seconds;
+//! - [`slices`]: the density and the occupancy grid on planes through the box;
+//! - [`report`]: the speed-against-error report over configurations.
 //!
 //! ```
 //! use fogray_grid::{images, photographs::photographs, ring::Ring, scene::Scene};
@@ -37,5 +39,7 @@ pub mod images;
 pub mod model;
 pub mod photographs;
 pub mod plots;
+pub mod report;
 pub mod ring;
 pub mod scene;
+pub mod slices;
