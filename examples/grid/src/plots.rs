@@ -61,7 +61,12 @@ pub struct Curve<'a> {
     pub log: &'a [LogEntry],
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, curves: &[Curve<'_>], x: XAxis) -> Result<(), String>
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    curves: &[Curve<'_>],
+    x: XAxis,
+    dashed: &[usize],
+) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
@@ -111,11 +116,18 @@ where
             .iter()
             .filter(|e| e.test_psnr.is_finite())
             .map(|e| (x.of(e), e.test_psnr));
-        chart
-            .draw_series(LineSeries::new(line, color.stroke_width(2)))
-            .map_err(err)?
-            .label(c.label.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+        let drawn = if dashed.contains(&k) {
+            chart.draw_series(DashedLineSeries::new(line, 8, 5, color.stroke_width(2)))
+        } else {
+            chart.draw_series(LineSeries::new(line, color.stroke_width(2)))
+        };
+        // A dashed curve's legend is two dashes, a solid one's a line (relative to the entry).
+        let gap = if dashed.contains(&k) { (8, 13) } else { (20, 20) };
+        drawn.map_err(err)?.label(c.label.clone()).legend(move |p| {
+            EmptyElement::at(p)
+                + PathElement::new(vec![(0, 0), (gap.0, 0)], color.stroke_width(2))
+                + PathElement::new(vec![(gap.1, 0), (20, 0)], color.stroke_width(2))
+        });
     }
     chart
         .configure_series_labels()
@@ -134,13 +146,14 @@ where
 /// Errors: [`ImageError::Empty`] for no curve, [`ImageError::Write`] if a file cannot be drawn
 /// or written.
 pub fn psnr_curves(stem: &Path, curves: &[Curve<'_>]) -> Result<(), ImageError> {
-    psnr_curves_against(stem, curves, XAxis::Seconds)
+    psnr_curves_against(stem, curves, XAxis::Seconds, &[])
 }
 
-/// As [`psnr_curves`], against training seconds or steps.
+/// As [`psnr_curves`], against training seconds or steps, the curves whose indices are in
+/// `dashed` drawn dashed.
 ///
 /// Errors: as [`psnr_curves`].
-pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis) -> Result<(), ImageError> {
+pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis, dashed: &[usize]) -> Result<(), ImageError> {
     if curves.is_empty() {
         return Err(ImageError::Empty);
     }
@@ -153,10 +166,10 @@ pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis) -> Resul
     };
     {
         let root = SVGBackend::new(&svg, size).into_drawing_area();
-        draw(&root, curves, x).map_err(wrap(&svg))?;
+        draw(&root, curves, x, dashed).map_err(wrap(&svg))?;
         root.present().map_err(|e| wrap(&svg)(e.to_string()))?;
     }
     let root = BitMapBackend::new(&png, size).into_drawing_area();
-    draw(&root, curves, x).map_err(wrap(&png))?;
+    draw(&root, curves, x, dashed).map_err(wrap(&png))?;
     root.present().map_err(|e| wrap(&png)(e.to_string()))
 }

@@ -186,7 +186,11 @@ impl Scene {
             Primitive::Sphere(s) => (0..3).map(|a| (p[a] - s.center[a]).powi(2)).sum::<f64>() <= s.radius * s.radius,
             Primitive::Box(b) => (0..3).all(|a| b.min[a] <= p[a] && p[a] <= b.max[a]),
         };
-        self.primitives.iter().filter(|prim| inside(prim)).map(Primitive::density).sum()
+        self.primitives
+            .iter()
+            .filter(|prim| inside(prim))
+            .map(Primitive::density)
+            .sum()
     }
 
     /// Parses and validates a scene from JSON text.

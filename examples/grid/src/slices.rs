@@ -86,7 +86,9 @@ fn plane_of(axis: GridAxis, n: usize, value: impl Fn([f64; 3]) -> f64) -> PlaneI
 /// The scene's exact density on the three planes, `n x n` pixels each (n >= 1; 0 gives empty
 /// images).
 pub fn scene_density_planes(scene: &Scene, n: usize) -> Vec<PlaneImage> {
-    AXES.iter().map(|&axis| plane_of(axis, n, |p| scene.density_at(p))).collect()
+    AXES.iter()
+        .map(|&axis| plane_of(axis, n, |p| scene.density_at(p)))
+        .collect()
 }
 
 /// The model's density on the three planes, `n x n` pixels each.
@@ -144,7 +146,11 @@ impl Colouring {
     fn color(&self, v: f64) -> RGBColor {
         match self {
             Colouring::Map { lo, hi, .. } => {
-                let h = if hi > lo { ((v - lo) / (hi - lo)).clamp(0.0, 1.0) } else { 0.0 };
+                let h = if hi > lo {
+                    ((v - lo) / (hi - lo)).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                };
                 // NaN clamps to NaN: draw it magenta so it cannot pass for a value.
                 if h.is_nan() {
                     return RGBColor(255, 0, 255);
@@ -169,7 +175,12 @@ pub struct PlaneRow<'a> {
 fn panel_title(row: &str, axis: GridAxis) -> String {
     let (across, up) = in_plane_axes(axis);
     let name = |a: usize| ["x", "y", "z"][a];
-    format!("{row}, {} = 0 ({} right, {} up)", axis_name(axis), name(across), name(up))
+    format!(
+        "{row}, {} = 0 ({} right, {} up)",
+        axis_name(axis),
+        name(across),
+        name(up)
+    )
 }
 
 /// Writes rows of plane images, each pixel magnified `scale` times, with a colour bar (or the
@@ -178,7 +189,12 @@ fn panel_title(row: &str, axis: GridAxis) -> String {
 /// Errors: [`ImageError::Empty`] for no rows or an empty image, [`ImageError::Shape`] if the
 /// images differ in size, [`ImageError::Write`] if the file cannot be drawn (including a
 /// `scale` of 0).
-pub fn write_planes_png(path: &Path, rows: &[PlaneRow<'_>], colouring: &Colouring, scale: u32) -> Result<(), ImageError> {
+pub fn write_planes_png(
+    path: &Path,
+    rows: &[PlaneRow<'_>],
+    colouring: &Colouring,
+    scale: u32,
+) -> Result<(), ImageError> {
     let first = rows
         .iter()
         .flat_map(|r| r.planes.first())
@@ -216,11 +232,18 @@ pub fn write_planes_png(path: &Path, rows: &[PlaneRow<'_>], colouring: &Colourin
         let y0 = GAP + i as i32 * (TITLE + h + GAP);
         for (k, plane) in row.planes.iter().enumerate() {
             let x0 = GAP + k as i32 * (w + GAP);
-            root.draw(&Text::new(panel_title(row.title, plane.axis), (x0, y0 + 2), (FONT, 15).into_font()))
-                .map_err(e)?;
+            root.draw(&Text::new(
+                panel_title(row.title, plane.axis),
+                (x0, y0 + 2),
+                (FONT, 15).into_font(),
+            ))
+            .map_err(e)?;
             let top = y0 + TITLE;
-            root.draw(&Rectangle::new([(x0 - 1, top - 1), (x0 + w, top + h)], RGBColor(160, 160, 160)))
-                .map_err(e)?;
+            root.draw(&Rectangle::new(
+                [(x0 - 1, top - 1), (x0 + w, top + h)],
+                RGBColor(160, 160, 160),
+            ))
+            .map_err(e)?;
             for ((a, b), &v) in plane.values.indexed_iter() {
                 let (x, y) = (x0 + b as i32 * s, top + a as i32 * s);
                 root.draw(&Rectangle::new([(x, y), (x + s, y + s)], colouring.color(v).filled()))
@@ -236,24 +259,33 @@ pub fn write_planes_png(path: &Path, rows: &[PlaneRow<'_>], colouring: &Colourin
             for y in top..bottom {
                 let f = (bottom - 1 - y) as f64 / (bottom - 1 - top).max(1) as f64;
                 let c = colouring.color(lo + f * (hi - lo));
-                root.draw(&Rectangle::new([(x0, y), (x0 + BAR, y + 1)], c.filled())).map_err(e)?;
+                root.draw(&Rectangle::new([(x0, y), (x0 + BAR, y + 1)], c.filled()))
+                    .map_err(e)?;
             }
-            root.draw(&Rectangle::new([(x0 - 1, top - 1), (x0 + BAR, bottom)], BLACK)).map_err(e)?;
+            root.draw(&Rectangle::new([(x0 - 1, top - 1), (x0 + BAR, bottom)], BLACK))
+                .map_err(e)?;
             for (f, v) in [(0.0, *lo), (0.5, 0.5 * (lo + hi)), (1.0, *hi)] {
                 let y = bottom - 1 - (f * (bottom - 1 - top) as f64) as i32;
-                root.draw(&PathElement::new(vec![(x0 + BAR, y), (x0 + BAR + 5, y)], BLACK)).map_err(e)?;
-                root.draw(&text(format!("{v:.3}"), x0 + BAR + 8, y - 7)).map_err(e)?;
+                root.draw(&PathElement::new(vec![(x0 + BAR, y), (x0 + BAR + 5, y)], BLACK))
+                    .map_err(e)?;
+                root.draw(&text(format!("{}", (v * 1000.0).round() / 1000.0), x0 + BAR + 8, y - 7))
+                    .map_err(e)?;
             }
             for (j, line) in label.split('\n').enumerate() {
-                root.draw(&text(line.to_string(), x0, bottom + 8 + 18 * j as i32)).map_err(e)?;
+                root.draw(&text(line.to_string(), x0, bottom + 8 + 18 * j as i32))
+                    .map_err(e)?;
             }
         }
         Colouring::Occupied => {
             for (j, (v, name)) in [(1.0, "occupied cell"), (0.0, "empty cell")].into_iter().enumerate() {
                 let y = top + 26 * j as i32;
-                root.draw(&Rectangle::new([(x0, y), (x0 + 16, y + 16)], colouring.color(v).filled()))
+                root.draw(&Rectangle::new(
+                    [(x0, y), (x0 + 16, y + 16)],
+                    colouring.color(v).filled(),
+                ))
+                .map_err(e)?;
+                root.draw(&Rectangle::new([(x0, y), (x0 + 16, y + 16)], BLACK))
                     .map_err(e)?;
-                root.draw(&Rectangle::new([(x0, y), (x0 + 16, y + 16)], BLACK)).map_err(e)?;
                 root.draw(&text(name.to_string(), x0 + 24, y + 1)).map_err(e)?;
             }
         }

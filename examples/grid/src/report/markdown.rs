@@ -94,7 +94,10 @@ pub fn occupancy_vs_uniform_rows(
             .iter()
             .find(|u| u.sampling == "uniform" && u.method == o.method && u.precision == o.precision)
         {
-            rows.push((shared(o.method, o.precision), occupancy_vs_uniform(&o.log, &u.log, batch)?));
+            rows.push((
+                shared(o.method, o.precision),
+                occupancy_vs_uniform(&o.log, &u.log, batch)?,
+            ));
         }
     }
     Ok(rows)
@@ -137,7 +140,10 @@ pub struct ReportContext<'a> {
 pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, ReportError> {
     let points = checkpoints(ctx.budget, runs);
     let mut md = String::from("# fogray-grid: test PSNR against training time\n\n");
-    md += &format!("Reproduce with `{}` (on a quiet machine: the runs are timed).\n\n", ctx.reproduce);
+    md += &format!(
+        "Reproduce with `{}` (on a quiet machine: the runs are timed).\n\n",
+        ctx.reproduce
+    );
     md += &format!("{}\n\n", ctx.stamp.markdown());
     let budget = match ctx.budget {
         Budget::Seconds(s) => format!("{s} training seconds"),
@@ -151,7 +157,7 @@ pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, Rep
     md += "![test PSNR against training steps](psnr-vs-steps.png)\n\n";
     md += "## Configurations\n\n| configuration |";
     for t in &points {
-        md += &format!(" PSNR at {t:.3} s (dB) |");
+        md += &format!(" PSNR at {} s (dB) |", (t * 1000.0).round() / 1000.0);
     }
     md += " final PSNR (dB) | steps | training s | steps/s | samples per ray | occupied fraction |\n|---|";
     md += &"---|".repeat(points.len() + 6);
@@ -177,23 +183,21 @@ pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, Rep
            (1 with uniform sampling).\n\n";
     let fvt = fused_vs_taped_rows(runs)?;
     if !fvt.is_empty() {
-        md += "## Fused against taped: time to the taped run's final PSNR\n\n";
-        md += "| sampling | taped final PSNR (dB) | taped s to reach it | fused s to reach it | fused speed-up |\n|---|---|---|---|---|\n";
+        md += "## Fused against taped: time to the same PSNR\n\n";
+        md += "| sampling | target PSNR (dB, the taped final) | taped s to reach it | fused s to reach it | fused speed-up |\n|---|---|---|---|---|\n";
         for (name, c) in &fvt {
             md += &format!(
                 "| {name} | {} | {} | {} | {} |\n",
                 num(Some(c.target_psnr), 2),
                 num(Some(c.taped.seconds), 2),
-                num(c.fused.map(|f| f.seconds), 2),
-                match (c.fused, c.speedup) {
-                    (None, _) => "fused never reached it".into(),
-                    (Some(_), Some(x)) => format!("{x:.2} x"),
-                    (Some(_), None) => "-".into(),
-                }
+                num(Some(c.fused.seconds), 2),
+                c.speedup.map_or("-".into(), |x| format!("{x:.2} x"))
             );
         }
-        md += "\nThe seconds to reach a PSNR are interpolated linearly between the last evaluation \
-               below it and the first at or above it (the first crossing).\n\n";
+        md += "\nThe target is the taped run's final PSNR, or the fused run's where that is lower \
+               (with the same steps they differ only by rounding). The seconds to reach it are \
+               interpolated linearly between the last evaluation below it and the first at or \
+               above it (the first crossing).\n\n";
     }
     let ovu = occupancy_vs_uniform_rows(runs, ctx.batch)?;
     if !ovu.is_empty() {

@@ -124,8 +124,16 @@ pub fn run_configs(
         };
         let mut report = |p| progress(i, p);
         let run = match config.precision {
-            Precision::F32 => keep(config, fit::<f32>(data, &fit_config, &mut report)?, options.slice_pixels)?,
-            Precision::F64 => keep(config, fit::<f64>(data, &fit_config, &mut report)?, options.slice_pixels)?,
+            Precision::F32 => keep(
+                config,
+                fit::<f32>(data, &fit_config, &mut report)?,
+                options.slice_pixels,
+            )?,
+            Precision::F64 => keep(
+                config,
+                fit::<f64>(data, &fit_config, &mut report)?,
+                options.slice_pixels,
+            )?,
         };
         runs.push(run);
     }

@@ -74,8 +74,12 @@ fn reach_is_the_first_crossing_interpolated_in_time_steps_and_samples() {
     assert_eq!(r.steps, 18.75);
     assert_eq!(r.samples, 1875.0);
     assert_eq!(r.samples_per_ray(10), Some(10.0)); // 1875 / (18.75 x 10)
-    // 25 dB: only in the last climb, 2/3 of the way from (6 s, 23) to (8 s, 26).
-    assert_relative_eq!(reach(&log, 25.0).unwrap().unwrap().seconds, 6.0 + 4.0 / 3.0, epsilon = 1e-12);
+                                                   // 25 dB: only in the last climb, 2/3 of the way from (6 s, 23) to (8 s, 26).
+    assert_relative_eq!(
+        reach(&log, 25.0).unwrap().unwrap().seconds,
+        6.0 + 4.0 / 3.0,
+        epsilon = 1e-12
+    );
     // An evaluation exactly at the target: its own time.
     assert_eq!(reach(&log, 24.0).unwrap().unwrap().seconds, 4.0);
     // Reached at the start: time 0, and no samples per ray yet.
@@ -101,7 +105,11 @@ fn logs_that_are_not_curves_are_rejected() {
 
 #[test]
 fn fused_against_taped_at_the_taped_final_psnr() {
-    let fused = vec![entry(0, 0.0, 10.0, 0), entry(100, 1.0, 20.0, 0), entry(200, 2.0, 26.0, 0)];
+    let fused = vec![
+        entry(0, 0.0, 10.0, 0),
+        entry(100, 1.0, 20.0, 0),
+        entry(200, 2.0, 26.0, 0),
+    ];
     let taped = vec![
         entry(0, 0.0, 10.0, 0),
         entry(10, 1.0, 14.0, 0),
@@ -112,14 +120,16 @@ fn fused_against_taped_at_the_taped_final_psnr() {
     assert_eq!(c.target_psnr, 22.0);
     assert_eq!(c.taped.seconds, 3.0);
     // 22 dB is 2/6 of the way from (1 s, 20 dB) to (2 s, 26 dB): 4/3 s, so 3 / (4/3) = 2.25.
-    let f = c.fused.unwrap();
+    let f = c.fused;
     assert_relative_eq!(f.seconds, 4.0 / 3.0, epsilon = 1e-12);
     assert_relative_eq!(f.steps, 100.0 + 100.0 / 3.0, epsilon = 1e-12);
     assert_relative_eq!(c.speedup.unwrap(), 2.25, epsilon = 1e-12);
-    // A fused run that stays below: no time, no speed-up.
+    // A fused run that ends lower sets the target: 21 dB, which the taped run crosses 3/4 of
+    // the way from (2 s, 18 dB) to (3 s, 22 dB).
     let slow = vec![entry(0, 0.0, 10.0, 0), entry(5, 4.0, 21.0, 0)];
     let c = fused_vs_taped(&slow, &taped).unwrap();
-    assert_eq!((c.fused, c.speedup), (None, None));
+    assert_eq!((c.target_psnr, c.fused.seconds, c.taped.seconds), (21.0, 4.0, 2.75));
+    assert_eq!(c.speedup, Some(2.75 / 4.0));
 }
 
 #[test]
@@ -157,7 +167,11 @@ fn occupancy_against_uniform_samples_per_ray_at_the_lower_final_psnr() {
 
 #[test]
 fn table_rows_pair_configurations_by_their_shared_settings() {
-    let fused = vec![entry(0, 0.0, 10.0, 0), entry(100, 1.0, 20.0, 0), entry(200, 2.0, 26.0, 0)];
+    let fused = vec![
+        entry(0, 0.0, 10.0, 0),
+        entry(100, 1.0, 20.0, 0),
+        entry(200, 2.0, 26.0, 0),
+    ];
     let taped = vec![entry(0, 0.0, 10.0, 0), entry(30, 3.0, 22.0, 0)];
     let runs = [
         run("fused-uniform", "fused", "uniform", fused.clone()),
@@ -199,7 +213,14 @@ fn configuration_names_read_back() {
     );
     assert_eq!(f64_config.to_string(), "taped-occupancy-f64");
     assert_eq!("fused-uniform-f32".parse::<RunConfig>().unwrap(), DEFAULT_CONFIGS[0]);
-    for bad in ["fused", "fast-uniform", "fused-dense", "fused-uniform-f16", "fused-uniform-f32-x", ""] {
+    for bad in [
+        "fused",
+        "fast-uniform",
+        "fused-dense",
+        "fused-uniform-f16",
+        "fused-uniform-f32-x",
+        "",
+    ] {
         assert!(matches!(bad.parse::<RunConfig>(), Err(ReportError::Config(_))), "{bad}");
     }
 }

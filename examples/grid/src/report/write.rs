@@ -11,15 +11,18 @@ use crate::fit::Budget;
 use crate::images::write_comparison_png;
 use crate::plots::{psnr_curves_against, Curve, XAxis};
 use crate::scene::Scene;
-use crate::slices::{scene_density_planes, write_planes_png, Colouring, PlaneRow};
+use crate::slices::{scene_density_planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
 
 use super::compare::{FusedVsTaped, OccupancyVsUniform};
 use super::markdown::{fused_vs_taped_rows, occupancy_vs_uniform_rows, report, ReportContext};
 use super::run::{best, ConfigRun};
 use super::ReportError;
 
-/// Magnification of the test views and of the occupancy slices in their PNGs.
+/// Magnification of the test views in their PNGs.
 const SCALE: u32 = 4;
+/// The density slices' colour range (extinction per unit length), on a log scale.
+const LOWEST_DENSITY: f64 = 0.01;
+const HIGHEST_DENSITY: f64 = 100.0;
 
 /// What the report says about how it was made.
 #[derive(Debug, Clone)]
@@ -82,21 +85,28 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
         write_comparison_png(&dir.join(&name), t.photograph.view(), render.view(), 4.0, SCALE)?;
         md += &format!("![test view {}]({name})\n\n", t.view);
     }
-    let fitted = &top.pictures.density;
-    if let Some(n) = fitted.first().map(|p| p.values.nrows()) {
-        let exact = scene_density_planes(scene, n);
-        let max = |planes: &[crate::slices::PlaneImage]| {
+    if let Some(n) = top.pictures.density.first().map(|p| p.values.nrows()) {
+        // Decades: the fitted density spans empty space (softplus of the shift, about 0.02)
+        // to the hundreds inside opaque matter, which a linear scale shows as one colour.
+        let log = |planes: &[PlaneImage]| -> Vec<PlaneImage> {
             planes
                 .iter()
-                .flat_map(|p| p.values.iter().copied())
-                .filter(|v| v.is_finite())
-                .fold(0.0, f64::max)
+                .map(|p| PlaneImage {
+                    axis: p.axis,
+                    values: p.values.mapv(|v| v.max(LOWEST_DENSITY).log10()),
+                })
+                .collect()
         };
-        let hi = if max(&exact) > 0.0 { max(&exact) } else { max(fitted).max(1.0) };
+        let exact = log(&scene_density_planes(scene, n));
+        let fitted = log(&top.pictures.density);
         let colouring = Colouring::Map {
-            lo: 0.0,
-            hi,
-            label: format!("density (extinction per unit\nlength); clamped to [0, {hi}]"),
+            lo: LOWEST_DENSITY.log10(),
+            hi: HIGHEST_DENSITY.log10(),
+            label: format!(
+                "log10 density (extinction\nper unit length), clamped\nto [{}, {}]",
+                LOWEST_DENSITY.log10(),
+                HIGHEST_DENSITY.log10()
+            ),
         };
         let rows = [
             PlaneRow {
@@ -105,11 +115,16 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
             },
             PlaneRow {
                 title: "fitted",
-                planes: fitted,
+                planes: &fitted,
             },
         ];
-        write_planes_png(&dir.join("density-slices.png"), &rows, &colouring, (384 / n as u32).max(1))?;
-        md += "The density on the planes through the centre of the box: the scene's (top) and the fitted model's (bottom).\n\n![density slices](density-slices.png)\n\n";
+        write_planes_png(
+            &dir.join("density-slices.png"),
+            &rows,
+            &colouring,
+            (384 / n as u32).max(1),
+        )?;
+        md += "The density on the planes through the centre of the box, log scale: the scene's (top) and the fitted model's (bottom).\n\n![density slices](density-slices.png)\n\n";
     }
     let occupancy_runs = runs.iter().filter(|r| r.pictures.occupancy.is_some());
     if let Some(occ) = occupancy_runs.reduce(|a, b| if b.final_test_psnr > a.final_test_psnr { b } else { a }) {
@@ -119,7 +134,12 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
                 title: &format!("{} occupancy", occ.name),
                 planes,
             }];
-            write_planes_png(&dir.join("occupancy-slices.png"), &rows, &Colouring::Occupied, (384 / r).max(1))?;
+            write_planes_png(
+                &dir.join("occupancy-slices.png"),
+                &rows,
+                &Colouring::Occupied,
+                (384 / r).max(1),
+            )?;
             md += &format!(
                 "The final occupancy grid of {} ({:.1} % of cells occupied), its middle plane of cells across each axis.\n\n![occupancy slices](occupancy-slices.png)\n\n",
                 occ.name,
@@ -159,8 +179,10 @@ pub fn write_report(
             log: &r.log,
         })
         .collect();
-    psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds)?;
-    psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps)?;
+    // Taped dashed: against steps it follows its fused twin (the same arithmetic).
+    let taped: Vec<usize> = (0..runs.len()).filter(|&i| runs[i].method == "taped").collect();
+    psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
+    psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
     let pictures = pictures(dir, runs, data, scene)?;
     let ctx = ReportContext {
         stamp: setup.stamp,

@@ -25,9 +25,9 @@ fn the_scene_density_adds_where_primitives_overlap() {
     assert_eq!(scene.density_at([0.0, 0.0, 0.1]), 40.0); // red sphere's centre
     assert_eq!(scene.density_at([0.0, 0.0, -0.7]), 60.0); // floor slab
     assert_eq!(scene.density_at([0.95, 0.95, 0.95]), 0.0); // empty corner
-    // The blue sphere (centre (0.45, 0.35, -0.2), radius 0.25) reaches into the red one
-    // (centre (0, 0, 0.1), radius 0.45) at (0.3, 0.2, -0.1): 0.3^2 + 0.2^2 + 0.2^2 = 0.17 <
-    // 0.2025, and 0.15^2 + 0.15^2 + 0.1^2 = 0.055 < 0.0625.
+                                                           // The blue sphere (centre (0.45, 0.35, -0.2), radius 0.25) reaches into the red one
+                                                           // (centre (0, 0, 0.1), radius 0.45) at (0.3, 0.2, -0.1): 0.3^2 + 0.2^2 + 0.2^2 = 0.17 <
+                                                           // 0.2025, and 0.15^2 + 0.15^2 + 0.1^2 = 0.055 < 0.0625.
     assert_eq!(scene.density_at([0.3, 0.2, -0.1]), 55.0);
 }
 
@@ -53,7 +53,10 @@ fn occupancy_planes_are_drawn_right_way_up() {
     )
     .unwrap();
     let density = |p: ArrayView2<'_, f64>| -> Result<Array1<f64>, String> {
-        Ok(p.rows().into_iter().map(|r| if r[0] > 0.0 && r[2] > 0.0 { 10.0 } else { 0.0 }).collect())
+        Ok(p.rows()
+            .into_iter()
+            .map(|r| if r[0] > 0.0 && r[2] > 0.0 { 10.0 } else { 0.0 })
+            .collect())
     };
     grid.update(density, CellPoints::Centre).unwrap();
     let planes = occupancy_planes(&grid).unwrap();
@@ -101,7 +104,10 @@ fn plane_pictures_reject_bad_input() {
         write_planes_png(&path, &rows[..1], &colouring, 0),
         Err(ImageError::Write { .. })
     ));
-    assert!(matches!(write_planes_png(&path, &[], &colouring, 2), Err(ImageError::Empty)));
+    assert!(matches!(
+        write_planes_png(&path, &[], &colouring, 2),
+        Err(ImageError::Empty)
+    ));
     assert!(!path.exists(), "nothing written on error");
     write_planes_png(&path, &rows[..1], &colouring, 2).unwrap();
     assert!(path.exists());
