@@ -157,6 +157,8 @@ pub struct LogEntry {
     pub train_loss: f64,
     /// Test PSNR (dB) over all test views.
     pub test_psnr: f64,
+    /// Training samples so far, over all rays of all steps (what a step's cost grows with).
+    pub samples: usize,
 }
 
 /// What a fit returns.
@@ -180,6 +182,8 @@ pub struct FitResult<F: Float> {
     pub training: TrainingState<F>,
     /// Whether the fit stopped early because its stop flag was raised.
     pub interrupted: bool,
+    /// The final occupancy grid, with occupancy sampling.
+    pub occupancy: Option<OccupancyGrid>,
 }
 
 /// Progress reported after every step.
@@ -361,16 +365,17 @@ pub fn fit_from<F: Float>(
         Budget::Steps(n) => step as f64 / n as f64,
         Budget::Seconds(s) => seconds / s,
     };
-    let evaluate = |model: &GridModel<F>, step, seconds, loss| -> Result<LogEntry, FitError> {
+    let evaluate = |model: &GridModel<F>, step, seconds, loss, samples| -> Result<LogEntry, FitError> {
         let renders = render_test_views(model, data, config.method)?;
         Ok(LogEntry {
             step,
             seconds,
             train_loss: loss,
             test_psnr: test_psnr(&renders, data)?,
+            samples,
         })
     };
-    let mut log = vec![evaluate(&model, step, seconds, loss)?];
+    let mut log = vec![evaluate(&model, step, seconds, loss, samples_total)?];
     let mut next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
     while fraction(step, seconds) < 1.0 {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
@@ -411,14 +416,14 @@ pub fn fit_from<F: Float>(
         });
         let done = fraction(step, seconds) >= 1.0;
         if done || fraction(step, seconds) * config.evaluations as f64 >= next_eval as f64 {
-            log.push(evaluate(&model, step, seconds, loss)?);
+            log.push(evaluate(&model, step, seconds, loss, samples_total)?);
             next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
         }
     }
     let renders = render_test_views(&model, data, config.method)?;
-    let occupied_fraction = match &sampler {
-        Sampler::Occupancy(g) => g.occupied_fraction(),
-        Sampler::Uniform => 1.0,
+    let occupancy = match sampler {
+        Sampler::Occupancy(g) => Some(g),
+        Sampler::Uniform => None,
     };
     let training = TrainingState {
         step,
@@ -427,6 +432,7 @@ pub fn fit_from<F: Float>(
         batch_stream: rng.get_word_pos(),
         adam: adam.state(model.params(), model.grid_id())?,
     };
+    let occupied_fraction = occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction());
     Ok(FitResult {
         final_test_psnr: test_psnr(&renders, data)?,
         log,
@@ -437,5 +443,6 @@ pub fn fit_from<F: Float>(
         model,
         training,
         interrupted,
+        occupancy,
     })
 }

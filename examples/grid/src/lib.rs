@@ -19,7 +19,9 @@
 //!   to continue it or render from it;
 //! - [`render`], [`depth`]: any camera of the ring rendered from a model, with its expected
 //!   depth drawn as a PNG;
-//! - [`plots`]: test PSNR against training seconds.
+//! - [`plots`]: test PSNR against training seconds;
+//! - [`slices`]: the density and the occupancy grid on planes through the box;
+//! - [`report`]: the speed-against-error report over configurations.
 //!
 //! ```
 //! use fogray_grid::{images, photographs::photographs, ring::Ring, scene::Scene};
@@ -43,6 +45,8 @@ pub mod model;
 pub mod photographs;
 pub mod plots;
 pub mod render;
+pub mod report;
 pub mod ring;
 pub mod scene;
+pub mod slices;
 pub mod state;

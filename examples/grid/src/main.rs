@@ -108,6 +108,11 @@ enum Command {
     /// photograph, the render and |render - exact| x 4 (view-NNN.png) and the expected depth
     /// (depth-NNN.png), and the PSNR of the render against the photograph.
     Render(RenderArgs),
+    /// The speed-against-error report: fits each configuration in turn for the same budget and
+    /// writes test PSNR against training time (psnr-vs-seconds.svg/.png, psnr-vs-steps.svg/.png),
+    /// report.md, report.json and pictures of the best configuration's model into --out. The
+    /// runs are timed: run it on a quiet machine.
+    Report(ReportArgs),
     /// Writes the built-in scene as JSON, to edit and pass back with --scene.
     Scene {
         /// File to write; stdout if absent.
@@ -205,6 +210,119 @@ struct RenderArgs {
     /// [...]} instead of a summary.
     #[arg(long)]
     json: bool,
+}
+
+#[derive(Args)]
+struct ReportArgs {
+    #[command(flatten)]
+    scene: SceneArg,
+    #[command(flatten)]
+    ring: RingArgs,
+    /// Nodes per axis of the grid.
+    #[arg(long, default_value_t = 64)]
+    grid: usize,
+    /// Training seconds of each configuration (evaluations excluded); 60 unless --steps is given.
+    #[arg(long, conflicts_with = "steps", allow_negative_numbers = true)]
+    seconds: Option<f64>,
+    /// Training steps of each configuration instead of seconds.
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Training rays per step.
+    #[arg(long, default_value_t = 8192)]
+    batch: usize,
+    /// Seed of the batches (the same for every configuration).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Configurations to run, in order, comma-separated: METHOD-SAMPLING[-PRECISION] with
+    /// METHOD fused|taped, SAMPLING uniform|occupancy, PRECISION f32 (default)|f64.
+    #[arg(
+        long,
+        value_delimiter = ',',
+        default_value = "fused-uniform,taped-uniform,fused-occupancy,taped-occupancy"
+    )]
+    configs: Vec<String>,
+    /// Directory for the report (created if missing).
+    #[arg(long, default_value = "reports/grid")]
+    out: PathBuf,
+}
+
+fn run_report(args: ReportArgs) -> Result<()> {
+    use fogray_grid::report::configuration::RunConfig;
+    use fogray_grid::report::run::{run_configs, ReportOptions};
+    use fogray_grid::report::write::{write_report, ReportSetup};
+
+    let configs = args
+        .configs
+        .iter()
+        .map(|c| c.parse::<RunConfig>())
+        .collect::<Result<Vec<_>, _>>()?;
+    let (scene, ring) = (args.scene.load()?, args.ring.ring()?);
+    let budget = match (args.steps, args.seconds) {
+        (Some(n), _) => Budget::Steps(n),
+        (None, s) => Budget::Seconds(s.unwrap_or(60.0)),
+    };
+    let options = ReportOptions {
+        fit: FitConfig {
+            grid: args.grid,
+            batch: args.batch,
+            budget,
+            seed: args.seed,
+            ..FitConfig::default()
+        },
+        configs,
+        slice_pixels: 128,
+    };
+    // Before training, so that a bad directory costs nothing.
+    create_dir(&args.out)?;
+    let given: Vec<String> = std::env::args().skip(1).collect();
+    let stamp = fogray::stamp::Stamp::now(&format!("fogray-grid {}", given.join(" ")));
+    let reproduce = format!("cargo run --release -p fogray-grid -- {}", given.join(" "));
+    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background)?;
+    let bar = indicatif::ProgressBar::new(1000);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("{prefix} [{bar:40}] {msg} ({elapsed})") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    let names: Vec<String> = options.configs.iter().map(|c| c.to_string()).collect();
+    let mut current = usize::MAX;
+    let runs = run_configs(&data, &options, &mut |i, p| {
+        if i != current {
+            current = i;
+            bar.reset();
+            bar.set_prefix(format!("{} ({}/{})", names[i], i + 1, names.len()));
+        }
+        bar.set_position((p.fraction * 1000.0) as u64);
+        bar.set_message(format!("step {}", p.step));
+    })?;
+    bar.finish_and_clear();
+    let problem = format!(
+        "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",
+        g = args.grid,
+        v = args.ring.views,
+        s = args.ring.size,
+        scene = match &args.scene.scene {
+            Some(path) => format!("the scene {}", path.display()),
+            None => "the built-in scene".into(),
+        },
+        t = data.test.len(),
+        b = args.batch,
+        seed = args.seed,
+    );
+    let setup = ReportSetup {
+        stamp: &stamp,
+        reproduce: &reproduce,
+        budget,
+        batch: args.batch,
+        problem: &problem,
+    };
+    let md = write_report(&args.out, &runs, &data, &scene, &setup)?;
+    for r in &runs {
+        println!(
+            "{:<22} final test PSNR {:.2} dB, {} steps in {:.1} s",
+            r.name, r.final_test_psnr, r.steps, r.seconds
+        );
+    }
+    println!("written: {}", md.display());
+    Ok(())
 }
 
 #[derive(Clone, Copy, clap::ValueEnum)]
@@ -576,6 +694,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
             run_fit(args, &given)?
         }
         Command::Render(args) => run_render(args)?,
+        Command::Report(args) => run_report(args)?,
         Command::Scene { out } => {
             let text = Scene::default().to_json_pretty() + "\n";
             match out {
@@ -690,7 +809,7 @@ fn main() -> ExitCode {
                     ExitCode::SUCCESS
                 }
                 ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand | ErrorKind::MissingSubcommand => {
-                    fail("a subcommand is required (photographs, fit, render, scene); see --help")
+                    fail("a subcommand is required (photographs, fit, render, report, scene); see --help")
                 }
                 _ => {
                     // clap's message is its first line; the rest is usage and a hint.

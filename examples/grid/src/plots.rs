@@ -1,12 +1,12 @@
-//! Test PSNR against training seconds, one curve per configuration, as SVG and PNG.
+//! Test PSNR against training seconds (or steps), one curve per configuration, as SVG and PNG.
 //!
 //! ```
 //! use fogray_grid::fit::LogEntry;
 //! use fogray_grid::plots::{psnr_curves, Curve};
 //!
 //! let log = [
-//!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0 },
-//!     LogEntry { step: 50, seconds: 2.0, train_loss: 0.01, test_psnr: 20.0 },
+//!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0, samples: 0 },
+//!     LogEntry { step: 50, seconds: 2.0, train_loss: 0.01, test_psnr: 20.0, samples: 6400 },
 //! ];
 //! let dir = std::env::temp_dir().join(format!("fogray-grid-plots-doc-{}", std::process::id()));
 //! std::fs::create_dir_all(&dir)?;
@@ -34,6 +34,24 @@ const COLORS: [RGBColor; 6] = [
     RGBColor(90, 90, 90),
 ];
 
+/// What the horizontal axis shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum XAxis {
+    /// Training seconds (evaluations excluded).
+    Seconds,
+    /// Training steps.
+    Steps,
+}
+
+impl XAxis {
+    fn of(self, e: &LogEntry) -> f64 {
+        match self {
+            XAxis::Seconds => e.seconds,
+            XAxis::Steps => e.step as f64,
+        }
+    }
+}
+
 /// One configuration's log, with its legend label.
 #[derive(Debug, Clone)]
 pub struct Curve<'a> {
@@ -43,7 +61,12 @@ pub struct Curve<'a> {
     pub log: &'a [LogEntry],
 }
 
-fn draw<DB: DrawingBackend>(root: &DrawingArea<DB, Shift>, curves: &[Curve<'_>]) -> Result<(), String>
+fn draw<DB: DrawingBackend>(
+    root: &DrawingArea<DB, Shift>,
+    curves: &[Curve<'_>],
+    x: XAxis,
+    dashed: &[usize],
+) -> Result<(), String>
 where
     DB::ErrorType: 'static,
 {
@@ -55,7 +78,7 @@ where
             .flat_map(|c| c.log.iter())
             .filter(|e| e.test_psnr.is_finite())
     };
-    let t_max = points().map(|e| e.seconds).fold(0.0, f64::max).max(1e-3) * 1.05;
+    let t_max = points().map(|e| x.of(e)).fold(0.0, f64::max).max(1e-3) * 1.05;
     let lo = points().map(|e| e.test_psnr).fold(f64::INFINITY, f64::min);
     let hi = points().map(|e| e.test_psnr).fold(f64::NEG_INFINITY, f64::max);
     let (lo, hi) = if lo <= hi {
@@ -64,7 +87,13 @@ where
         (0.0, 1.0)
     };
     let mut chart = ChartBuilder::on(root)
-        .caption("test PSNR against training time", (FONT, 20))
+        .caption(
+            match x {
+                XAxis::Seconds => "test PSNR against training time",
+                XAxis::Steps => "test PSNR against training steps",
+            },
+            (FONT, 20),
+        )
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(56)
@@ -72,7 +101,10 @@ where
         .map_err(err)?;
     chart
         .configure_mesh()
-        .x_desc("training seconds (evaluations excluded)")
+        .x_desc(match x {
+            XAxis::Seconds => "training seconds (evaluations excluded)",
+            XAxis::Steps => "training steps",
+        })
         .y_desc("test PSNR (dB)")
         .light_line_style(WHITE)
         .draw()
@@ -83,12 +115,19 @@ where
             .log
             .iter()
             .filter(|e| e.test_psnr.is_finite())
-            .map(|e| (e.seconds, e.test_psnr));
-        chart
-            .draw_series(LineSeries::new(line, color.stroke_width(2)))
-            .map_err(err)?
-            .label(c.label.clone())
-            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2)));
+            .map(|e| (x.of(e), e.test_psnr));
+        let drawn = if dashed.contains(&k) {
+            chart.draw_series(DashedLineSeries::new(line, 8, 5, color.stroke_width(2)))
+        } else {
+            chart.draw_series(LineSeries::new(line, color.stroke_width(2)))
+        };
+        // A dashed curve's legend is two dashes, a solid one's a line (relative to the entry).
+        let gap = if dashed.contains(&k) { (8, 13) } else { (20, 20) };
+        drawn.map_err(err)?.label(c.label.clone()).legend(move |p| {
+            EmptyElement::at(p)
+                + PathElement::new(vec![(0, 0), (gap.0, 0)], color.stroke_width(2))
+                + PathElement::new(vec![(gap.1, 0), (20, 0)], color.stroke_width(2))
+        });
     }
     chart
         .configure_series_labels()
@@ -101,12 +140,20 @@ where
     Ok(())
 }
 
-/// Writes `<stem>.svg` and `<stem>.png` with one curve per entry of `curves` (points whose
-/// PSNR is not finite are left out).
+/// Writes `<stem>.svg` and `<stem>.png` with one curve per entry of `curves` against training
+/// seconds (points whose PSNR is not finite are left out).
 ///
 /// Errors: [`ImageError::Empty`] for no curve, [`ImageError::Write`] if a file cannot be drawn
 /// or written.
 pub fn psnr_curves(stem: &Path, curves: &[Curve<'_>]) -> Result<(), ImageError> {
+    psnr_curves_against(stem, curves, XAxis::Seconds, &[])
+}
+
+/// As [`psnr_curves`], against training seconds or steps, the curves whose indices are in
+/// `dashed` drawn dashed.
+///
+/// Errors: as [`psnr_curves`].
+pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis, dashed: &[usize]) -> Result<(), ImageError> {
     if curves.is_empty() {
         return Err(ImageError::Empty);
     }
@@ -119,10 +166,10 @@ pub fn psnr_curves(stem: &Path, curves: &[Curve<'_>]) -> Result<(), ImageError> 
     };
     {
         let root = SVGBackend::new(&svg, size).into_drawing_area();
-        draw(&root, curves).map_err(wrap(&svg))?;
+        draw(&root, curves, x, dashed).map_err(wrap(&svg))?;
         root.present().map_err(|e| wrap(&svg)(e.to_string()))?;
     }
     let root = BitMapBackend::new(&png, size).into_drawing_area();
-    draw(&root, curves).map_err(wrap(&png))?;
+    draw(&root, curves, x, dashed).map_err(wrap(&png))?;
     root.present().map_err(|e| wrap(&png)(e.to_string()))
 }

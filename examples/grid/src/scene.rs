@@ -179,6 +179,20 @@ impl Default for Scene {
 }
 
 impl Scene {
+    /// The density at point `p`: the sum of the densities of the primitives holding it (the
+    /// boundary included), 0 outside them all.
+    pub fn density_at(&self, p: [f64; 3]) -> f64 {
+        let inside = |prim: &Primitive| match prim {
+            Primitive::Sphere(s) => (0..3).map(|a| (p[a] - s.center[a]).powi(2)).sum::<f64>() <= s.radius * s.radius,
+            Primitive::Box(b) => (0..3).all(|a| b.min[a] <= p[a] && p[a] <= b.max[a]),
+        };
+        self.primitives
+            .iter()
+            .filter(|prim| inside(prim))
+            .map(Primitive::density)
+            .sum()
+    }
+
     /// Parses and validates a scene from JSON text.
     ///
     /// Errors: [`SceneError::Json`] for text that is not a scene, [`SceneError::UnknownKind`],

@@ -1,0 +1,95 @@
+//! The two questions the report answers about pairs of configurations: how much sooner the
+//! fused ops reach what the taped twins reach, and how many samples per ray occupancy sampling
+//! spends against uniform sampling for the same test PSNR.
+
+use serde::Serialize;
+
+use crate::fit::LogEntry;
+
+use super::reach::{final_psnr, reach, Reach};
+use super::ReportError;
+
+/// Fused against taped at the taped run's final test PSNR, or at the fused run's if that is
+/// lower (on the same steps the two differ only by rounding, and either may end a hair above).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct FusedVsTaped {
+    /// min(taped final PSNR, fused final PSNR) (dB).
+    pub target_psnr: f64,
+    /// Where the fused run first reached it.
+    pub fused: Reach,
+    /// Where the taped run first reached it.
+    pub taped: Reach,
+    /// Taped seconds over fused seconds to the target; `None` if the fused run was there at
+    /// 0 s.
+    pub speedup: Option<f64>,
+}
+
+/// Occupancy against uniform sampling at the lower of their two final test PSNRs (both runs
+/// reach it).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct OccupancyVsUniform {
+    /// min(final PSNR of each) (dB).
+    pub target_psnr: f64,
+    /// Where the occupancy run first reached it.
+    pub occupancy: Reach,
+    /// Where the uniform run first reached it.
+    pub uniform: Reach,
+    /// Mean samples per training ray of the occupancy run up to the target (`None` if reached
+    /// at step 0).
+    pub occupancy_samples_per_ray: Option<f64>,
+    /// The same for the uniform run.
+    pub uniform_samples_per_ray: Option<f64>,
+    /// Occupancy samples per ray over uniform samples per ray.
+    pub samples_per_ray_ratio: Option<f64>,
+    /// Uniform seconds over occupancy seconds to the target (`None` if the occupancy run was
+    /// there at 0 s).
+    pub speedup: Option<f64>,
+}
+
+fn ratio(num: f64, den: f64) -> Option<f64> {
+    (den > 0.0 && num.is_finite() && den.is_finite()).then(|| num / den)
+}
+
+/// How much sooner `fused` reached the final test PSNR of `taped` (see [`FusedVsTaped`]).
+///
+/// Errors: [`ReportError::Log`] for a log that is empty, not in time order, or has a NaN PSNR.
+pub fn fused_vs_taped(fused: &[LogEntry], taped: &[LogEntry]) -> Result<FusedVsTaped, ReportError> {
+    let target = final_psnr(taped)?.min(final_psnr(fused)?);
+    let missing = || ReportError::Log("a run misses its own final PSNR".into());
+    let t = reach(taped, target)?.ok_or_else(missing)?;
+    let f = reach(fused, target)?.ok_or_else(missing)?;
+    Ok(FusedVsTaped {
+        target_psnr: target,
+        fused: f,
+        taped: t,
+        speedup: ratio(t.seconds, f.seconds),
+    })
+}
+
+/// Samples per ray and seconds of `occupancy` and `uniform` (both with `batch` rays per step)
+/// to the lower of their final test PSNRs.
+///
+/// Errors: [`ReportError::Log`] as for [`fused_vs_taped`], or a `batch` of 0.
+pub fn occupancy_vs_uniform(
+    occupancy: &[LogEntry],
+    uniform: &[LogEntry],
+    batch: usize,
+) -> Result<OccupancyVsUniform, ReportError> {
+    if batch == 0 {
+        return Err(ReportError::Log("the batch must be at least 1 ray".into()));
+    }
+    let target = final_psnr(occupancy)?.min(final_psnr(uniform)?);
+    let missing = || ReportError::Log("a run misses its own final PSNR".into());
+    let o = reach(occupancy, target)?.ok_or_else(missing)?;
+    let u = reach(uniform, target)?.ok_or_else(missing)?;
+    let (os, us) = (o.samples_per_ray(batch), u.samples_per_ray(batch));
+    Ok(OccupancyVsUniform {
+        target_psnr: target,
+        occupancy: o,
+        uniform: u,
+        occupancy_samples_per_ray: os,
+        uniform_samples_per_ray: us,
+        samples_per_ray_ratio: os.zip(us).and_then(|(o, u)| ratio(o, u)),
+        speedup: ratio(u.seconds, o.seconds),
+    })
+}

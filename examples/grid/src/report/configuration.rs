@@ -1,0 +1,122 @@
+//! Which fits the report runs: a method, a sampling and a precision, named
+//! `METHOD-SAMPLING[-PRECISION]` (`fused-uniform`, `taped-occupancy`, `fused-uniform-f64`).
+
+use std::fmt;
+use std::str::FromStr;
+
+use crate::fit::Sampling;
+use crate::model::Method;
+
+use super::ReportError;
+
+/// The floating-point type of a fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Precision {
+    /// `f32` (the default).
+    F32,
+    /// `f64`.
+    F64,
+}
+
+/// One configuration of the report.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct RunConfig {
+    /// Fused ops or taped twins.
+    pub method: Method,
+    /// Uniform or occupancy sampling.
+    pub sampling: Sampling,
+    /// The model's and the render's float type.
+    pub precision: Precision,
+}
+
+/// The report's default configurations: fused and taped, uniform and occupancy, all in f32.
+pub const DEFAULT_CONFIGS: [RunConfig; 4] = [
+    RunConfig::f32(Method::Fused, Sampling::Uniform),
+    RunConfig::f32(Method::Taped, Sampling::Uniform),
+    RunConfig::f32(Method::Fused, Sampling::Occupancy),
+    RunConfig::f32(Method::Taped, Sampling::Occupancy),
+];
+
+impl RunConfig {
+    /// An f32 configuration.
+    pub const fn f32(method: Method, sampling: Sampling) -> Self {
+        RunConfig {
+            method,
+            sampling,
+            precision: Precision::F32,
+        }
+    }
+
+    /// `"fused"` or `"taped"`.
+    pub fn method_name(&self) -> &'static str {
+        match self.method {
+            Method::Fused => "fused",
+            Method::Taped => "taped",
+        }
+    }
+
+    /// `"uniform"` or `"occupancy"`.
+    pub fn sampling_name(&self) -> &'static str {
+        match self.sampling {
+            Sampling::Uniform => "uniform",
+            Sampling::Occupancy => "occupancy",
+        }
+    }
+
+    /// `"f32"` or `"f64"`.
+    pub fn precision_name(&self) -> &'static str {
+        match self.precision {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+}
+
+impl fmt::Display for RunConfig {
+    /// The name that [`RunConfig::from_str`] reads back (`-f32` left out).
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        write!(f, "{}-{}", self.method_name(), self.sampling_name())?;
+        match self.precision {
+            Precision::F32 => Ok(()),
+            Precision::F64 => write!(f, "-f64"),
+        }
+    }
+}
+
+impl FromStr for RunConfig {
+    type Err = ReportError;
+
+    /// Reads `METHOD-SAMPLING[-PRECISION]`: `fused|taped`, `uniform|occupancy`, `f32|f64`
+    /// (f32 if absent). Error: [`ReportError::Config`] naming what is wrong.
+    fn from_str(name: &str) -> Result<Self, ReportError> {
+        let bad = |what: &str| {
+            ReportError::Config(format!(
+                "configuration {name:?}: {what} (expected METHOD-SAMPLING[-PRECISION], e.g. fused-uniform or taped-occupancy-f64)"
+            ))
+        };
+        let parts: Vec<&str> = name.split('-').collect();
+        if !(2..=3).contains(&parts.len()) {
+            return Err(bad("two or three parts"));
+        }
+        let method = match parts[0] {
+            "fused" => Method::Fused,
+            "taped" => Method::Taped,
+            _ => return Err(bad("the method is fused or taped")),
+        };
+        let sampling = match parts[1] {
+            "uniform" => Sampling::Uniform,
+            "occupancy" => Sampling::Occupancy,
+            _ => return Err(bad("the sampling is uniform or occupancy")),
+        };
+        let precision = match parts.get(2) {
+            None | Some(&"f32") => Precision::F32,
+            Some(&"f64") => Precision::F64,
+            Some(_) => return Err(bad("the precision is f32 or f64")),
+        };
+        Ok(RunConfig {
+            method,
+            sampling,
+            precision,
+        })
+    }
+}

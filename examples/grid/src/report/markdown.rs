@@ -1,0 +1,223 @@
+//! The report's tables, as numbers ([`config_rows`], [`fused_vs_taped_rows`],
+//! [`occupancy_vs_uniform_rows`]) and as markdown ([`report`]).
+
+use fogray::stamp::Stamp;
+
+use crate::fit::Budget;
+
+use super::compare::{fused_vs_taped, occupancy_vs_uniform, FusedVsTaped, OccupancyVsUniform};
+use super::reach::psnr_at;
+use super::run::ConfigRun;
+use super::ReportError;
+
+/// The training times the table reads the PSNR at: a quarter, half and all of a budget of
+/// seconds; for a budget of steps (whose runs stop at different times), of the shortest run's
+/// training time.
+pub fn checkpoints(budget: Budget, runs: &[ConfigRun]) -> Vec<f64> {
+    let total = match budget {
+        Budget::Seconds(s) => s,
+        Budget::Steps(_) => runs.iter().map(|r| r.seconds).fold(f64::INFINITY, f64::min),
+    };
+    if total.is_finite() {
+        vec![total / 4.0, total / 2.0, total]
+    } else {
+        Vec::new()
+    }
+}
+
+/// One configuration's row of the main table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConfigRow {
+    /// The configuration's name.
+    pub name: String,
+    /// Test PSNR at each checkpoint (`None` where the run stopped before it).
+    pub psnr_at: Vec<Option<f64>>,
+    /// Test PSNR at the end.
+    pub final_psnr: f64,
+    /// Steps done.
+    pub steps: usize,
+    /// Training seconds.
+    pub seconds: f64,
+    /// Steps per training second.
+    pub steps_per_second: f64,
+    /// Mean samples per training ray.
+    pub samples_per_ray: f64,
+    /// Fraction of occupied cells at the end.
+    pub occupied_fraction: f64,
+}
+
+/// The main table's rows. Errors: [`ReportError::Log`] for a log that is not a curve.
+pub fn config_rows(runs: &[ConfigRun], checkpoints: &[f64]) -> Result<Vec<ConfigRow>, ReportError> {
+    runs.iter()
+        .map(|r| {
+            Ok(ConfigRow {
+                name: r.name.clone(),
+                psnr_at: checkpoints
+                    .iter()
+                    .map(|&t| psnr_at(&r.log, t))
+                    .collect::<Result<_, _>>()?,
+                final_psnr: r.final_test_psnr,
+                steps: r.steps,
+                seconds: r.seconds,
+                steps_per_second: r.steps as f64 / r.seconds,
+                samples_per_ray: r.samples_per_ray_mean,
+                occupied_fraction: r.occupied_fraction,
+            })
+        })
+        .collect()
+}
+
+/// Fused against taped for every sampling and precision that has both, named by the pair's
+/// shared part (`"uniform"`, `"occupancy-f64"`). Errors: as [`config_rows`].
+pub fn fused_vs_taped_rows(runs: &[ConfigRun]) -> Result<Vec<(String, FusedVsTaped)>, ReportError> {
+    let mut rows = Vec::new();
+    for f in runs.iter().filter(|r| r.method == "fused") {
+        if let Some(t) = runs
+            .iter()
+            .find(|t| t.method == "taped" && t.sampling == f.sampling && t.precision == f.precision)
+        {
+            rows.push((shared(f.sampling, f.precision), fused_vs_taped(&f.log, &t.log)?));
+        }
+    }
+    Ok(rows)
+}
+
+/// Occupancy against uniform for every method and precision that has both, `batch` rays per
+/// step. Errors: as [`config_rows`], or a `batch` of 0.
+pub fn occupancy_vs_uniform_rows(
+    runs: &[ConfigRun],
+    batch: usize,
+) -> Result<Vec<(String, OccupancyVsUniform)>, ReportError> {
+    let mut rows = Vec::new();
+    for o in runs.iter().filter(|r| r.sampling == "occupancy") {
+        if let Some(u) = runs
+            .iter()
+            .find(|u| u.sampling == "uniform" && u.method == o.method && u.precision == o.precision)
+        {
+            rows.push((
+                shared(o.method, o.precision),
+                occupancy_vs_uniform(&o.log, &u.log, batch)?,
+            ));
+        }
+    }
+    Ok(rows)
+}
+
+fn shared(name: &str, precision: &str) -> String {
+    if precision == "f32" {
+        name.to_string()
+    } else {
+        format!("{name}-{precision}")
+    }
+}
+
+fn num(v: Option<f64>, decimals: usize) -> String {
+    match v {
+        Some(v) if v.is_finite() => format!("{v:.decimals$}"),
+        Some(v) => format!("{v}"),
+        None => "-".into(),
+    }
+}
+
+/// What the markdown needs besides the runs.
+#[derive(Debug, Clone)]
+pub struct ReportContext<'a> {
+    /// Date, machine and command.
+    pub stamp: &'a Stamp,
+    /// The command that reproduces the report, shown at the top.
+    pub reproduce: &'a str,
+    /// The budget every run had.
+    pub budget: Budget,
+    /// Rays per step.
+    pub batch: usize,
+    /// A sentence on the problem (grid, views, image size).
+    pub problem: &'a str,
+    /// Markdown for the pictures section (images and captions), or empty.
+    pub pictures: &'a str,
+}
+
+/// The whole of `report.md`. Errors: as [`config_rows`].
+pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, ReportError> {
+    let points = checkpoints(ctx.budget, runs);
+    let mut md = String::from("# fogray-grid: test PSNR against training time\n\n");
+    md += &format!(
+        "Reproduce with `{}` (on a quiet machine: the runs are timed).\n\n",
+        ctx.reproduce
+    );
+    md += &format!("{}\n\n", ctx.stamp.markdown());
+    let budget = match ctx.budget {
+        Budget::Seconds(s) => format!("{s} training seconds"),
+        Budget::Steps(n) => format!("{n} steps"),
+    };
+    md += &format!(
+        "{} Each configuration trains for {budget} (test evaluations excluded from the clock), one after another in one process.\n\n",
+        ctx.problem
+    );
+    md += "![test PSNR against training seconds](psnr-vs-seconds.png)\n\n";
+    md += "![test PSNR against training steps](psnr-vs-steps.png)\n\n";
+    md += "## Configurations\n\n| configuration |";
+    for t in &points {
+        md += &format!(" PSNR at {} s (dB) |", (t * 1000.0).round() / 1000.0);
+    }
+    md += " final PSNR (dB) | steps | training s | steps/s | samples per ray | occupied fraction |\n|---|";
+    md += &"---|".repeat(points.len() + 6);
+    md += "\n";
+    for row in config_rows(runs, &points)? {
+        md += &format!("| {} |", row.name);
+        for p in &row.psnr_at {
+            md += &format!(" {} |", num(*p, 2));
+        }
+        md += &format!(
+            " {} | {} | {} | {} | {} | {} |\n",
+            num(Some(row.final_psnr), 2),
+            row.steps,
+            num(Some(row.seconds), 2),
+            num(Some(row.steps_per_second), 2),
+            num(Some(row.samples_per_ray), 1),
+            num(Some(row.occupied_fraction), 3)
+        );
+    }
+    md += "\nThe PSNR at a time is interpolated linearly between the two test evaluations around it \
+           (about 20 per run); `-` where the run stopped before that time. Samples per ray are the \
+           mean over all training steps; the occupied fraction is the occupancy grid's at the end \
+           (1 with uniform sampling).\n\n";
+    let fvt = fused_vs_taped_rows(runs)?;
+    if !fvt.is_empty() {
+        md += "## Fused against taped: time to the same PSNR\n\n";
+        md += "| sampling | target PSNR (dB, the taped final) | taped s to reach it | fused s to reach it | fused speed-up |\n|---|---|---|---|---|\n";
+        for (name, c) in &fvt {
+            md += &format!(
+                "| {name} | {} | {} | {} | {} |\n",
+                num(Some(c.target_psnr), 2),
+                num(Some(c.taped.seconds), 2),
+                num(Some(c.fused.seconds), 2),
+                c.speedup.map_or("-".into(), |x| format!("{x:.2} x"))
+            );
+        }
+        md += "\nThe target is the taped run's final PSNR, or the fused run's where that is lower \
+               (with the same steps they differ only by rounding). The seconds to reach it are \
+               interpolated linearly between the last evaluation below it and the first at or \
+               above it (the first crossing).\n\n";
+    }
+    let ovu = occupancy_vs_uniform_rows(runs, ctx.batch)?;
+    if !ovu.is_empty() {
+        md += "## Occupancy against uniform sampling at the same PSNR\n\n";
+        md += "| method | target PSNR (dB, the lower final) | uniform samples per ray | occupancy samples per ray | occupancy / uniform | uniform s | occupancy s | occupancy speed-up |\n|---|---|---|---|---|---|---|---|\n";
+        for (name, c) in &ovu {
+            md += &format!(
+                "| {name} | {} | {} | {} | {} | {} | {} | {} |\n",
+                num(Some(c.target_psnr), 2),
+                num(c.uniform_samples_per_ray, 1),
+                num(c.occupancy_samples_per_ray, 1),
+                num(c.samples_per_ray_ratio, 3),
+                num(Some(c.uniform.seconds), 2),
+                num(Some(c.occupancy.seconds), 2),
+                num(c.speedup, 2)
+            );
+        }
+        md += "\nSamples per ray: the training samples drawn until the run first reached the target \
+               PSNR, over the rays of those steps (both interpolated between evaluations).\n\n";
+    }
+    md += ctx.pictures;
+    Ok(md)
+}

@@ -1,0 +1,217 @@
+//! Writing the report's files into one directory: the curves, `report.md`, `report.json` and
+//! the pictures of the best configuration.
+
+use std::path::{Path, PathBuf};
+
+use fogray::stamp::Stamp;
+use serde::Serialize;
+
+use crate::dataset::Dataset;
+use crate::fit::Budget;
+use crate::images::write_comparison_png;
+use crate::plots::{psnr_curves_against, Curve, XAxis};
+use crate::scene::Scene;
+use crate::slices::{scene_density_planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
+
+use super::compare::{FusedVsTaped, OccupancyVsUniform};
+use super::markdown::{fused_vs_taped_rows, occupancy_vs_uniform_rows, report, ReportContext};
+use super::run::{best, ConfigRun};
+use super::ReportError;
+
+/// Magnification of the test views in their PNGs.
+const SCALE: u32 = 4;
+/// The density slices' colour range (extinction per unit length), on a log scale.
+const LOWEST_DENSITY: f64 = 0.01;
+const HIGHEST_DENSITY: f64 = 100.0;
+
+/// What the report says about how it was made.
+#[derive(Debug, Clone)]
+pub struct ReportSetup<'a> {
+    /// Date, machine and the command that ran.
+    pub stamp: &'a Stamp,
+    /// The command that reproduces the report.
+    pub reproduce: &'a str,
+    /// Every run's budget.
+    pub budget: Budget,
+    /// Rays per step.
+    pub batch: usize,
+    /// One sentence on the problem.
+    pub problem: &'a str,
+}
+
+#[derive(Serialize)]
+struct ReportJson<'a> {
+    stamp: &'a Stamp,
+    reproduce: &'a str,
+    budget_seconds: Option<f64>,
+    budget_steps: Option<usize>,
+    batch: usize,
+    configurations: &'a [ConfigRun],
+    fused_vs_taped: Vec<Named<FusedVsTaped>>,
+    occupancy_vs_uniform: Vec<Named<OccupancyVsUniform>>,
+}
+
+#[derive(Serialize)]
+struct Named<T> {
+    name: String,
+    #[serde(flatten)]
+    comparison: T,
+}
+
+fn named<T>(rows: Vec<(String, T)>) -> Vec<Named<T>> {
+    rows.into_iter()
+        .map(|(name, comparison)| Named { name, comparison })
+        .collect()
+}
+
+fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
+    std::fs::write(path, text).map_err(|e| ReportError::Write {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })
+}
+
+/// The pictures of the best run (and of the best occupancy run's grid); returns their markdown.
+fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Result<String, ReportError> {
+    let Some(top) = best(runs) else {
+        return Ok(String::new());
+    };
+    let mut md = format!(
+        "## The best configuration: {} ({:.2} dB)\n\nEach test view: the exact photograph, the final render and |render - exact| x 4.\n\n",
+        top.name, top.final_test_psnr
+    );
+    for (t, render) in data.test.iter().zip(&top.pictures.renders) {
+        let name = format!("test-view-{:03}.png", t.view);
+        write_comparison_png(&dir.join(&name), t.photograph.view(), render.view(), 4.0, SCALE)?;
+        md += &format!("![test view {}]({name})\n\n", t.view);
+    }
+    if let Some(n) = top.pictures.density.first().map(|p| p.values.nrows()) {
+        // Decades: the fitted density spans empty space (softplus of the shift, about 0.02)
+        // to the hundreds inside opaque matter, which a linear scale shows as one colour.
+        let log = |planes: &[PlaneImage]| -> Vec<PlaneImage> {
+            planes
+                .iter()
+                .map(|p| PlaneImage {
+                    axis: p.axis,
+                    values: p.values.mapv(|v| v.max(LOWEST_DENSITY).log10()),
+                })
+                .collect()
+        };
+        let exact = log(&scene_density_planes(scene, n));
+        let fitted = log(&top.pictures.density);
+        let colouring = Colouring::Map {
+            lo: LOWEST_DENSITY.log10(),
+            hi: HIGHEST_DENSITY.log10(),
+            label: format!(
+                "log10 density (extinction\nper unit length), clamped\nto [{}, {}]",
+                LOWEST_DENSITY.log10(),
+                HIGHEST_DENSITY.log10()
+            ),
+        };
+        let rows = [
+            PlaneRow {
+                title: "exact",
+                planes: &exact,
+            },
+            PlaneRow {
+                title: "fitted",
+                planes: &fitted,
+            },
+        ];
+        write_planes_png(
+            &dir.join("density-slices.png"),
+            &rows,
+            &colouring,
+            (384 / n as u32).max(1),
+        )?;
+        md += "The density on the planes through the centre of the box, log scale: the scene's (top) and the fitted model's (bottom).\n\n![density slices](density-slices.png)\n\n";
+    }
+    let occupancy_runs = runs.iter().filter(|r| r.pictures.occupancy.is_some());
+    if let Some(occ) = occupancy_runs.reduce(|a, b| if b.final_test_psnr > a.final_test_psnr { b } else { a }) {
+        if let Some(planes) = &occ.pictures.occupancy {
+            let r = planes.first().map_or(1, |p| p.values.nrows()) as u32;
+            let rows = [PlaneRow {
+                title: &format!("{} occupancy", occ.name),
+                planes,
+            }];
+            write_planes_png(
+                &dir.join("occupancy-slices.png"),
+                &rows,
+                &Colouring::Occupied,
+                (384 / r).max(1),
+            )?;
+            md += &format!(
+                "The final occupancy grid of {} ({:.1} % of cells occupied), its middle plane of cells across each axis.\n\n![occupancy slices](occupancy-slices.png)\n\n",
+                occ.name,
+                100.0 * occ.occupied_fraction
+            );
+        }
+    }
+    Ok(md)
+}
+
+/// Writes into `dir` (created if missing): `psnr-vs-seconds.svg/.png` and
+/// `psnr-vs-steps.svg/.png` (one curve per run), `report.md`, `report.json` (every run's log
+/// and figures, the comparisons and the stamp), and pictures of the best run: each test view's
+/// photograph, render and error (`test-view-NNN.png`), `density-slices.png` and, where a run
+/// sampled with an occupancy grid, `occupancy-slices.png`. Returns `report.md`'s path.
+///
+/// Errors: [`ReportError::Write`] or [`ReportError::Image`] for a file that cannot be written,
+/// [`ReportError::Log`] for a log that is not a curve, [`ReportError::Config`] for no runs.
+pub fn write_report(
+    dir: &Path,
+    runs: &[ConfigRun],
+    data: &Dataset,
+    scene: &Scene,
+    setup: &ReportSetup<'_>,
+) -> Result<PathBuf, ReportError> {
+    if runs.is_empty() {
+        return Err(ReportError::Config("no runs to report".into()));
+    }
+    std::fs::create_dir_all(dir).map_err(|e| ReportError::Write {
+        path: dir.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let curves: Vec<Curve<'_>> = runs
+        .iter()
+        .map(|r| Curve {
+            label: r.name.clone(),
+            log: &r.log,
+        })
+        .collect();
+    // Taped dashed: against steps it follows its fused twin (the same arithmetic).
+    let taped: Vec<usize> = (0..runs.len()).filter(|&i| runs[i].method == "taped").collect();
+    psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
+    psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
+    let pictures = pictures(dir, runs, data, scene)?;
+    let ctx = ReportContext {
+        stamp: setup.stamp,
+        reproduce: setup.reproduce,
+        budget: setup.budget,
+        batch: setup.batch,
+        problem: setup.problem,
+        pictures: &pictures,
+    };
+    let md_path = dir.join("report.md");
+    write_text(&md_path, &report(runs, &ctx)?)?;
+    let (budget_seconds, budget_steps) = match setup.budget {
+        Budget::Seconds(s) => (Some(s), None),
+        Budget::Steps(n) => (None, Some(n)),
+    };
+    let json = ReportJson {
+        stamp: setup.stamp,
+        reproduce: setup.reproduce,
+        budget_seconds,
+        budget_steps,
+        batch: setup.batch,
+        configurations: runs,
+        fused_vs_taped: named(fused_vs_taped_rows(runs)?),
+        occupancy_vs_uniform: named(occupancy_vs_uniform_rows(runs, setup.batch)?),
+    };
+    let text = serde_json::to_string_pretty(&json).map_err(|e| ReportError::Write {
+        path: dir.join("report.json"),
+        message: e.to_string(),
+    })?;
+    write_text(&dir.join("report.json"), &(text + "\n"))?;
+    Ok(md_path)
+}

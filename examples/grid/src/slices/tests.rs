@@ -1,0 +1,119 @@
+//! The planes' geometry against hand-placed points, the scene's density, and the occupancy
+//! grid's planes drawn the right way up.
+
+use fogray::ops::rays::Aabb;
+use fogray::ops::sample::{CellPoints, GridAxis, OccupancyConfig, OccupancyGrid};
+use ndarray::{Array1, ArrayView2};
+
+use super::*;
+use crate::images::ImageError;
+use crate::scene::Scene;
+
+#[test]
+fn pixel_centres_run_right_along_the_first_axis_and_up_the_second() {
+    // 4 x 4 pixels over [-1, 1]: centres at -0.75, -0.25, 0.25, 0.75.
+    assert_eq!(pixel_point(GridAxis::Z, 4, 0, 0), [-0.75, 0.75, 0.0]);
+    assert_eq!(pixel_point(GridAxis::Z, 4, 3, 1), [-0.25, -0.75, 0.0]);
+    assert_eq!(pixel_point(GridAxis::X, 4, 0, 3), [0.0, 0.75, 0.75]);
+    assert_eq!(pixel_point(GridAxis::Y, 4, 2, 0), [-0.75, 0.0, -0.25]);
+}
+
+#[test]
+fn the_scene_density_adds_where_primitives_overlap() {
+    let scene = Scene::default();
+    assert_eq!(scene.density_at([0.0, 0.0, 0.1]), 40.0); // red sphere's centre
+    assert_eq!(scene.density_at([0.0, 0.0, -0.7]), 60.0); // floor slab
+    assert_eq!(scene.density_at([0.95, 0.95, 0.95]), 0.0); // empty corner
+                                                           // The blue sphere (centre (0.45, 0.35, -0.2), radius 0.25) reaches into the red one
+                                                           // (centre (0, 0, 0.1), radius 0.45) at (0.3, 0.2, -0.1): 0.3^2 + 0.2^2 + 0.2^2 = 0.17 <
+                                                           // 0.2025, and 0.15^2 + 0.15^2 + 0.1^2 = 0.055 < 0.0625.
+    assert_eq!(scene.density_at([0.3, 0.2, -0.1]), 55.0);
+}
+
+#[test]
+fn a_fresh_model_has_the_shifted_density_everywhere() {
+    let model = GridModel::<f32>::new(5, -4.0).unwrap();
+    let planes = model_density_planes(&model, 6).unwrap();
+    assert_eq!(planes.iter().map(|p| p.axis).collect::<Vec<_>>(), AXES.to_vec());
+    let want = softplus(-4.0); // 0.01815
+    for v in planes.iter().flat_map(|p| p.values.iter()) {
+        assert!((v - want).abs() < 1e-6, "{v} vs {want}");
+    }
+}
+
+#[test]
+fn occupancy_planes_are_drawn_right_way_up() {
+    // Matter only where x > 0 and z > 0, on a 4^3 grid: every middle plane (index 2, cells
+    // 0 .. 0.5) is half or a quarter occupied, and where must match the picture's axes.
+    let mut grid = OccupancyGrid::new(
+        Aabb::new([-1.0; 3], [1.0; 3]).unwrap(),
+        4,
+        OccupancyConfig::density(1.0).unwrap(),
+    )
+    .unwrap();
+    let density = |p: ArrayView2<'_, f64>| -> Result<Array1<f64>, String> {
+        Ok(p.rows()
+            .into_iter()
+            .map(|r| if r[0] > 0.0 && r[2] > 0.0 { 10.0 } else { 0.0 })
+            .collect())
+    };
+    grid.update(density, CellPoints::Centre).unwrap();
+    let planes = occupancy_planes(&grid).unwrap();
+    // Across x at index 2 (x > 0): occupied where z > 0, the top half of the image.
+    let x = &planes[0].values;
+    assert_eq!(x.column(0).to_vec(), vec![1.0, 1.0, 0.0, 0.0]);
+    assert_eq!(x.row(0).to_vec(), vec![1.0; 4]);
+    // Across y: x right, z up, so the top right quarter.
+    let y = &planes[1].values;
+    assert_eq!(y.row(0).to_vec(), vec![0.0, 0.0, 1.0, 1.0]);
+    assert_eq!(y.row(3).to_vec(), vec![0.0; 4]);
+    // Across z at index 2 (z > 0): x > 0, the right half, all the way up y.
+    let z = &planes[2].values;
+    assert_eq!(z.column(3).to_vec(), vec![1.0; 4]);
+    assert_eq!(z.column(0).to_vec(), vec![0.0; 4]);
+}
+
+#[test]
+fn plane_pictures_reject_bad_input() {
+    let dir = std::env::temp_dir().join(format!("fogray-grid-slices-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("planes.png");
+    let small = scene_density_planes(&Scene::default(), 4);
+    let large = scene_density_planes(&Scene::default(), 5);
+    let colouring = Colouring::Map {
+        lo: 0.0,
+        hi: 60.0,
+        label: "density".into(),
+    };
+    let rows = [
+        PlaneRow {
+            title: "a",
+            planes: &small,
+        },
+        PlaneRow {
+            title: "b",
+            planes: &large,
+        },
+    ];
+    assert!(matches!(
+        write_planes_png(&path, &rows, &colouring, 2),
+        Err(ImageError::Shape { .. })
+    ));
+    assert!(matches!(
+        write_planes_png(&path, &rows[..1], &colouring, 0),
+        Err(ImageError::Write { .. })
+    ));
+    assert!(matches!(
+        write_planes_png(&path, &[], &colouring, 2),
+        Err(ImageError::Empty)
+    ));
+    assert!(!path.exists(), "nothing written on error");
+    write_planes_png(&path, &rows[..1], &colouring, 2).unwrap();
+    assert!(path.exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `ln(1 + e^x)` in the stable form, by the standard library.
+fn softplus(x: f64) -> f64 {
+    x.max(0.0) + (-x.abs()).exp().ln_1p()
+}

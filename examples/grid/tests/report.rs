@@ -1,0 +1,152 @@
+//! The report end to end on a tiny problem budgeted by steps: the fits it runs are the fits
+//! `fit` runs, its tables read their logs, and its files are there.
+
+use fogray_grid::dataset::Dataset;
+use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
+use fogray_grid::photographs::photographs;
+use fogray_grid::report::configuration::DEFAULT_CONFIGS;
+use fogray_grid::report::markdown::fused_vs_taped_rows;
+use fogray_grid::report::run::{run_configs, ReportOptions};
+use fogray_grid::report::write::{write_report, ReportSetup};
+use fogray_grid::report::ReportError;
+use fogray_grid::ring::Ring;
+use fogray_grid::scene::Scene;
+
+fn tiny() -> (Scene, Dataset, FitConfig) {
+    let ring = Ring::new(6, 1, 10).unwrap();
+    let scene = Scene::default();
+    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap();
+    let config = FitConfig {
+        grid: 10,
+        batch: 128,
+        budget: Budget::Steps(70),
+        lr: 0.3,
+        evaluations: 5,
+        ..FitConfig::default()
+    };
+    (scene, data, config)
+}
+
+#[test]
+fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
+    let (scene, data, config) = tiny();
+    let options = ReportOptions {
+        fit: config,
+        configs: DEFAULT_CONFIGS.to_vec(),
+        slice_pixels: 12,
+    };
+    let mut heard = Vec::new();
+    let runs = run_configs(&data, &options, &mut |i, p| heard.push((i, p.step))).unwrap();
+    assert_eq!(runs.len(), 4);
+    assert_eq!(
+        heard.len(),
+        4 * 70,
+        "one progress report per step of each configuration"
+    );
+    // Each run is the fit of its configuration: the same steps and test PSNRs.
+    for (run, c) in runs.iter().zip(DEFAULT_CONFIGS) {
+        let alone = fit::<f32>(
+            &data,
+            &FitConfig {
+                method: c.method,
+                sampling: c.sampling,
+                ..config
+            },
+            &mut |_| {},
+        )
+        .unwrap();
+        assert_eq!(run.name, c.to_string());
+        let steps = |log: &[fogray_grid::fit::LogEntry]| {
+            log.iter().map(|e| (e.step, e.test_psnr, e.samples)).collect::<Vec<_>>()
+        };
+        assert_eq!(steps(&run.log), steps(&alone.log), "{}", run.name);
+        assert_eq!(run.steps, 70);
+        assert_eq!(run.pictures.renders.len(), 1);
+        assert_eq!(run.pictures.occupancy.is_some(), c.sampling == Sampling::Occupancy);
+        // Uniform sampling counts every sample of every step: the mean per ray times the rays.
+        let last = run.log.last().unwrap();
+        let total = run.samples_per_ray_mean * (70 * 128) as f64;
+        assert!((last.samples as f64 - total).abs() < 1e-6 * total, "{}", run.name);
+    }
+    // Fused and taped do the same arithmetic, so at the taped run's final PSNR the fused log
+    // crosses at the same step (to rounding), whatever the clocks say.
+    for (name, c) in fused_vs_taped_rows(&runs).unwrap() {
+        assert!(
+            (c.fused.steps - c.taped.steps).abs() < 1.0,
+            "{name}: {} vs {}",
+            c.fused.steps,
+            c.taped.steps
+        );
+        let final_of = |method: &str| {
+            let run = runs.iter().find(|r| r.method == method && r.sampling == name).unwrap();
+            run.final_test_psnr
+        };
+        assert_eq!(c.target_psnr, final_of("taped").min(final_of("fused")));
+    }
+
+    let dir = std::env::temp_dir().join(format!("fogray-grid-report-{}", std::process::id()));
+    let stamp = fogray::stamp::Stamp::now("fogray-grid report --steps 70");
+    let setup = ReportSetup {
+        stamp: &stamp,
+        reproduce: "cargo run --release -p fogray-grid -- report --steps 70",
+        budget: config.budget,
+        batch: config.batch,
+        problem: "A tiny problem.",
+    };
+    let md = write_report(&dir, &runs, &data, &scene, &setup).unwrap();
+    let text = std::fs::read_to_string(&md).unwrap();
+    assert!(text.contains("`cargo run --release -p fogray-grid -- report --steps 70`"));
+    for row in ["| fused-uniform |", "| taped-occupancy |", "| uniform |", "| fused |"] {
+        assert!(text.contains(row), "{row} missing from\n{text}");
+    }
+    for file in [
+        "psnr-vs-seconds.svg",
+        "psnr-vs-seconds.png",
+        "psnr-vs-steps.png",
+        "report.json",
+        "density-slices.png",
+        "occupancy-slices.png",
+        "test-view-003.png",
+    ] {
+        assert!(dir.join(file).exists(), "{file}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let configs = json["configurations"].as_array().unwrap();
+    assert_eq!(configs.len(), 4);
+    assert_eq!(configs[1]["name"], "taped-uniform");
+    assert_eq!(configs[1]["log"].as_array().unwrap().len(), runs[1].log.len());
+    assert_eq!(configs[1]["final_test_psnr"].as_f64().unwrap(), runs[1].final_test_psnr);
+    assert_eq!(json["fused_vs_taped"].as_array().unwrap().len(), 2);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_options_fail_before_any_fit() {
+    let (_, data, config) = tiny();
+    let mut ran = false;
+    for (configs, slice_pixels) in [
+        (vec![], 8),
+        (vec![DEFAULT_CONFIGS[0], DEFAULT_CONFIGS[0]], 8),
+        (DEFAULT_CONFIGS.to_vec(), 0),
+    ] {
+        let options = ReportOptions {
+            fit: config,
+            configs,
+            slice_pixels,
+        };
+        let result = run_configs(&data, &options, &mut |_, _| ran = true);
+        assert!(matches!(result, Err(ReportError::Config(_))));
+    }
+    assert!(!ran);
+    // A fit's own check (a zero batch) comes back as the fit's error.
+    let options = ReportOptions {
+        fit: FitConfig { batch: 0, ..config },
+        configs: vec![DEFAULT_CONFIGS[0]],
+        slice_pixels: 8,
+    };
+    assert!(matches!(
+        run_configs(&data, &options, &mut |_, _| {}),
+        Err(ReportError::Fit(_))
+    ));
+}

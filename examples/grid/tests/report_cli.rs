@@ -1,0 +1,105 @@
+//! `fogray-grid report` as a user runs it: on a tiny problem budgeted by steps it writes its
+//! files and prints one line per configuration; bad input exits 2 with one line on stderr.
+
+use std::process::Command;
+
+fn grid(args: &[&str]) -> (i32, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_fogray-grid"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.code().unwrap_or(-1),
+        String::from_utf8(out.stdout).unwrap(),
+        String::from_utf8(out.stderr).unwrap(),
+    )
+}
+
+#[test]
+fn report_writes_its_files_and_names_its_command() {
+    let dir = std::env::temp_dir().join(format!("fogray-grid-report-cli-{}", std::process::id()));
+    let out = dir.join("report");
+    let tiny = [
+        "--views",
+        "4",
+        "--test-views",
+        "1",
+        "--size",
+        "8",
+        "--grid",
+        "8",
+        "--batch",
+        "64",
+        "--steps",
+        "6",
+    ];
+    let args = [
+        &["report"][..],
+        &tiny,
+        &[
+            "--configs",
+            "fused-uniform,fused-occupancy-f64",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    ]
+    .concat();
+    let (code, stdout, err) = grid(&args);
+    assert_eq!(code, 0, "{err}");
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(lines.len(), 3, "{stdout}");
+    assert!(
+        lines[0].starts_with("fused-uniform ") && lines[0].contains("6 steps"),
+        "{stdout}"
+    );
+    assert!(lines[1].starts_with("fused-occupancy-f64 "), "{stdout}");
+    assert!(lines[2].ends_with("report.md"), "{stdout}");
+    let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    let given = args[1..].join(" ");
+    assert!(
+        md.contains(&format!("`cargo run --release -p fogray-grid -- report {given}`")),
+        "{md}"
+    );
+    // No taped run, no f32 occupancy run: neither comparison has a pair.
+    assert!(!md.contains("## Fused against taped"), "{md}");
+    assert!(!md.contains("## Occupancy against uniform"), "{md}");
+    for file in [
+        "psnr-vs-seconds.png",
+        "psnr-vs-steps.svg",
+        "report.json",
+        "density-slices.png",
+        "occupancy-slices.png",
+    ] {
+        assert!(out.join(file).exists(), "{file}");
+    }
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("report.json")).unwrap()).unwrap();
+    assert_eq!(json["configurations"][1]["precision"], "f64");
+    assert_eq!(json["budget_steps"], 6);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn bad_report_input_exits_2_with_one_line() {
+    let dir = std::env::temp_dir().join(format!("fogray-grid-report-bad-{}", std::process::id()));
+    let out = dir.to_str().unwrap();
+    let tiny = ["--size", "4", "--steps", "2", "--out", out];
+    for extra in [
+        &["--configs", "fused-dense"][..],
+        &["--configs", "fused-uniform,fused-uniform"][..],
+        &["--configs", "fused-uniform-f16"][..],
+        &["--seconds", "3"][..],
+        &["--grid", "1"][..],
+        &["--batch", "0"][..],
+        &["--test-views", "0"][..],
+    ] {
+        let args = [&["report"][..], &tiny, extra].concat();
+        let (code, stdout, err) = grid(&args);
+        assert_eq!(code, 2, "{args:?}: {err}");
+        assert!(stdout.is_empty(), "{args:?}: {stdout}");
+        assert_eq!(err.lines().count(), 1, "{args:?}: {err}");
+        assert!(err.starts_with("fogray-grid: error: "), "{args:?}: {err}");
+    }
+    assert!(!dir.join("report.md").exists());
+    let _ = std::fs::remove_dir_all(&dir);
+}
