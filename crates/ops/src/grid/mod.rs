@@ -58,6 +58,7 @@ mod forward;
 mod geometry;
 mod op;
 mod scatter;
+mod scratch;
 pub mod twin;
 
 pub use config::{GridField, GridGradients, GridWanted};
