@@ -153,6 +153,8 @@ fn sort_block<F: Float, const D: usize>(
 /// Adds `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
 /// (`[n, D]`, flat) into `out` (the grid's shape, flat; zeros on entry), with the working
 /// memory kept in `scratch`.
+// A Vec, not a slice: recognising f64 data by downcasting needs a sized type.
+#[allow(clippy::ptr_arg)]
 pub(crate) fn grid_gradient<F: Float, const D: usize>(
     layout: &Layout<D>,
     positions: &[F],
