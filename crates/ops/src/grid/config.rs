@@ -4,6 +4,7 @@
 use fogray_tape::{Float, Tape, TapeError, Var};
 
 use super::geometry::GridBox;
+use super::scratch::Scratch;
 use crate::error::GridError;
 
 /// A dense grid of `C` channels over a [`GridBox`], looked up at packed positions: bilinear in
@@ -11,11 +12,17 @@ use crate::error::GridError;
 ///
 /// Holds the box and the grid's shape; the grid values and the positions are tape values
 /// passed to [`GridField::apply`] (or arrays passed to [`GridField::evaluate`]).
+///
+/// It also keeps the working memory of its backward into the grid between calls (about
+/// `(D + C)` values per lookup, and for f32 data 8 bytes per grid value), shared with its
+/// clones, so that a training loop's steps reuse it instead of faulting in fresh pages;
+/// [`GridField::release_buffers`] gives it back.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridField {
     pub(crate) bbox: GridBox,
     /// `[n0, n1, (n2,) C]`.
     pub(crate) shape: Vec<usize>,
+    pub(crate) scratch: Scratch,
 }
 
 /// Which gradients [`GridField::vjp`] computes.
@@ -69,7 +76,14 @@ impl GridField {
         Ok(GridField {
             bbox,
             shape: shape.to_vec(),
+            scratch: Scratch::default(),
         })
+    }
+
+    /// Drops the working memory the backward keeps between calls (for this field and its
+    /// clones); the next backward allocates it again.
+    pub fn release_buffers(&self) {
+        self.scratch.release();
     }
 
     /// The box.

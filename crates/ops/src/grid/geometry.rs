@@ -158,12 +158,6 @@ impl<const D: usize> Layout<D> {
         }
         Some(Cell { node, index, t })
     }
-
-    /// The cell index along axis 0 of the position `p` (the slab key of the backward).
-    #[inline(always)]
-    pub(crate) fn cell_along_first_axis(&self, p: [f64; D]) -> Option<usize> {
-        self.locate(p).map(|c| c.index[0])
-    }
 }
 
 /// The `2^D` trilinear (bilinear) weights of a cell's corners, in the corner order of

@@ -23,10 +23,12 @@
 //!
 //! Each position's cell and weights are computed in f64 (also for f32 data) and rounded once.
 //! The forward is parallel over fixed chunks of positions. The backward into the grid is a
-//! scatter made deterministic by a fixed cut of the grid into slabs along x: each slab's terms
-//! are summed in a fixed order, in f64, by one task, so the gradient is bitwise the same for
-//! any number of threads (see `scatter.rs` in the source). Nothing is saved between forward and
-//! backward: the backward recomputes cells and weights from the inputs.
+//! scatter made deterministic by a fixed cut of the grid into tiles (slabs along x, rows along
+//! y): each node's terms are summed in a fixed order, in f64, and rounded once, so the
+//! gradient is bitwise the same for any number of threads (see `scatter.rs` in the source).
+//! Nothing is saved between forward and backward: the backward recomputes cells and weights
+//! from the inputs. The backward's working memory is kept by the field between calls
+//! ([`GridField::release_buffers`]).
 //!
 //! ```
 //! use fogray_ops::{GridBox, GridField};
@@ -58,6 +60,7 @@ mod forward;
 mod geometry;
 mod op;
 mod scatter;
+mod scratch;
 pub mod twin;
 
 pub use config::{GridField, GridGradients, GridWanted};

@@ -157,7 +157,7 @@ impl GridField {
         let ch = self.channels();
         let grid = if wanted.grid {
             let mut out = zeroed(x.grid.len());
-            grid_gradient(layout, &x.positions, upstream, ch, &mut out);
+            grid_gradient(layout, &x.positions, upstream, ch, &mut out, &self.scratch);
             Some(array(&self.shape, out)?)
         } else {
             None

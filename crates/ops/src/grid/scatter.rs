@@ -1,140 +1,227 @@
 //! The backward into the grid values: a deterministic scatter of `w_k g` into the `2^D`
 //! corner rows of every position's cell.
 //!
-//! The grid is cut along axis 0 into slabs of `T` cell layers (`T` from the grid's shape
-//! alone). A position in slab `j` only touches node layers `jT ..= (j+1)T`, so the even slabs
-//! touch disjoint nodes, and so do the odd ones: the even slabs are summed in parallel, then
-//! the odd ones. Each slab's positions are listed by a stable counting sort within fixed
-//! blocks of positions, and summed in block order, then position order, into an f64 buffer
-//! (a node may collect millions of terms: the f32 sum of 2^20 equal terms is off by several
-//! percent), rounded once and added to the gradient. Nothing depends on the thread count, so
-//! neither does any bit of the result; and a slab's nodes stay in cache while it is summed.
+//! The grid's cells are cut into tiles: slabs of `T` cell layers along axis 0, each cut into
+//! `R` cell rows along axis 1 (`T` and `R` from the grid's shape alone). A position in slab
+//! `j` only touches node layers `jT ..= (j+1)T`, so the even slabs touch disjoint nodes, and so
+//! do the odd ones: the even slabs are summed in parallel, then the odd ones. Each position is
+//! listed under its tile by a stable counting sort within fixed blocks of positions, and a
+//! slab is summed tile by tile, each tile in block order, then position order: a tile's
+//! nodes are few enough to stay in cache while it is summed.
+//!
+//! Every node's terms are summed in f64 (a node may collect millions of terms: the f32 sum of
+//! 2^20 equal terms is off by several percent), in one buffer the size of the grid, rounded
+//! once at the end. Nothing depends on the thread count, so neither does any bit of the result.
+
+use std::any::Any;
 
 use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::forward::position;
 use super::geometry::{weights, Layout};
+use super::scratch::Scratch;
 
 /// Positions per block of the counting sort (fixed: the order of the sums depends on it).
 const BLOCK: usize = 1 << 15;
 
-/// A slab holds at least this many gradient values (unless the grid is thinner).
+/// A slab holds at least this many gradient values (unless the grid is thinner): fewer,
+/// larger tasks.
 const MIN_SLAB_VALUES: usize = 1 << 14;
 
-/// The positions of one block grouped by slab, each with its upstream gradient: records
-/// `starts[j]..starts[j + 1]` (of `D + C` values each: the position, then the gradient) are
-/// those of slab `j`, in position order. The copy turns the slab pass's scattered reads into
-/// one sequential run per block and slab.
+/// A tile's nodes hold at most about this many gradient values (unless one cell row of a
+/// slab holds more): its f64 sums then fit in a core's L2 cache.
+const TILE_VALUES: usize = 1 << 14;
+
+/// The positions of one block grouped by tile, each with its upstream gradient: records
+/// `starts[k]..starts[k + 1]` (of `D + C` values each: the position, then the gradient) are
+/// those of tile `k`, in position order. The copy turns the slab pass's scattered reads into
+/// one sequential run per block and tile. Kept between calls (see `scratch.rs`).
 struct Sorted<F> {
     records: Vec<F>,
     starts: Vec<u32>,
+    /// Each position's tile (working memory of the sort).
+    keys: Vec<u32>,
 }
 
-/// How the grid is cut into slabs.
-#[derive(Debug, Clone, Copy)]
-struct Slabs {
-    /// Cell layers per slab (`T`).
-    thickness: usize,
-    /// Number of slabs.
-    count: usize,
-    /// Values per node layer (`n1 (n2) C`).
-    layer: usize,
-}
-
-impl Slabs {
-    fn new<const D: usize>(layout: &Layout<D>, ch: usize) -> Self {
-        let layer = layout.strides[0] * ch;
-        let thickness = (MIN_SLAB_VALUES / layer).max(1);
-        let cells = layout.axes[0].last_cell + 1;
-        Slabs {
-            thickness,
-            count: cells.div_ceil(thickness),
-            layer,
+impl<F> Default for Sorted<F> {
+    fn default() -> Self {
+        Sorted {
+            records: Vec::new(),
+            starts: Vec::new(),
+            keys: Vec::new(),
         }
     }
 }
 
+/// How the grid's cells are cut into tiles.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct Tiles {
+    /// Cell layers per slab along axis 0 (`T`).
+    pub(crate) thickness: usize,
+    /// Number of slabs.
+    pub(crate) slabs: usize,
+    /// Cell rows per tile along axis 1 (`R`).
+    pub(crate) rows: usize,
+    /// Tiles per slab.
+    pub(crate) per_slab: usize,
+    /// Values per node layer (`n1 (n2) C`).
+    pub(crate) layer: usize,
+}
+
+impl Tiles {
+    pub(crate) fn new<const D: usize>(layout: &Layout<D>, ch: usize) -> Self {
+        let layer = layout.strides[0] * ch;
+        let thickness = (MIN_SLAB_VALUES / layer).max(1);
+        let row = layout.strides[1] * ch;
+        // A tile of R rows spans (T + 1) (R + 1) node rows.
+        let rows = (TILE_VALUES / ((thickness + 1) * row)).saturating_sub(1).max(1);
+        let (cells0, cells1) = (layout.axes[0].last_cell + 1, layout.axes[1].last_cell + 1);
+        Tiles {
+            thickness,
+            slabs: cells0.div_ceil(thickness),
+            rows,
+            per_slab: cells1.div_ceil(rows),
+            layer,
+        }
+    }
+
+    /// Number of tiles.
+    fn count(&self) -> usize {
+        self.slabs * self.per_slab
+    }
+
+    /// The tile of the cell with indices `i0` and `i1` along axes 0 and 1.
+    #[inline(always)]
+    fn of(&self, i0: usize, i1: usize) -> usize {
+        (i0 / self.thickness) * self.per_slab + i1 / self.rows
+    }
+}
+
+/// Sorts one block of positions (and their upstream gradients) by tile into `sorted`.
 fn sort_block<F: Float, const D: usize>(
+    sorted: &mut Sorted<F>,
     layout: &Layout<D>,
-    slabs: Slabs,
+    tiles: Tiles,
     positions: &[F],
     upstream: &[F],
     ch: usize,
-) -> Sorted<F> {
+) {
     let n = positions.len() / D;
-    let outside = slabs.count;
-    let keys: Vec<usize> = (0..n)
-        .map(|s| {
-            layout
-                .cell_along_first_axis(position::<F, D>(positions, s))
-                .map_or(outside, |i| i / slabs.thickness)
-        })
-        .collect();
-    let mut starts = vec![0u32; slabs.count + 2];
-    for &k in &keys {
-        starts[k + 1] += 1;
+    // Positions outside the box, or with a zero gradient, get the key after the last tile and
+    // are not copied.
+    let skip = tiles.count();
+    let Sorted { records, starts, keys } = sorted;
+    keys.clear();
+    keys.extend((0..n).map(|s| {
+        if upstream[s * ch..(s + 1) * ch].iter().all(|&v| v == F::zero()) {
+            return skip as u32;
+        }
+        layout
+            .locate(position::<F, D>(positions, s))
+            .map_or(skip, |c| tiles.of(c.index[0], c.index[1])) as u32
+    }));
+    starts.clear();
+    starts.resize(skip + 2, 0);
+    for &k in keys.iter() {
+        starts[k as usize + 1] += 1;
     }
-    for j in 0..=slabs.count {
-        starts[j + 1] += starts[j];
+    for k in 0..=skip {
+        starts[k + 1] += starts[k];
     }
-    let mut next = starts.clone();
-    let mut order = vec![0u32; n];
+    let width = D + ch;
+    let len = starts[skip] as usize * width;
+    // Every record below `len` is written below, so only growth needs a value.
+    records.truncate(len);
+    records.resize(len, F::zero());
+    // next[k], each tile's next free record, begins at starts[k] and ends at starts[k + 1],
+    // so that the array shifted by one holds the starts again when the copy is done.
+    let next = &mut starts[1..];
+    next.rotate_right(1);
+    next[0] = 0;
     for (s, &k) in keys.iter().enumerate() {
-        order[next[k] as usize] = s as u32;
-        next[k] += 1;
+        if (k as usize) < skip {
+            let at = next[k as usize] as usize;
+            next[k as usize] += 1;
+            let record = &mut records[at * width..(at + 1) * width];
+            record[..D].copy_from_slice(&positions[s * D..(s + 1) * D]);
+            record[D..].copy_from_slice(&upstream[s * ch..(s + 1) * ch]);
+        }
     }
-    // Positions outside the box (key `slabs.count`, sorted last) are not copied.
-    let inside = starts[slabs.count] as usize;
-    let mut records = Vec::with_capacity(inside * (D + ch));
-    for &s in &order[..inside] {
-        let s = s as usize;
-        records.extend_from_slice(&positions[s * D..(s + 1) * D]);
-        records.extend_from_slice(&upstream[s * ch..(s + 1) * ch]);
-    }
-    Sorted { records, starts }
 }
 
 /// Adds `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
-/// (`[n, D]`, flat) into `out` (the grid's shape, flat; zeros on entry).
+/// (`[n, D]`, flat) into `out` (the grid's shape, flat; zeros on entry), with the working
+/// memory kept in `scratch`.
+// A Vec, not a slice: recognising f64 data by downcasting needs a sized type.
+#[allow(clippy::ptr_arg)]
 pub(crate) fn grid_gradient<F: Float, const D: usize>(
     layout: &Layout<D>,
     positions: &[F],
     upstream: &[F],
     ch: usize,
-    out: &mut [F],
+    out: &mut Vec<F>,
+    scratch: &Scratch,
 ) {
-    let slabs = Slabs::new(layout, ch);
-    let blocks: Vec<Sorted<F>> = positions
-        .par_chunks(BLOCK * D)
+    let tiles = Tiles::new(layout, ch);
+    let mut blocks: Vec<Sorted<F>> = scratch.take_blocks();
+    blocks.resize_with(positions.len().div_ceil(BLOCK * D), Sorted::default);
+    blocks
+        .par_iter_mut()
+        .zip(positions.par_chunks(BLOCK * D))
         .zip(upstream.par_chunks(BLOCK * ch))
-        .map(|(p, g)| sort_block(layout, slabs, p, g, ch))
-        .collect();
-    let window = 2 * slabs.thickness * slabs.layer;
+        .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, p, g, ch));
+    // f64 data sums in place; f32 data in an f64 buffer rounded once at the end.
+    if let Some(out) = (out as &mut dyn Any).downcast_mut::<Vec<f64>>() {
+        sum_slabs(layout, tiles, &blocks, ch, out);
+    } else {
+        let mut acc = scratch.take_zeros(out.len());
+        sum_slabs(layout, tiles, &blocks, ch, &mut acc);
+        out.par_chunks_mut(1 << 16)
+            .zip(acc.par_chunks_mut(1 << 16))
+            .for_each(|(o, a)| {
+                for (o, a) in o.iter_mut().zip(a) {
+                    *o += F::lit(*a);
+                    // The kept sums must be zeros for the next call.
+                    *a = 0.0;
+                }
+            });
+        scratch.give_zeros(acc);
+    }
+    scratch.give_blocks(blocks);
+}
+
+/// Sums every tile's terms into `acc` (the grid's shape, f64, zeros on entry): the even
+/// slabs in parallel, then the odd ones.
+fn sum_slabs<F: Float, const D: usize>(
+    layout: &Layout<D>,
+    tiles: Tiles,
+    blocks: &[Sorted<F>],
+    ch: usize,
+    acc: &mut [f64],
+) {
+    let window = 2 * tiles.thickness * tiles.layer;
     for parity in 0..2 {
         // Slab j = 2 i + parity starts at node layer j T; its window runs to the next slab of
         // the same parity, which covers its nodes jT ..= (j+1)T since T >= 1.
-        let first = parity * slabs.thickness * slabs.layer;
-        if first >= out.len() {
+        let first = parity * tiles.thickness * tiles.layer;
+        if first >= acc.len() {
             break;
         }
-        out[first..]
-            .par_chunks_mut(window)
-            .enumerate()
-            .for_each_init(Vec::new, |acc, (i, dst)| {
-                let j = 2 * i + parity;
-                if j < slabs.count {
-                    let task = SlabTask { layout, slab: j, slabs };
-                    match ch {
-                        // A constant channel count lets the compiler unroll the channel loop.
-                        1 => task.sum(&blocks, acc, dst, 1),
-                        2 => task.sum(&blocks, acc, dst, 2),
-                        3 => task.sum(&blocks, acc, dst, 3),
-                        4 => task.sum(&blocks, acc, dst, 4),
-                        _ => task.sum(&blocks, acc, dst, ch),
-                    }
+        acc[first..].par_chunks_mut(window).enumerate().for_each(|(i, dst)| {
+            let j = 2 * i + parity;
+            if j < tiles.slabs {
+                let task = SlabTask { layout, slab: j, tiles };
+                match ch {
+                    // A constant channel count lets the compiler unroll the channel loop.
+                    1 => task.sum(blocks, dst, 1),
+                    2 => task.sum(blocks, dst, 2),
+                    3 => task.sum(blocks, dst, 3),
+                    4 => task.sum(blocks, dst, 4),
+                    _ => task.sum(blocks, dst, ch),
                 }
-            });
+            }
+        });
     }
 }
 
@@ -142,41 +229,58 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
 struct SlabTask<'a, const D: usize> {
     layout: &'a Layout<D>,
     slab: usize,
-    slabs: Slabs,
+    tiles: Tiles,
 }
 
 impl<const D: usize> SlabTask<'_, D> {
-    /// Sums the slab's terms into `acc` (f64, reused across tasks) and adds them to `dst`, the
-    /// gradient from the slab's first node layer on.
+    /// Adds the slab's terms, tile by tile, to `dst`: the f64 sums from the slab's first node
+    /// layer on.
     #[inline(always)]
-    fn sum<F: Float>(&self, blocks: &[Sorted<F>], acc: &mut Vec<f64>, dst: &mut [F], ch: usize) {
-        let len = dst.len().min((self.slabs.thickness + 1) * self.slabs.layer);
-        acc.clear();
-        acc.resize(len, 0.0);
+    fn sum<F: Float>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
         // The slab's first node, as a linear node index.
-        let origin = self.slab * self.slabs.thickness * self.layout.strides[0];
-        for block in blocks {
-            let (lo, hi) = (block.starts[self.slab] as usize, block.starts[self.slab + 1] as usize);
-            for record in block.records[lo * (D + ch)..hi * (D + ch)].chunks_exact(D + ch) {
-                let (p, g) = record.split_at(D);
-                if g.iter().all(|&v| v == F::zero()) {
-                    continue;
-                }
-                // The sort located it in this slab; the same code finds the same cell.
-                let Some(cell) = self.layout.locate(position::<F, D>(p, 0)) else {
-                    continue;
-                };
-                let w = weights(cell.t);
-                for (k, &corner) in self.layout.corners[..1 << D].iter().enumerate() {
-                    let row = &mut acc[(cell.node - origin + corner) * ch..][..ch];
-                    for (a, &v) in row.iter_mut().zip(g) {
-                        *a += w[k] * v.as_f64();
+        let origin = self.slab * self.tiles.thickness * self.layout.strides[0];
+        let first = self.slab * self.tiles.per_slab;
+        for tile in first..first + self.tiles.per_slab {
+            for block in blocks {
+                let (lo, hi) = (block.starts[tile] as usize, block.starts[tile + 1] as usize);
+                for record in block.records[lo * (D + ch)..hi * (D + ch)].chunks_exact(D + ch) {
+                    let (p, g) = record.split_at(D);
+                    // The sort located it in this tile; the same code finds the same cell.
+                    let Some(cell) = self.layout.locate(position::<F, D>(p, 0)) else {
+                        continue;
+                    };
+                    let w = weights(cell.t);
+                    for (k, &corner) in self.layout.corners[..1 << D].iter().enumerate() {
+                        let row = &mut dst[(cell.node - origin + corner) * ch..][..ch];
+                        for (a, &v) in row.iter_mut().zip(g) {
+                            *a += w[k] * v.as_f64();
+                        }
                     }
                 }
             }
         }
-        for (d, &a) in dst.iter_mut().zip(acc.iter()) {
-            *d += F::lit(a);
-        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::GridBox;
+
+    #[test]
+    fn tiles_follow_the_grid_shape() {
+        let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).unwrap();
+        // 128^3 x 4: a node layer holds 65536 values, so slabs of one cell layer; a node row
+        // 512, so tiles of 15 cell rows (2 x 16 node rows of 512 values = 16384).
+        let t = Tiles::new(&Layout::<3>::new(&bbox, &[128, 128, 128]), 4);
+        assert_eq!((t.thickness, t.slabs, t.rows, t.per_slab), (1, 127, 15, 9));
+        // 9 x 6 x 5 x 3: one slab of all 8 cell layers (a layer holds 90 values, 16384 / 90 =
+        // 182); a node row holds 15, so 183 x 15 x 5 <= 16384 gives tiles of 4 cell rows.
+        let t = Tiles::new(&Layout::<3>::new(&bbox, &[9, 6, 5]), 3);
+        assert_eq!((t.thickness, t.slabs, t.rows, t.per_slab), (182, 1, 4, 2));
+        // 2-D, 9 x 4096 x 4: a node row is one node, 16384 / (2 x 4) - 1 = 2047 cell rows.
+        let bbox = GridBox::new(&[0.0; 2], &[1.0; 2]).unwrap();
+        let t = Tiles::new(&Layout::<2>::new(&bbox, &[9, 4096]), 4);
+        assert_eq!((t.thickness, t.slabs, t.rows, t.per_slab), (1, 8, 2047, 3));
     }
 }
