@@ -48,7 +48,10 @@ pub mod rays;
 pub mod sample;
 pub mod twins;
 
-pub use composite::{Background, Composite, CompositeInputs, CompositeVars};
+pub use composite::{
+    Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
+    CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
+};
 pub use error::{CompositeError, GeometryError, GridError, SampleError};
 pub use grid::{GridBox, GridField, GridGradients, GridWanted};
 pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

@@ -11,7 +11,7 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use fogray::ops::{twins, Background, Composite, CompositeInputs};
+use fogray::ops::{twins, Background, Composite, CompositeArrays, CompositeInputs, CompositeUpstream, CompositeWanted};
 use fogray::stamp::Stamp;
 use fogray::tape::{Float, Tape};
 use ndarray::{Array1, Array2, ArrayD};
@@ -152,12 +152,18 @@ fn measure<F: Float>(
             .map(|(a, e)| (a - e).abs())
             .fold(0.0, f64::max)
     };
-    let views = [
+    let views = CompositeArrays::new(
         sigma.view().into_dyn(),
         delta.view().into_dyn(),
         color.view().into_dyn(),
-        background.view().into_dyn(),
-    ];
+    )
+    .with_background(background.view().into_dyn());
+    let upstream = CompositeUpstream::color(grad.view());
+    let wanted = CompositeWanted {
+        sigma: true,
+        color: true,
+        ..Default::default()
+    };
     for threshold in THRESHOLDS {
         let op = Composite::new(&b.offsets)
             .map_err(|e| e.to_string())?
@@ -166,11 +172,9 @@ fn measure<F: Float>(
             .map_err(|e| e.to_string())?;
         let step = || -> Result<Vec<f64>, String> {
             let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
-            let g = op
-                .vjp(&views, &res, &[Some(grad.view()), None], &[true, false, true, false])
-                .map_err(|e| e.to_string())?;
+            let g = op.vjp(&views, &res, &upstream, wanted).map_err(|e| e.to_string())?;
             black_box(g);
-            Ok(outs[0].iter().map(|v| v.as_f64()).collect())
+            Ok(outs.color.iter().map(|v| v.as_f64()).collect())
         };
         let (us_per_frame, spread) = time_frame(timing, || step().map(drop))?;
         rows.push(Row {
