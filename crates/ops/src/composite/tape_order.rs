@@ -204,3 +204,89 @@ pub(super) fn gradients_in_order<F>(op: &Composite, g: CompositeGradients<F>) ->
     }
     .into_tape()
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn op(background: Background, depth: bool) -> Composite {
+        let op = Composite::new(&[0, 2]).unwrap().background(background);
+        if depth {
+            op.with_depth()
+        } else {
+            op
+        }
+    }
+
+    #[test]
+    fn inputs_are_named_in_the_tapes_order_and_back() {
+        let cases = [
+            (Background::None, false, vec!["sigma", "delta", "color"]),
+            (Background::Shared, false, vec!["sigma", "delta", "color", "background"]),
+            (Background::None, true, vec!["sigma", "delta", "color", "t"]),
+            (
+                Background::PerRay,
+                true,
+                vec!["sigma", "delta", "color", "background", "t"],
+            ),
+        ];
+        for (background, depth, order) in cases {
+            let op = op(background, depth);
+            let named = ByInput::from_tape(&op, order.clone()).unwrap();
+            assert_eq!(
+                (named.sigma, named.delta, named.color, named.background, named.t),
+                (
+                    "sigma",
+                    "delta",
+                    "color",
+                    (background != Background::None).then_some("background"),
+                    depth.then_some("t")
+                )
+            );
+            assert_eq!(named.into_tape(), order);
+            // One too few or one too many is refused.
+            let mut short = order.clone();
+            short.pop();
+            let mut long = order.clone();
+            long.push("extra");
+            for wrong in [short, long] {
+                let len = wrong.len();
+                match ByInput::from_tape(&op, wrong) {
+                    Err(CompositeError::Shape {
+                        what: "inputs", got, ..
+                    }) => assert_eq!(got, len.to_string()),
+                    other => panic!("{:?}", other.map(|_| ())),
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn outputs_are_named_in_the_tapes_order_and_back() {
+        let op = Composite::new(&[0, 2]).unwrap().with_depth().with_transmittance();
+        let order = vec!["color", "opacity", "depth", "transmittance"];
+        let named = ByOutput::from_tape(&op, order.clone()).unwrap();
+        assert_eq!(
+            (
+                named.color,
+                named.opacity,
+                named.depth,
+                named.weights,
+                named.transmittance
+            ),
+            ("color", "opacity", Some("depth"), None, Some("transmittance"))
+        );
+        assert_eq!(named.into_tape(), order);
+        assert!(ByOutput::from_tape(&op, vec!["color", "opacity", "depth"]).is_err());
+        // The wanted flags of the tape map to the named inputs (here: the t gradient only).
+        let op = op.background(Background::PerRay);
+        let w = wanted(&op, vec![false, false, false, false, true]).unwrap();
+        assert_eq!(
+            w,
+            CompositeWanted {
+                t: true,
+                ..Default::default()
+            }
+        );
+    }
+}
