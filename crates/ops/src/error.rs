@@ -203,6 +203,44 @@ pub enum GridError {
     },
 }
 
+/// Why the density/colour activation rejected its input or its configuration. Nothing is
+/// computed (and nothing of the caller's is changed) when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum FieldError {
+    /// A shift that is not finite.
+    #[error("shift is {value} (must be finite)")]
+    InvalidShift {
+        /// The offending value.
+        value: f64,
+    },
+    /// An array whose shape does not fit: raw values not `[n, k]` with `k >= 2`, or an
+    /// output or gradient not of the shape the raw values give.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input or output.
+        what: &'static str,
+        /// What is required.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A NaN raw value (infinities are valid: they saturate).
+    #[error("raw value at row {row}, channel {channel} is NaN")]
+    NanRaw {
+        /// Row of the raw values.
+        row: usize,
+        /// Channel (0 is the density).
+        channel: usize,
+    },
+}
+
+impl From<FieldError> for TapeError {
+    fn from(e: FieldError) -> Self {
+        TapeError::from_op("density_color", OpError::typed(e))
+    }
+}
+
 impl From<GridError> for TapeError {
     fn from(e: GridError) -> Self {
         TapeError::from_op("grid_field", OpError::typed(e))

@@ -16,7 +16,10 @@
 //!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space;
 //! - [`grid`]: a dense grid field over a box, looked up bilinearly (2-D) or trilinearly (3-D)
 //!   at packed positions, as a fused op ([`GridField`]) with a deterministic parallel backward
-//!   into the grid values and the positions, and its taped twin.
+//!   into the grid values and the positions, and its taped twin;
+//! - [`field`]: the activations of a grid renderer's raw values, density
+//!   `softplus(raw_0 + shift)` and colour `sigmoid(raw_1..)`, as a fused op
+//!   ([`DensityColor`]) with a hand-written backward, and its taped twin.
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
@@ -42,8 +45,10 @@
 
 pub mod composite;
 mod error;
+pub mod field;
 pub mod grid;
 pub mod hard;
+mod math;
 pub mod rays;
 pub mod sample;
 pub mod twins;
@@ -52,6 +57,7 @@ pub use composite::{
     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
-pub use error::{CompositeError, GeometryError, GridError, SampleError};
+pub use error::{CompositeError, FieldError, GeometryError, GridError, SampleError};
+pub use field::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
 pub use grid::{GridBox, GridField, GridGradients, GridWanted};
 pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

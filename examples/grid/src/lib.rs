@@ -11,8 +11,8 @@
 //!   which of them are held out for testing;
 //! - [`photographs`]: the exact photographs of every view;
 //! - [`images`]: PNG files and the test PSNR;
-//! - [`model`], [`activation`]: the dense grid of raw density and colour, rendered with
-//!   fogray's grid field and composite (fused, or their taped twins);
+//! - [`model`]: the dense grid of raw density and colour, rendered with fogray's grid field,
+//!   density/colour activation and composite (fused, or their taped twins);
 //! - [`dataset`]: the training rays and colours, the test views;
 //! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
 //! - [`plots`]: test PSNR against training seconds.
@@ -29,7 +29,6 @@
 
 #![warn(missing_docs)]
 
-pub mod activation;
 pub mod dataset;
 pub mod exact;
 pub mod fit;

@@ -22,13 +22,15 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use fogray::ops::field::{twin, DensityColor};
 use fogray::ops::sample::PackedSamples;
-use fogray::ops::{twins, Composite, CompositeInputs, GridBox, GridError, GridField};
+use fogray::ops::{twins, Composite, CompositeInputs, FieldError, GridBox, GridError, GridField};
 use fogray::tape::params::{ParamId, Params};
 use fogray::tape::{Float, Tape, TapeError, Var};
-use ndarray::{Array1, Array2, Array4, ArrayView2, Axis, IxDyn};
+use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
 
-use crate::activation::{softplus, Activation, CHANNELS};
+/// Channels of a raw grid value: density, then red, green, blue.
+pub const CHANNELS: usize = 4;
 
 /// The box the grid covers.
 pub const BOUNDS: ([f64; 3], [f64; 3]) = ([-1.0; 3], [1.0; 3]);
@@ -37,6 +39,16 @@ fn param_error(e: fogray::tape::params::ParamError) -> GridError {
     GridError::Shape {
         what: "grid",
         expected: "the model's parameter, not lent to a tape".into(),
+        got: e.to_string(),
+    }
+}
+
+/// The activation's error in the model's error type: the model's API predates the fused
+/// activation, and its callers only report these (a non-finite shift, a NaN in the grid).
+fn field_error(e: &FieldError) -> GridError {
+    GridError::Shape {
+        what: "density/colour activation",
+        expected: "a finite shift and raw values without NaN".into(),
         got: e.to_string(),
     }
 }
@@ -56,7 +68,7 @@ pub struct GridModel<F: Float> {
     params: Params<F>,
     grid: ParamId,
     field: GridField,
-    activation: Activation,
+    activation: DensityColor,
     nodes: usize,
 }
 
@@ -64,7 +76,8 @@ impl<F: Float> GridModel<F> {
     /// A grid of `nodes^3` nodes (at least 2) over `[-1, 1]^3`, every raw value 0: density
     /// `softplus(shift)` and colour grey (0.5) everywhere.
     ///
-    /// Errors: fewer than 2 nodes, or more than memory can address ([`GridError`]).
+    /// Errors ([`GridError`]): fewer than 2 nodes, more than memory can address, or a shift
+    /// that is not finite.
     pub fn new(nodes: usize, shift: f64) -> Result<Self, GridError> {
         let field = GridField::new(GridBox::new(&BOUNDS.0, &BOUNDS.1)?, &[nodes, nodes, nodes, CHANNELS])?;
         let mut params = Params::new();
@@ -79,7 +92,7 @@ impl<F: Float> GridModel<F> {
             params,
             grid,
             field,
-            activation: Activation { shift },
+            activation: DensityColor::new(shift).map_err(|e| field_error(&e))?,
             nodes,
         })
     }
@@ -89,7 +102,7 @@ impl<F: Float> GridModel<F> {
     ///
     /// Errors: as [`GridModel::new`].
     pub fn resampled(&self, nodes: usize) -> Result<Self, GridError> {
-        let mut grown = GridModel::<F>::new(nodes, self.activation.shift)?;
+        let mut grown = GridModel::<F>::new(nodes, self.activation.shift())?;
         let spacing = grown.voxel();
         let at = |i: usize| F::lit(BOUNDS.0[0] + i as f64 * spacing);
         let positions = Array2::from_shape_fn((nodes * nodes * nodes, 3), |(p, axis)| match axis {
@@ -171,7 +184,7 @@ impl<F: Float> GridModel<F> {
         };
         let activated = match method {
             Method::Fused => self.activation.apply(tape, raw)?,
-            Method::Taped => self.activation.taped(tape, raw)?,
+            Method::Taped => twin::density_color(tape, &self.activation, raw)?,
         };
         let op = Composite::packed(samples.offsets.clone());
         let inputs = CompositeInputs {
@@ -191,7 +204,7 @@ impl<F: Float> GridModel<F> {
     /// The density at `positions` (`[m, 3]`), without a tape: for the occupancy grid and for
     /// slices. A position outside the box reads raw 0 (density `softplus(shift)`).
     ///
-    /// Errors: as [`GridField::evaluate`].
+    /// Errors: as [`GridField::evaluate`], and a NaN raw density (a diverged fit).
     pub fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, GridError> {
         let grid = self.params.get(self.grid).map_err(|e| GridError::Shape {
             what: "grid",
@@ -199,10 +212,11 @@ impl<F: Float> GridModel<F> {
             got: e.to_string(),
         })?;
         let raw = self.field.evaluate(&grid, &positions.into_dyn())?;
-        let shift = self.activation.shift;
-        Ok(raw
-            .axis_iter(Axis(0))
-            .map(|row| F::lit(softplus(row[0].as_f64() + shift)))
-            .collect())
+        let raw = raw.into_dimensionality::<Ix2>().map_err(|e| GridError::Shape {
+            what: "raw values",
+            expected: format!("[m, {CHANNELS}]"),
+            got: e.to_string(),
+        })?;
+        self.activation.density(raw.view()).map_err(|e| field_error(&e))
     }
 }

@@ -127,3 +127,38 @@ fn resampling_keeps_a_linear_field_exactly() {
         assert!((v - want).abs() < 1e-12, "({i}, {j}, {k}, {c}): {v} vs {want}");
     }
 }
+
+#[test]
+fn densities_are_the_softplus_of_the_shifted_raw_density() {
+    // Raw densities from -30 to 30 at the nodes of a 3^3 grid; the model reads them at the
+    // nodes, so its densities are ln(1 + exp(raw - 2)), computed here through the C library.
+    let mut model = GridModel::<f64>::new(3, -2.0).unwrap();
+    let id = model.grid_id();
+    let raw = |i: usize, j: usize, k: usize| (i * 9 + j * 3 + k) as f64 * (60.0 / 26.0) - 30.0;
+    model
+        .params_mut()
+        .get_mut(id)
+        .unwrap()
+        .assign(&Array4::from_shape_fn((3, 3, 3, 4), |(i, j, k, c)| {
+            if c == 0 {
+                raw(i, j, k)
+            } else {
+                7.0
+            }
+        }));
+    let positions = Array2::from_shape_fn((27, 3), |(p, axis)| [p / 9, p / 3 % 3, p % 3][axis] as f64 - 1.0);
+    let sigma = model.densities(positions.view()).unwrap();
+    for (p, s) in sigma.iter().enumerate() {
+        let x = raw(p / 9, p / 3 % 3, p % 3) - 2.0;
+        let want = if x > 0.0 {
+            x + (-x).exp().ln_1p()
+        } else {
+            x.exp().ln_1p()
+        };
+        assert!((s - want).abs() <= 5e-16 * want, "node {p}: {s:e} vs {want:e}");
+    }
+    // Outside the box the raw value is 0: softplus(-2).
+    let outside = model.densities(arr2(&[[2.0, 0.0, 0.0]]).view()).unwrap();
+    assert!((outside[0] - (-2f64).exp().ln_1p()).abs() < 1e-16);
+    assert!(GridModel::<f32>::new(3, f64::NAN).is_err());
+}

@@ -3,7 +3,7 @@
 
 use fogray_tape::Float;
 
-use super::decay::{exp_neg, exp_neg_slice, one_minus_exp_neg, one_minus_exp_neg_slice, single_tier};
+use crate::math::exp::{exp_neg, exp_neg_slice, one_minus_exp_neg, one_minus_exp_neg_slice, single_tier};
 
 /// Reusable buffers for one ray at a time (one per block of rays, so allocation is amortised).
 #[derive(Debug, Default)]

@@ -45,10 +45,11 @@
 //!
 //! # Speed, by design
 //!
-//! - `exp` and `expm1` are one branch-free polynomial kernel (`decay`, within 2 ulp of the C
-//!   library over the whole domain, subnormals included; for f32 data a shorter series within
-//!   7e-10 relative) applied to a ray's slices of optical depths: the scalar library calls
-//!   were most of the op's time and never vectorise.
+//! - `exp` and `expm1` are one branch-free polynomial kernel (`math::exp`, shared with the
+//!   field activations; within 2 ulp of the C library over the whole domain, subnormals
+//!   included; for f32 data a shorter series within 7e-10 relative) applied to a ray's slices
+//!   of optical depths: the scalar library calls were most of the op's time and never
+//!   vectorise.
 //! - The forward and backward of each block of rays are compiled for AVX-512, AVX2+FMA and the
 //!   baseline and chosen at run time, with the per-ray loops inlined into them. The values do
 //!   not depend on which one runs: every fused multiply-add is written as one (`mul_add`), and
@@ -76,7 +77,6 @@ mod arrays;
 mod attenuation;
 mod backward;
 mod config;
-mod decay;
 mod forward;
 mod gradients;
 mod layout;

@@ -1,7 +1,8 @@
 //! `exp(-x)` and `-expm1(-x)` for `x >= 0`, written so that a loop over a slice vectorises.
 //!
 //! The composite needs both for every sample (transmittance from the running optical depth,
-//! alpha from the sample's own), and the C library's scalar calls were most of its time. One
+//! alpha from the sample's own), the field activations `exp(-|x|)` for every raw value, and
+//! the C library's scalar calls were most of their time. One
 //! range reduction serves both: `-x = n ln2 + r` with `|r| <= ln2 / 2`, then
 //! `p = expm1(r)` by its Taylor series to `r^13`, evaluated by Estrin's scheme (the first omitted term is below
 //! `1.2e-17 |r|`), then
