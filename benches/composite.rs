@@ -9,9 +9,12 @@
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use fogray::ops::{twins, Background, Composite, CompositeInputs};
+use fogray::ops::{
+    twins, Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeInputs, CompositeOutputBuffers,
+    CompositeUpstream, CompositeWanted,
+};
 use fogray::tape::{Float, Tape};
-use ndarray::{Array1, Array2, ArrayD, ArrayViewD};
+use ndarray::{Array1, Array2, ArrayD};
 use rand::{Rng, SeedableRng};
 
 struct Inputs<F: Float> {
@@ -25,13 +28,13 @@ struct Inputs<F: Float> {
 
 impl<F: Float> Inputs<F> {
     /// The op's inputs: sigma, delta, colour, the shared background.
-    fn views(&self) -> [ArrayViewD<'_, F>; 4] {
-        [
+    fn views(&self) -> CompositeArrays<'_, F> {
+        CompositeArrays::new(
             self.sigma.view().into_dyn(),
             self.delta.view().into_dyn(),
             self.color.view().into_dyn(),
-            self.background.view().into_dyn(),
-        ]
+        )
+        .with_background(self.background.view().into_dyn())
     }
 }
 
@@ -55,7 +58,7 @@ fn fused<F: Float>(x: &Inputs<F>) {
     let views = x.views();
     let (outs, res) = x.op.evaluate(&views).unwrap();
     let g =
-        x.op.vjp(&views, &res, &[Some(x.grad.view()), None], &[true, false, true, false])
+        x.op.vjp(&views, &res, &CompositeUpstream::color(x.grad.view()), SIGMA_AND_COLOR)
             .unwrap();
     black_box((outs, g));
 }
@@ -68,25 +71,60 @@ struct Buffers<F: Float> {
     grad_color: ArrayD<F>,
 }
 
+impl<F: Float> Buffers<F> {
+    fn outputs(&mut self) -> CompositeOutputBuffers<'_, F> {
+        CompositeOutputBuffers::new(self.color.view_mut(), self.opacity.view_mut())
+    }
+
+    fn gradients(&mut self) -> CompositeGradientBuffers<'_, F> {
+        CompositeGradientBuffers {
+            sigma: Some(self.grad_sigma.view_mut()),
+            color: Some(self.grad_color.view_mut()),
+            ..Default::default()
+        }
+    }
+
+    fn outputs_and_gradients(&mut self) -> (CompositeOutputBuffers<'_, F>, CompositeGradientBuffers<'_, F>) {
+        let outputs = CompositeOutputBuffers::new(self.color.view_mut(), self.opacity.view_mut());
+        let gradients = CompositeGradientBuffers {
+            sigma: Some(self.grad_sigma.view_mut()),
+            color: Some(self.grad_color.view_mut()),
+            ..Default::default()
+        };
+        (outputs, gradients)
+    }
+}
+
+/// The gradients every run asks for.
+const SIGMA_AND_COLOR: CompositeWanted = CompositeWanted {
+    sigma: true,
+    delta: false,
+    color: true,
+    background: false,
+    t: false,
+};
+
 fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
     let views = x.views();
-    let res =
-        x.op.evaluate_into(&views, &mut [b.color.view_mut(), b.opacity.view_mut()])
-            .unwrap();
-    let mut grads = [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None];
-    x.op.vjp_into(&views, &res, &[Some(x.grad.view()), None], &mut grads)
-        .unwrap();
+    let res = x.op.evaluate_into(&views, &mut b.outputs()).unwrap();
+    x.op.vjp_into(
+        &views,
+        &res,
+        &CompositeUpstream::color(x.grad.view()),
+        &mut b.gradients(),
+    )
+    .unwrap();
 }
 
 /// [`fused_into`] in one pass per ray, each ray's upstream gradient handed over by the callback.
 fn fused_one_pass<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
     let views = x.views();
     let upstream = x.grad.as_slice().unwrap();
-    let mut grads = [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None];
+    let (mut outputs, mut grads) = b.outputs_and_gradients();
     x.op.evaluate_vjp_into(
         &views,
         |r, _, d: &mut [F]| d.copy_from_slice(&upstream[r * d.len()..(r + 1) * d.len()]),
-        &mut [b.color.view_mut(), b.opacity.view_mut()],
+        &mut outputs,
         &mut grads,
     )
     .unwrap();

@@ -10,6 +10,7 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
+use cli::error::CliError;
 use cli::evaluate::Method;
 
 /// Counts allocated bytes, so that `fogray bench` can report each method's peak extra memory.
@@ -162,13 +163,12 @@ impl Publish<'_> {
         title: &str,
         tables: &str,
         headline: impl Fn(&fogray::stamp::Stamp) -> String,
-    ) -> Result<(), String> {
+    ) -> Result<(), CliError> {
         let Some(dir) = self.dir else { return Ok(()) };
         let stamp = fogray::stamp::Stamp::now(&self.command);
-        std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
         let path = dir.join(format!("bench-{name}.md"));
-        std::fs::write(&path, cli::markdown::report(title, &stamp, tables))
-            .map_err(|e| format!("cannot write {}: {e}", path.display()))?;
+        std::fs::write(&path, cli::markdown::report(title, &stamp, tables)).map_err(CliError::file("write", &path))?;
         match self.readme {
             Some(readme) => cli::markdown::update_readme(readme, name, &headline(&stamp)),
             None => Ok(()),
@@ -231,25 +231,23 @@ on stderr, e.g. the composite's own message for a negative density).
 Example:
   echo '{"rays":[{"sigma":[0,0.5,2,8],"delta":[0.5,0.5,0.5,0.5],"color":[[0.9],[0.2],[0.9],[0.4]],"background":[1],"grad_color":[1]}]}' | fogray gradcheck"#;
 
-fn read_input(path: &PathBuf) -> Result<String, String> {
+fn read_input(path: &PathBuf) -> Result<String, CliError> {
     let mut text = String::new();
     if path.as_os_str() == "-" {
-        std::io::stdin()
-            .read_to_string(&mut text)
-            .map_err(|e| format!("cannot read standard input: {e}"))?;
+        std::io::stdin().read_to_string(&mut text).map_err(CliError::Stdin)?;
     } else {
-        text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        text = std::fs::read_to_string(path).map_err(CliError::file("read", path))?;
     }
     Ok(text)
 }
 
-fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, String> {
+fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, CliError> {
     let grids = match workload {
-        Some(w) => vec![w
-            .parse::<usize>()
-            .ok()
-            .filter(|&n| n >= 2)
-            .ok_or_else(|| format!("grid workload {w:?} is not a node count of at least 2 (for example 128)"))?],
+        Some(w) => vec![w.parse::<usize>().ok().filter(|&n| n >= 2).ok_or_else(|| {
+            CliError::Option(format!(
+                "grid workload {w:?} is not a node count of at least 2 (for example 128)"
+            ))
+        })?],
         None => cli::grid_bench::GRIDS.to_vec(),
     };
     let mut log = |m: &cli::grid_bench::GridMeasurement| {
@@ -273,13 +271,15 @@ fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish
         |s| cli::markdown::grid_headline(&results, s),
     )?;
     if json {
-        serde_json::to_string_pretty(&serde_json::json!({ "results": results })).map_err(|e| e.to_string())
+        Ok(serde_json::to_string_pretty(
+            &serde_json::json!({ "results": results }),
+        )?)
     } else {
         Ok(cli::grid_bench::table(&results))
     }
 }
 
-fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, String> {
+fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, CliError> {
     let workloads = match workload {
         Some(w) => vec![cli::bench::parse_workload(w)?],
         None => cli::bench::WORKLOADS.to_vec(),
@@ -307,8 +307,9 @@ fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> 
         |s| cli::markdown::composite_headline(&results, s),
     )?;
     if json {
-        serde_json::to_string_pretty(&serde_json::json!({ "results": results, "tape_overhead": tape }))
-            .map_err(|e| e.to_string())
+        Ok(serde_json::to_string_pretty(
+            &serde_json::json!({ "results": results, "tape_overhead": tape }),
+        )?)
     } else {
         Ok(cli::bench::table(&results) + &cli::tape_cost::table(&tape))
     }
@@ -362,7 +363,7 @@ fn main() -> ExitCode {
             (
                 "composite",
                 read_input(input)
-                    .and_then(|t| cli::input::parse(&t))
+                    .and_then(|t| Ok(cli::input::parse(&t)?))
                     .and_then(|p| cli::composite::run(&p, *method, fields)),
             )
         }
@@ -386,7 +387,7 @@ fn main() -> ExitCode {
                 worst: *worst,
             };
             let outcome = read_input(input)
-                .and_then(|t| cli::input::parse(&t))
+                .and_then(|t| Ok(cli::input::parse(&t)?))
                 .and_then(|p| cli::gradcheck::run(p, &settings));
             match outcome {
                 // Exit status 1: the check ran and found a disagreement.
@@ -405,7 +406,7 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             // One line: the reason, with any newline of a nested message folded.
-            eprintln!("fogray {name}: error: {}", e.replace('\n', " "));
+            eprintln!("fogray {name}: error: {}", e.to_string().replace('\n', " "));
             ExitCode::from(2)
         }
     }

@@ -5,12 +5,16 @@
 use std::hint::black_box;
 use std::time::Instant;
 
-use fogray_ops::{twins, Background, Composite, CompositeInputs};
+use fogray_ops::{
+    twins, Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeInputs, CompositeOutputBuffers,
+    CompositeUpstream, CompositeWanted,
+};
 use fogray_tape::{Float, Tape, Var};
 use ndarray::{Array1, Array2, ArrayD, ArrayViewD};
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
+use super::error::CliError;
 use super::reference::{errors, reference, Rays};
 
 /// The workloads of the issue: rays x samples per ray.
@@ -103,26 +107,30 @@ struct Typed<F: Float> {
 
 impl<F: Float> Typed<F> {
     /// The op's inputs: sigma, delta, colour, the shared background.
-    fn views(&self) -> [ArrayViewD<'_, F>; 4] {
-        [
+    fn views(&self) -> CompositeArrays<'_, F> {
+        CompositeArrays::new(
             self.sigma.view().into_dyn(),
             self.delta.view().into_dyn(),
             self.color.view().into_dyn(),
-            self.background.view().into_dyn(),
-        ]
+        )
+        .with_background(self.background.view().into_dyn())
+    }
+
+    /// The upstream gradient of every run: dL/dC only.
+    fn upstream(&self) -> CompositeUpstream<'_, F> {
+        CompositeUpstream::color(self.grad_color.view())
     }
 }
 
-fn typed<F: Float>(d: &Data) -> Result<Typed<F>, String> {
+fn typed<F: Float>(d: &Data) -> Result<Typed<F>, CliError> {
     let n = d.sigma.len();
     let rays = d.offsets.len() - 1;
     Ok(Typed {
         sigma: Array1::from(cast::<F>(&d.sigma)),
         delta: Array1::from(cast::<F>(&d.delta)),
-        color: Array2::from_shape_vec((n, CHANNELS), cast::<F>(&d.color)).map_err(|e| e.to_string())?,
+        color: Array2::from_shape_vec((n, CHANNELS), cast::<F>(&d.color))?,
         background: Array1::from(cast::<F>(&d.background)),
-        grad_color: ArrayD::from_shape_vec(vec![rays, CHANNELS], cast::<F>(&d.grad_color))
-            .map_err(|e| e.to_string())?,
+        grad_color: ArrayD::from_shape_vec(vec![rays, CHANNELS], cast::<F>(&d.grad_color))?,
     })
 }
 
@@ -141,7 +149,7 @@ const MAX_RUNS: usize = 200;
 
 /// Times at least `reps` runs of `f` (more for short runs when `reps > 1`, see [`MIN_SECS`]),
 /// after one warm-up run when `reps > 1`.
-pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Result<Timing, String> {
+pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), CliError>) -> Result<Timing, CliError> {
     if reps > 1 {
         f()?;
     }
@@ -163,7 +171,7 @@ pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), String>) -> Resu
 }
 
 /// Median wall time of `reps` runs of `f` (see [`time_runs`]).
-pub fn median_secs(reps: usize, f: impl FnMut() -> Result<(), String>) -> Result<f64, String> {
+pub fn median_secs(reps: usize, f: impl FnMut() -> Result<(), CliError>) -> Result<f64, CliError> {
     Ok(time_runs(reps, f)?.median)
 }
 
@@ -178,39 +186,25 @@ struct Outcome {
     peak_extra: usize,
 }
 
-fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result<Outcome, String> {
+fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result<Outcome, CliError> {
     let views = x.views();
     mem.reset();
-    let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
-    let grads = op
-        .vjp(
-            &views,
-            &res,
-            &[Some(x.grad_color.view()), None],
-            &[true, false, true, false],
-        )
-        .map_err(|e| e.to_string())?;
+    let (outs, res) = op.evaluate(&views)?;
+    let grads = op.vjp(&views, &res, &x.upstream(), SIGMA_AND_COLOR)?;
     let peak_extra = mem.peak_since_reset();
-    let g = grads[0].as_ref().ok_or("no sigma gradient")?;
+    let g = grads.sigma.as_ref().ok_or(CliError::Missing("no sigma gradient"))?;
     Ok(Outcome {
-        color: to_f64(outs[0].view()),
+        color: to_f64(outs.color.view()),
         grad_sigma: to_f64(g.view()),
         peak_extra,
     })
 }
 
-fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), String> {
+fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), CliError> {
     let views = x.views();
-    let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
+    let (outs, res) = op.evaluate(&views)?;
     if backward {
-        let g = op
-            .vjp(
-                &views,
-                &res,
-                &[Some(x.grad_color.view()), None],
-                &[true, false, true, false],
-            )
-            .map_err(|e| e.to_string())?;
+        let g = op.vjp(&views, &res, &x.upstream(), SIGMA_AND_COLOR)?;
         black_box(g);
     }
     black_box(outs);
@@ -235,37 +229,53 @@ impl<F: Float> Buffers<F> {
             grad_color: ArrayD::zeros(vec![n, CHANNELS]),
         }
     }
+
+    /// The output buffers and the gradient buffers (dL/dsigma, dL/dcolour).
+    fn split(&mut self) -> (CompositeOutputBuffers<'_, F>, CompositeGradientBuffers<'_, F>) {
+        let outputs = CompositeOutputBuffers::new(self.color.view_mut(), self.opacity.view_mut());
+        let gradients = CompositeGradientBuffers {
+            sigma: Some(self.grad_sigma.view_mut()),
+            color: Some(self.grad_color.view_mut()),
+            ..Default::default()
+        };
+        (outputs, gradients)
+    }
 }
 
+/// The gradients every fused run asks for.
+const SIGMA_AND_COLOR: CompositeWanted = CompositeWanted {
+    sigma: true,
+    delta: false,
+    color: true,
+    background: false,
+    t: false,
+};
+
 /// [`fused_step`] through the `_into` API, forward and backward, into `b`.
-fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), String> {
+fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
     let views = x.views();
-    let res = op
-        .evaluate_into(&views, &mut [b.color.view_mut(), b.opacity.view_mut()])
-        .map_err(|e| e.to_string())?;
-    op.vjp_into(
-        &views,
-        &res,
-        &[Some(x.grad_color.view()), None],
-        &mut [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None],
-    )
-    .map_err(|e| e.to_string())?;
+    let (mut outputs, mut gradients) = b.split();
+    let res = op.evaluate_into(&views, &mut outputs)?;
+    op.vjp_into(&views, &res, &x.upstream(), &mut gradients)?;
     black_box(&b.grad_sigma);
     Ok(())
 }
 
 /// [`fused_step_into`] in one pass per ray (`evaluate_vjp_into`), the upstream gradient of
 /// each ray handed over by the callback.
-fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), String> {
+fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
     let views = x.views();
-    let upstream = x.grad_color.as_slice().ok_or("upstream gradient not contiguous")?;
+    let upstream = x
+        .grad_color
+        .as_slice()
+        .ok_or(CliError::Missing("upstream gradient not contiguous"))?;
+    let (mut outputs, mut gradients) = b.split();
     op.evaluate_vjp_into(
         &views,
         |r, _, d: &mut [F]| d.copy_from_slice(&upstream[r * d.len()..(r + 1) * d.len()]),
-        &mut [b.color.view_mut(), b.opacity.view_mut()],
-        &mut [Some(b.grad_sigma.view_mut()), None, Some(b.grad_color.view_mut()), None],
-    )
-    .map_err(|e| e.to_string())?;
+        &mut outputs,
+        &mut gradients,
+    )?;
     black_box(&b.grad_sigma);
     Ok(())
 }
@@ -288,22 +298,20 @@ fn put_inputs<F: Float>(tape: &mut Tape<F>, x: &Typed<F>) -> CompositeInputs {
     }
 }
 
-fn twin<F: Float>(tape: &mut Tape<F>, op: &Composite, inputs: &CompositeInputs, naive: bool) -> Result<Var, String> {
+fn twin<F: Float>(tape: &mut Tape<F>, op: &Composite, inputs: &CompositeInputs, naive: bool) -> Result<Var, CliError> {
     let out = if naive {
         twins::naive(tape, op, inputs)
     } else {
         twins::stable(tape, op, inputs)
     };
-    Ok(out.map_err(|e| e.to_string())?.color)
+    Ok(out?.color)
 }
 
-fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), String> {
+fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), CliError> {
     let (mut tape, inputs) = tape_with_inputs(x);
     let color = twin(&mut tape, op, &inputs, naive)?;
     if backward {
-        let g = tape
-            .backward_with(color, x.grad_color.clone())
-            .map_err(|e| e.to_string())?;
+        let g = tape.backward_with(color, x.grad_color.clone())?;
         black_box(g);
     }
     black_box(tape);
@@ -312,29 +320,25 @@ fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: boo
 
 /// [`taped_step`] on one tape kept across runs: cleared first, its gradients handed back to it
 /// after use (a training loop's steady state).
-fn taped_step_reused<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, tape: &mut Tape<F>) -> Result<(), String> {
+fn taped_step_reused<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, tape: &mut Tape<F>) -> Result<(), CliError> {
     tape.clear();
     let inputs = put_inputs(tape, x);
     let color = twin(tape, op, &inputs, naive)?;
-    let g = tape
-        .backward_with(color, x.grad_color.clone())
-        .map_err(|e| e.to_string())?;
+    let g = tape.backward_with(color, x.grad_color.clone())?;
     black_box(g.get(inputs.sigma));
     tape.recycle(g);
     Ok(())
 }
 
-fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, String> {
+fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, CliError> {
     let (mut tape, inputs) = tape_with_inputs(x);
     mem.reset();
     let color = twin(&mut tape, op, &inputs, naive)?;
-    let g = tape
-        .backward_with(color, x.grad_color.clone())
-        .map_err(|e| e.to_string())?;
+    let g = tape.backward_with(color, x.grad_color.clone())?;
     let peak_extra = mem.peak_since_reset();
-    let gs = g.get(inputs.sigma).ok_or("no sigma gradient")?;
+    let gs = g.get(inputs.sigma).ok_or(CliError::Missing("no sigma gradient"))?;
     Ok(Outcome {
-        color: to_f64(tape.value(color).map_err(|e| e.to_string())?),
+        color: to_f64(tape.value(color)?),
         grad_sigma: to_f64(gs),
         peak_extra,
     })
@@ -357,18 +361,13 @@ fn measure<F: Float>(
     refs: &super::reference::Reference,
     out: &mut Vec<Measurement>,
     log: &mut dyn FnMut(&Measurement),
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     let x = typed::<F>(d)?;
     let rays = d.offsets.len() - 1;
     let n = d.sigma.len() as f64;
-    let op = Composite::new(&d.offsets)
-        .map_err(|e| e.to_string())?
-        .background(Background::Shared);
+    let op = Composite::new(&d.offsets)?.background(Background::Shared);
     let all = rayon::current_num_threads();
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .map_err(|e| e.to_string())?;
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let mut push = |method: &'static str,
                     threads: usize,
                     both: Timing,
@@ -451,7 +450,7 @@ pub fn run(
     quick: bool,
     mem: &dyn Memory,
     log: &mut dyn FnMut(&Measurement),
-) -> Result<Vec<Measurement>, String> {
+) -> Result<Vec<Measurement>, CliError> {
     let reps = if quick { 1 } else { 5 };
     let mut out = Vec::new();
     for &(rays, samples) in workloads {
@@ -472,15 +471,15 @@ pub fn run(
 }
 
 /// Parses `RxS`.
-pub fn parse_workload(s: &str) -> Result<(usize, usize), String> {
+pub fn parse_workload(s: &str) -> Result<(usize, usize), CliError> {
     let (r, n) = s
         .split_once('x')
-        .ok_or_else(|| format!("workload {s:?} is not RxS (for example 4096x64)"))?;
+        .ok_or_else(|| CliError::Option(format!("workload {s:?} is not RxS (for example 4096x64)")))?;
     let parse = |v: &str| {
         v.parse::<usize>()
             .ok()
             .filter(|&x| x > 0)
-            .ok_or_else(|| format!("workload {s:?}: {v:?} is not a positive integer"))
+            .ok_or_else(|| CliError::Option(format!("workload {s:?}: {v:?} is not a positive integer")))
     };
     Ok((parse(r)?, parse(n)?))
 }

@@ -4,6 +4,7 @@ use fogray_ops::{twins, Background, Composite, CompositeInputs};
 use fogray_tape::{Float, Tape};
 use ndarray::{Array1, Array2};
 
+use super::error::CliError;
 use super::input::Packed;
 
 /// Which implementation of the composite.
@@ -69,20 +70,17 @@ fn flat<F: Float>(v: ndarray::ArrayViewD<'_, F>) -> Vec<F> {
 }
 
 /// Evaluates `p` with `method` in precision `F`, the outputs and gradients `want` asks for.
-pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Result<Evaluation<F>, String> {
+pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Result<Evaluation<F>, CliError> {
     let (n, rays, ch) = (p.sigma.len(), p.offsets.len() - 1, p.ch);
-    let shape_err = |e: ndarray::ShapeError| e.to_string();
     let mut tape = Tape::<F>::new();
     let sigma = tape.param(Array1::from(cast::<F>(&p.sigma)));
     let delta = tape.param(Array1::from(cast::<F>(&p.delta)));
-    let color = tape.param(Array2::from_shape_vec((n, ch), cast::<F>(&p.color)).map_err(shape_err)?);
-    let background = tape.param(Array2::from_shape_vec((rays, ch), cast::<F>(&p.background)).map_err(shape_err)?);
+    let color = tape.param(Array2::from_shape_vec((n, ch), cast::<F>(&p.color))?);
+    let background = tape.param(Array2::from_shape_vec((rays, ch), cast::<F>(&p.background))?);
     let t = p.t.as_ref().map(|t| tape.param(Array1::from(cast::<F>(t))));
-    let mut op = Composite::new(&p.offsets)
-        .map_err(|e| e.to_string())?
+    let mut op = Composite::new(&p.offsets)?
         .background(Background::PerRay)
-        .min_transmittance(p.min_transmittance)
-        .map_err(|e| e.to_string())?;
+        .min_transmittance(p.min_transmittance)?;
     if want.per_sample {
         op = op.with_weights().with_transmittance();
     }
@@ -90,7 +88,9 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Resul
         op = op.with_depth();
     }
     if method != Method::Fused && p.min_transmittance != 0.0 {
-        return Err("min_transmittance is offered by the fused method only (the taped twins are exact)".into());
+        return Err(CliError::Option(
+            "min_transmittance is offered by the fused method only (the taped twins are exact)".into(),
+        ));
     }
     let inputs = CompositeInputs {
         sigma,
@@ -103,18 +103,17 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Resul
         Method::Fused => op.apply(&mut tape, &inputs),
         Method::Taped => twins::stable(&mut tape, &op, &inputs),
         Method::TapedNaive => twins::naive(&mut tape, &op, &inputs),
-    }
-    .map_err(|e| e.to_string())?;
+    }?;
     let grads = match want.grads {
         None => None,
         Some(up) => {
             let array = |v: &[f64], shape: Vec<usize>| ndarray::ArrayD::from_shape_vec(shape, cast::<F>(v));
-            let seed = array(up.color, vec![rays, ch]).map_err(shape_err)?;
+            let seed = array(up.color, vec![rays, ch])?;
             let g = match (up.depth, out.depth) {
                 (Some(gd), Some(depth)) => {
                     // L = sum(gC * C) + sum(gD * D) (the same gradients as two seeded sweeps).
                     let gc = tape.constant(seed);
-                    let gd = tape.constant(array(gd, vec![rays]).map_err(shape_err)?);
+                    let gd = tape.constant(array(gd, vec![rays])?);
                     let loss = (|| {
                         let wc = tape.mul(out.color, gc)?;
                         let wd = tape.mul(depth, gd)?;
@@ -122,15 +121,11 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Resul
                         let l = tape.add(lc, ld)?;
                         tape.backward(l)
                     })();
-                    loss.map_err(|e| e.to_string())?
+                    loss?
                 }
-                _ => tape.backward_with(out.color, seed).map_err(|e| e.to_string())?,
+                _ => tape.backward_with(out.color, seed)?,
             };
-            let grad = |v| {
-                g.get_or_zeros(&tape, v)
-                    .map(|a| flat(a.view()))
-                    .map_err(|e| e.to_string())
-            };
+            let grad = |v| g.get_or_zeros(&tape, v).map(|a| flat(a.view()));
             Some(InputGrads {
                 sigma: grad(sigma)?,
                 delta: grad(delta)?,
@@ -140,7 +135,7 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Resul
             })
         }
     };
-    let value = |v| tape.value(v).map(flat).map_err(|e| e.to_string());
+    let value = |v| tape.value(v).map(flat);
     Ok(Evaluation {
         color: value(out.color)?,
         opacity: value(out.opacity)?,

@@ -13,6 +13,7 @@ use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
 use super::bench::{median_secs, time_runs, within, Memory, Timing};
+use super::error::CliError;
 use super::reference::errors;
 
 /// Nodes per axis of the workloads' cubic grids.
@@ -63,11 +64,11 @@ struct Data {
     upstream: Vec<f64>,
 }
 
-fn data(nodes: usize) -> Result<Data, String> {
+fn data(nodes: usize) -> Result<Data, CliError> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(2026);
     let mut u = |lo: f64, hi: f64| f64::from(rng.gen_range(lo..hi) as f32);
-    let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).map_err(|e| e.to_string())?;
-    let field = GridField::new(bbox, &[nodes, nodes, nodes, CHANNELS]).map_err(|e| e.to_string())?;
+    let bbox = GridBox::new(&[0.0; 3], &[1.0; 3])?;
+    let field = GridField::new(bbox, &[nodes, nodes, nodes, CHANNELS])?;
     Ok(Data {
         grid: (0..nodes.pow(3) * CHANNELS).map(|_| u(-1.0, 1.0)).collect(),
         positions: (0..LOOKUPS * 3).map(|_| u(0.0, 1.0)).collect(),
@@ -126,13 +127,12 @@ struct Typed<F: Float> {
     upstream: ArrayD<F>,
 }
 
-fn typed<F: Float>(d: &Data, n: usize) -> Result<Typed<F>, String> {
+fn typed<F: Float>(d: &Data, n: usize) -> Result<Typed<F>, CliError> {
     let cast = |v: &[f64]| v.iter().map(|&x| F::lit(x)).collect::<Vec<F>>();
     Ok(Typed {
-        grid: ArrayD::from_shape_vec(IxDyn(d.field.shape()), cast(&d.grid)).map_err(|e| e.to_string())?,
-        positions: Array2::from_shape_vec((n, 3), cast(&d.positions[..3 * n])).map_err(|e| e.to_string())?,
-        upstream: ArrayD::from_shape_vec(vec![n, CHANNELS], cast(&d.upstream[..n * CHANNELS]))
-            .map_err(|e| e.to_string())?,
+        grid: ArrayD::from_shape_vec(IxDyn(d.field.shape()), cast(&d.grid))?,
+        positions: Array2::from_shape_vec((n, 3), cast(&d.positions[..3 * n]))?,
+        upstream: ArrayD::from_shape_vec(vec![n, CHANNELS], cast(&d.upstream[..n * CHANNELS]))?,
     })
 }
 
@@ -157,17 +157,15 @@ struct Outcome {
     peak_extra: usize,
 }
 
-fn fused_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, String> {
+fn fused_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, CliError> {
     let p = x.positions.view().into_dyn();
-    let out = field.evaluate(&x.grid.view(), &p).map_err(|e| e.to_string())?;
+    let out = field.evaluate(&x.grid.view(), &p)?;
     if !backward {
         black_box(out);
         return Ok(None);
     }
-    let g = field
-        .vjp(&x.grid.view(), &p, &x.upstream.view(), GRID_ONLY)
-        .map_err(|e| e.to_string())?;
-    let grad = g.grid.ok_or("no grid gradient")?;
+    let g = field.vjp(&x.grid.view(), &p, &x.upstream.view(), GRID_ONLY)?;
+    let grad = g.grid.ok_or(CliError::Missing("no grid gradient"))?;
     Ok(Some(Values {
         output: to_f64(&out),
         grad: to_f64(&grad),
@@ -183,25 +181,28 @@ fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, fogray_tape::Var, fogra
     (tape, grid, positions)
 }
 
-fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, String> {
+fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, CliError> {
     let (mut tape, grid, positions) = tape_with_inputs(x);
-    let out = twin::lookup(&mut tape, field, grid, positions).map_err(|e| e.to_string())?;
+    let out = twin::lookup(&mut tape, field, grid, positions)?;
     if !backward {
         black_box(tape);
         return Ok(None);
     }
-    let g = tape.backward_with(out, x.upstream.clone()).map_err(|e| e.to_string())?;
-    let grad = g.get(grid).ok_or("no grid gradient")?.to_owned();
+    let g = tape.backward_with(out, x.upstream.clone())?;
+    let grad = g.get(grid).ok_or(CliError::Missing("no grid gradient"))?.to_owned();
     Ok(Some(Values {
-        output: to_f64(&tape.value(out).map_err(|e| e.to_string())?.to_owned()),
+        output: to_f64(&tape.value(out)?.to_owned()),
         grad: to_f64(&grad),
     }))
 }
 
 /// One forward + backward of `step`, measured for its peak extra memory and its values.
-fn measured_run(mem: &dyn Memory, step: impl FnOnce() -> Result<Option<Values>, String>) -> Result<Outcome, String> {
+fn measured_run(
+    mem: &dyn Memory,
+    step: impl FnOnce() -> Result<Option<Values>, CliError>,
+) -> Result<Outcome, CliError> {
     mem.reset();
-    let values = step()?.ok_or("no values")?;
+    let values = step()?.ok_or(CliError::Missing("no values"))?;
     Ok(Outcome {
         values,
         peak_extra: mem.peak_since_reset(),
@@ -226,15 +227,12 @@ fn measure<F: Float>(
     mem: &dyn Memory,
     out: &mut Vec<GridMeasurement>,
     log: &mut dyn FnMut(&GridMeasurement),
-) -> Result<(), String> {
+) -> Result<(), CliError> {
     let field = &d.field;
     let mut runs = Vec::new();
     let x = typed::<F>(d, LOOKUPS)?;
     let all = rayon::current_num_threads();
-    let one = rayon::ThreadPoolBuilder::new()
-        .num_threads(1)
-        .build()
-        .map_err(|e| e.to_string())?;
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let counts = if all > 1 { vec![1, all] } else { vec![1] };
     for threads in counts {
         let pool = (threads == 1).then_some(&one);
@@ -305,7 +303,7 @@ pub fn run(
     quick: bool,
     mem: &dyn Memory,
     log: &mut dyn FnMut(&GridMeasurement),
-) -> Result<Vec<GridMeasurement>, String> {
+) -> Result<Vec<GridMeasurement>, CliError> {
     let reps = if quick { 1 } else { 5 };
     let mut out = Vec::new();
     for &nodes in grids {

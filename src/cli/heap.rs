@@ -9,9 +9,11 @@
 //! this size afresh (with the setting, the same loop runs far slower on a pool thread than on
 //! the main thread), so their figures are not comparable across the flag.
 
+use super::error::CliError;
+
 /// Serves large allocations from the heap and never trims it.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
-pub fn keep_freed_memory() -> Result<(), String> {
+pub fn keep_freed_memory() -> Result<(), CliError> {
     // SAFETY: mallopt only changes two of glibc's allocation thresholds; it is called from the
     // main thread before the bench allocates anything large or starts a thread pool, and glibc
     // serialises it with its own lock in any case. It returns 1 on success.
@@ -21,12 +23,14 @@ pub fn keep_freed_memory() -> Result<(), String> {
     if done {
         Ok(())
     } else {
-        Err("glibc refused to change its mmap and trim thresholds".into())
+        Err(CliError::Unsupported(
+            "glibc refused to change its mmap and trim thresholds",
+        ))
     }
 }
 
 /// Serves large allocations from the heap and never trims it.
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-pub fn keep_freed_memory() -> Result<(), String> {
-    Err("--keep-freed-memory needs Linux with glibc".into())
+pub fn keep_freed_memory() -> Result<(), CliError> {
+    Err(CliError::Unsupported("--keep-freed-memory needs Linux with glibc"))
 }

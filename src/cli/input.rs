@@ -3,6 +3,8 @@
 
 use serde::Deserialize;
 
+use super::error::InputError;
+
 /// One ray as the JSON gives it.
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -55,13 +57,16 @@ pub struct Packed {
     pub has_grad_depth: Vec<bool>,
 }
 
-fn check_finite(values: &[f64], precision: Precision, what: impl Fn(usize) -> String) -> Result<(), String> {
+fn check_finite(values: &[f64], precision: Precision, what: impl Fn(usize) -> String) -> Result<(), InputError> {
     for (i, &v) in values.iter().enumerate() {
         if !v.is_finite() {
-            return Err(format!("{} is not finite", what(i)));
+            return Err(InputError::NotFinite { what: what(i) });
         }
         if precision == Precision::F32 && v.abs() > f64::from(f32::MAX) {
-            return Err(format!("{} = {v} overflows f32", what(i)));
+            return Err(InputError::OverflowsF32 {
+                what: what(i),
+                value: v,
+            });
         }
     }
     Ok(())
@@ -69,19 +74,19 @@ fn check_finite(values: &[f64], precision: Precision, what: impl Fn(usize) -> St
 
 /// Parses and checks the JSON text. Domain rules of the op itself (non-negative density and
 /// step) are checked by the op, which names the ray and sample too.
-pub fn parse(text: &str) -> Result<Packed, String> {
-    let input: InputJson = serde_json::from_str(text).map_err(|e| format!("invalid input JSON: {e}"))?;
+pub fn parse(text: &str) -> Result<Packed, InputError> {
+    let input: InputJson = serde_json::from_str(text).map_err(InputError::Json)?;
     let precision = match input.precision.as_deref() {
         None | Some("f64") => Precision::F64,
         Some("f32") => Precision::F32,
-        Some(other) => return Err(format!("unknown precision {other:?} (expected \"f32\" or \"f64\")")),
+        Some(other) => return Err(InputError::UnknownPrecision(other.into())),
     };
     let min_transmittance = input.min_transmittance.unwrap_or(0.0);
     if !(0.0..=1.0).contains(&min_transmittance) {
-        return Err(format!("min_transmittance must be in [0, 1], got {min_transmittance}"));
+        return Err(InputError::MinTransmittance(min_transmittance));
     }
     if input.rays.is_empty() {
-        return Err("rays: at least one ray is needed".into());
+        return Err(InputError::NoRays);
     }
     let ch = input
         .rays
@@ -89,7 +94,7 @@ pub fn parse(text: &str) -> Result<Packed, String> {
         .find_map(|r| r.color.first().map(Vec::len).or(r.background.as_ref().map(Vec::len)))
         .unwrap_or(1);
     if ch == 0 {
-        return Err("colours need at least one channel".into());
+        return Err(InputError::NoChannels);
     }
     let any_t = input.rays.iter().any(|r| r.t.is_some());
     let any_grad = input.rays.iter().any(|r| r.grad_color.is_some());
@@ -112,7 +117,12 @@ pub fn parse(text: &str) -> Result<Packed, String> {
     };
     for (r, ray) in input.rays.iter().enumerate() {
         let n = ray.sigma.len();
-        let mismatch = |what: &str, got: usize| format!("ray {r}: {what} has {got} entries, sigma has {n}");
+        let mismatch = |what: &'static str, got: usize| InputError::SampleCount {
+            ray: r,
+            what,
+            got,
+            samples: n,
+        };
         if ray.delta.len() != n {
             return Err(mismatch("delta", ray.delta.len()));
         }
@@ -129,18 +139,25 @@ pub fn parse(text: &str) -> Result<Packed, String> {
         }
         for (i, c) in ray.color.iter().enumerate() {
             if c.len() != ch {
-                return Err(format!(
-                    "ray {r}, sample {i}: color has {} channels, expected {ch}",
-                    c.len()
-                ));
+                return Err(InputError::SampleChannels {
+                    ray: r,
+                    sample: i,
+                    got: c.len(),
+                    channels: ch,
+                });
             }
             check_finite(c, precision, |k| format!("ray {r}, sample {i}: color[{k}]"))?;
             p.color.extend_from_slice(c);
         }
-        let per_ray = |what: &str, v: &Option<Vec<f64>>| -> Result<Vec<f64>, String> {
+        let per_ray = |what: &'static str, v: &Option<Vec<f64>>| -> Result<Vec<f64>, InputError> {
             match v {
                 None => Ok(vec![0.0; ch]),
-                Some(v) if v.len() != ch => Err(format!("ray {r}: {what} has {} channels, expected {ch}", v.len())),
+                Some(v) if v.len() != ch => Err(InputError::RayChannels {
+                    ray: r,
+                    what,
+                    got: v.len(),
+                    channels: ch,
+                }),
                 Some(v) => {
                     check_finite(v, precision, |k| format!("ray {r}: {what}[{k}]"))?;
                     Ok(v.clone())
@@ -162,7 +179,7 @@ pub fn parse(text: &str) -> Result<Packed, String> {
         }
         if let Some(g) = p.grad_depth.as_mut() {
             match (ray.grad_depth, &ray.t) {
-                (Some(_), None) => return Err(format!("ray {r}: grad_depth needs t (the depth needs sample depths)")),
+                (Some(_), None) => return Err(InputError::GradDepthWithoutT(r)),
                 (Some(gd), Some(_)) => {
                     check_finite(&[gd], precision, |_| format!("ray {r}: grad_depth"))?;
                     g.push(gd);
@@ -227,7 +244,7 @@ mod tests {
             ),
         ] {
             let e = parse(bad).unwrap_err();
-            assert!(e.contains(needle), "{bad}: {e}");
+            assert!(e.to_string().contains(needle), "{bad}: {e}");
         }
     }
 }

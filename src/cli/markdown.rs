@@ -8,6 +8,7 @@ use std::path::Path;
 use fogray::stamp::Stamp;
 
 use super::bench::Measurement;
+use super::error::CliError;
 use super::grid_bench::GridMeasurement;
 
 /// The full report: the stamp, then the text tables in a code block.
@@ -83,15 +84,18 @@ pub fn grid_headline(results: &[GridMeasurement], stamp: &Stamp) -> String {
 
 /// Replaces what stands between `<!-- headline:NAME:start -->` and `<!-- headline:NAME:end -->`
 /// in `readme` by `block`. Errors if the markers are missing; the file is then unchanged.
-pub fn update_readme(readme: &Path, name: &str, block: &str) -> Result<(), String> {
-    let text = std::fs::read_to_string(readme).map_err(|e| format!("cannot read {}: {e}", readme.display()))?;
+pub fn update_readme(readme: &Path, name: &str, block: &str) -> Result<(), CliError> {
+    let text = std::fs::read_to_string(readme).map_err(CliError::file("read", readme))?;
     let (start, end) = (
         format!("<!-- headline:{name}:start -->"),
         format!("<!-- headline:{name}:end -->"),
     );
-    let updated = replace_between(&text, &start, &end, block)
-        .ok_or_else(|| format!("{} has no {start} ... {end} block", readme.display()))?;
-    std::fs::write(readme, updated).map_err(|e| format!("cannot write {}: {e}", readme.display()))
+    let updated = replace_between(&text, &start, &end, block).ok_or_else(|| CliError::MissingMarkers {
+        path: readme.display().to_string(),
+        start: start.clone(),
+        end: end.clone(),
+    })?;
+    std::fs::write(readme, updated).map_err(CliError::file("write", readme))
 }
 
 fn replace_between(text: &str, start: &str, end: &str, block: &str) -> Option<String> {

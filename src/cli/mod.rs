@@ -2,6 +2,7 @@
 
 pub mod bench;
 pub mod composite;
+pub mod error;
 pub mod evaluate;
 pub mod gradcheck;
 pub mod grid_bench;

@@ -9,6 +9,7 @@ use ndarray::Array1;
 use serde::Serialize;
 
 use super::bench::median_secs;
+use super::error::CliError;
 
 /// One precision's tape costs (a JSON object of `"tape_overhead"`).
 #[derive(Debug, Clone, Serialize)]
@@ -28,22 +29,22 @@ pub struct TapeCost {
 /// Ops in the chain that measures the per-op cost.
 const CHAIN: usize = 20_000;
 
-fn per_op<F: Float>() -> Result<f64, String> {
-    let run = || -> Result<(), String> {
+fn per_op<F: Float>() -> Result<f64, CliError> {
+    let run = || -> Result<(), CliError> {
         let mut tape = Tape::<F>::new();
         let x = tape.param(Array1::from(vec![F::lit(0.5)]).into_dyn());
         let mut y = x;
         for _ in 0..CHAIN {
-            y = tape.add(y, x).map_err(|e| e.to_string())?;
+            y = tape.add(y, x)?;
         }
-        let s = tape.sum(y).map_err(|e| e.to_string())?;
-        black_box(tape.backward(s).map_err(|e| e.to_string())?);
+        let s = tape.sum(y)?;
+        black_box(tape.backward(s)?);
         Ok(())
     };
     Ok(median_secs(5, run)? / CHAIN as f64 * 1e9)
 }
 
-fn per_byte<F: Float>(elements: usize) -> Result<f64, String> {
+fn per_byte<F: Float>(elements: usize) -> Result<f64, CliError> {
     let a = Array1::from(vec![F::lit(0.25); elements]).into_dyn();
     let b = Array1::from(vec![F::lit(0.75); elements]).into_dyn();
     let g = Array1::from(vec![F::one(); elements]).into_dyn();
@@ -58,15 +59,15 @@ fn per_byte<F: Float>(elements: usize) -> Result<f64, String> {
     })?;
     let full = median_secs(5, || {
         let (mut tape, x, y) = setup();
-        let z = tape.add(x, y).map_err(|e| e.to_string())?;
-        black_box(tape.backward_with(z, g.clone()).map_err(|e| e.to_string())?);
+        let z = tape.add(x, y)?;
+        black_box(tape.backward_with(z, g.clone())?);
         Ok(())
     })?;
     let bytes = 6 * elements * std::mem::size_of::<F>();
     Ok((full - base).max(1e-12) / bytes as f64 * 1e9)
 }
 
-fn measure<F: Float>(elements: usize) -> Result<TapeCost, String> {
+fn measure<F: Float>(elements: usize) -> Result<TapeCost, CliError> {
     let ns_per_byte = per_byte::<F>(elements)?;
     Ok(TapeCost {
         precision: F::NAME,
@@ -78,7 +79,7 @@ fn measure<F: Float>(elements: usize) -> Result<TapeCost, String> {
 }
 
 /// The tape's costs in f32 and f64 (on 1 thread: the tape's ops are sequential).
-pub fn run(quick: bool) -> Result<Vec<TapeCost>, String> {
+pub fn run(quick: bool) -> Result<Vec<TapeCost>, CliError> {
     let elements = if quick { 1 << 20 } else { 1 << 22 };
     Ok(vec![measure::<f32>(elements)?, measure::<f64>(elements)?])
 }

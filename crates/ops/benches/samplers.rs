@@ -13,7 +13,7 @@ use fogray_ops::rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, Pi
 use fogray_ops::sample::{
     CellPoints, Importance, Jitter, OccupancyConfig, OccupancyGrid, Spacing, Stratified, Uniform,
 };
-use fogray_ops::{Background, Composite};
+use fogray_ops::{Background, Composite, CompositeArrays};
 use ndarray::{Array1, Array2, ArrayView2};
 use rand::{Rng, SeedableRng};
 
@@ -81,8 +81,11 @@ fn weights(s: &fogray_ops::sample::PackedSamples<f32>) -> Array1<f32> {
     let sigma = ball(s.positions.view()).unwrap().into_dyn();
     let color = Array2::<f32>::ones((s.len(), 1)).into_dyn();
     let delta = s.delta.clone().into_dyn();
-    let (outs, _) = op.evaluate(&[sigma.view(), delta.view(), color.view()]).unwrap();
-    outs[2].clone().into_dimensionality().unwrap()
+    let (outs, _) = op
+        .evaluate(&CompositeArrays::new(sigma.view(), delta.view(), color.view()))
+        .unwrap();
+    let weights = outs.weights.expect("the op was built with weights");
+    weights.into_dimensionality().unwrap()
 }
 
 /// CPU seconds of this process so far (user + system, all threads; Linux only, else 0):

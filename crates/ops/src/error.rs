@@ -52,6 +52,16 @@ pub enum CompositeError {
     /// A configuration value outside its domain.
     #[error("{0}")]
     Config(String),
+    /// An optional input, upstream gradient, buffer or wanted gradient that the op's
+    /// configuration requires and was not given, or that it has no use for and was given (a
+    /// background with [`Background::None`](crate::Background::None), `t` without depth...).
+    #[error("{what}: {problem}")]
+    Mismatch {
+        /// Which argument (`"background"`, `"t"`, `"depth buffer"`, ...).
+        what: &'static str,
+        /// What is wrong with it, given the configuration.
+        problem: &'static str,
+    },
 }
 
 /// Why a camera, a box or a batch of rays was rejected. Nothing is built when one is returned.

@@ -53,7 +53,10 @@ pub mod rays;
 pub mod sample;
 pub mod twins;
 
-pub use composite::{Background, Composite, CompositeInputs, CompositeVars};
+pub use composite::{
+    Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
+    CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
+};
 pub use error::{CompositeError, FieldError, GeometryError, GridError, SampleError};
 pub use field::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
 pub use grid::{GridBox, GridField, GridGradients, GridWanted};

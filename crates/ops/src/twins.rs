@@ -11,7 +11,7 @@
 
 use fogray_tape::{Float, Tape, TapeError, Var};
 
-use crate::composite::{validate, Background, Composite, CompositeInputs, CompositeVars};
+use crate::composite::{validate, Background, Composite, CompositeArrays, CompositeInputs, CompositeVars};
 
 fn invalid(reason: &str) -> TapeError {
     TapeError::InvalidArgument {
@@ -32,19 +32,15 @@ fn check<F: Float>(tape: &Tape<F>, op: &Composite, inputs: &CompositeInputs) -> 
     if op.depth != inputs.t.is_some() {
         return Err(invalid("t input does not match the depth option"));
     }
-    let vars = [
-        Some(inputs.sigma),
-        Some(inputs.delta),
-        Some(inputs.color),
-        inputs.background,
-        inputs.t,
-    ];
-    let views = vars
-        .iter()
-        .flatten()
-        .map(|&v| tape.value(v))
-        .collect::<Result<Vec<_>, _>>()?;
-    validate(op, &views).map(|_| ()).map_err(|e| invalid(&e.to_string()))
+    let optional = |v: Option<Var>| v.map(|v| tape.value(v)).transpose();
+    let arrays = CompositeArrays {
+        sigma: tape.value(inputs.sigma)?,
+        delta: tape.value(inputs.delta)?,
+        color: tape.value(inputs.color)?,
+        background: optional(inputs.background)?,
+        t: optional(inputs.t)?,
+    };
+    validate(op, &arrays).map(|_| ()).map_err(|e| invalid(&e.to_string()))
 }
 
 /// The colour and the optional depth, weights and transmittance shared by both forms, given

@@ -17,6 +17,7 @@ use clap::Args;
 use fogray::tape::TapeError;
 
 use crate::adam::{Adam, Descent};
+use crate::error::DiscError;
 use crate::experiments::{Fit, Renderer};
 use crate::hard;
 use crate::setup::Setup;
@@ -66,7 +67,7 @@ impl Schedule {
     }
 
     /// Checks the schedule.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), DiscError> {
         for (name, v) in [
             ("tau-start", self.tau_start),
             ("tau-end", self.tau_end),
@@ -74,11 +75,15 @@ impl Schedule {
             ("lr-end", self.lr_end),
         ] {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("--{name} must be positive, got {v}"));
+                return Err(DiscError::Setting {
+                    name,
+                    value: v,
+                    rule: "positive",
+                });
             }
         }
         if self.anneal_steps == 0 {
-            return Err("--anneal-steps must be at least 1".into());
+            return Err(DiscError::Usage("--anneal-steps must be at least 1"));
         }
         Ok(())
     }

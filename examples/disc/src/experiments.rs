@@ -6,6 +6,7 @@ use fogray::tape::{Tape, TapeError};
 use serde::Serialize;
 
 use crate::adam::{descend, Adam};
+use crate::error::DiscError;
 use crate::hard;
 use crate::setup::Setup;
 use crate::soft::{self, Compositor};
@@ -140,13 +141,15 @@ pub struct RayProfile {
 }
 
 /// The ray of `pixel` of `camera` through the sheet at offset `x` and softness `tau`.
-pub fn ray_profile(setup: &Setup, camera: usize, pixel: usize, x: f64, tau: f64) -> Result<RayProfile, String> {
+pub fn ray_profile(setup: &Setup, camera: usize, pixel: usize, x: f64, tau: f64) -> Result<RayProfile, DiscError> {
     let scene = &setup.scene;
     if camera >= scene.cameras || pixel >= scene.pixels {
-        return Err(format!(
-            "camera {camera} pixel {pixel} is not in the scene ({} cameras x {} pixels)",
-            scene.cameras, scene.pixels
-        ));
+        return Err(DiscError::NoSuchPixel {
+            camera,
+            pixel,
+            cameras: scene.cameras,
+            pixels: scene.pixels,
+        });
     }
     let ray = scene.ray(camera, pixel);
     let samples = match scene.sampling {
@@ -154,15 +157,16 @@ pub fn ray_profile(setup: &Setup, camera: usize, pixel: usize, x: f64, tau: f64)
         crate::sampling::Sampling::Band => crate::sampling::band(scene, &[ray], x, tau, scene.band_k),
     };
     let mut tape = Tape::new();
-    let (_, out) =
-        soft::render_on_tape(&mut tape, scene, &samples, x, tau, Compositor::Fused).map_err(|e| e.to_string())?;
-    let values = |v| {
-        tape.value(v)
-            .map(|a| a.iter().copied().collect::<Vec<f64>>())
-            .map_err(|e| e.to_string())
-    };
-    let weights = values(out.weights.ok_or("no weights")?)?;
-    let transmittance = values(out.transmittance.ok_or("no transmittance")?)?;
+    let (_, out) = soft::render_on_tape(&mut tape, scene, &samples, x, tau, Compositor::Fused)?;
+    let values = |v| tape.value(v).map(|a| a.iter().copied().collect::<Vec<f64>>());
+    let weights = values(
+        out.weights
+            .ok_or(DiscError::Usage("the op was built without weights"))?,
+    )?;
+    let transmittance = values(
+        out.transmittance
+            .ok_or(DiscError::Usage("the op was built without transmittance"))?,
+    )?;
     let sigma: Vec<f64> = samples
         .x
         .iter()

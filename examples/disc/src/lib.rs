@@ -10,6 +10,7 @@
 
 pub mod adam;
 pub mod anneal;
+pub mod error;
 pub mod experiments;
 pub mod hard;
 pub mod plots;

@@ -9,6 +9,7 @@ use serde_json::json;
 
 use fogray_disc::adam::Adam;
 use fogray_disc::anneal::{fit_annealed, Schedule};
+use fogray_disc::error::DiscError;
 use fogray_disc::experiments::{self, grid, Renderer};
 use fogray_disc::scene::Scene;
 use fogray_disc::setup::Setup;
@@ -139,13 +140,12 @@ fn bar(len: u64, json: bool) -> ProgressBar {
     pb
 }
 
-fn print_json(v: &impl serde::Serialize) -> Result<(), String> {
-    println!("{}", serde_json::to_string_pretty(v).map_err(|e| e.to_string())?);
+fn print_json(v: &impl serde::Serialize) -> Result<(), DiscError> {
+    println!("{}", serde_json::to_string_pretty(v)?);
     Ok(())
 }
 
-fn run(cli: Cli) -> Result<(), String> {
-    let te = |e: fogray::tape::TapeError| e.to_string();
+fn run(cli: Cli) -> Result<(), DiscError> {
     match cli.command.unwrap_or(Command::Reproduce { common: cli.common }) {
         Command::Staircase { common } => {
             let setup = Setup::new(common.scene)?;
@@ -172,7 +172,7 @@ fn run(cli: Cli) -> Result<(), String> {
         Command::Landscape { common, from, to, step } => {
             let setup = Setup::new(common.scene.clone())?;
             if !(step > 0.0 && from < to) {
-                return Err(format!("need --from < --to and --step > 0, got {from}, {to}, {step}"));
+                return Err(DiscError::Range { from, to, step });
             }
             let n = ((to - from) / step).round() as i64;
             let xs = grid(
@@ -182,9 +182,9 @@ fn run(cli: Cli) -> Result<(), String> {
             );
             let pb = bar(xs.len() as u64, common.json);
             pb.set_message(format!("landscape tau = {}", common.scene.tau));
-            let l = experiments::landscape(&setup, common.scene.tau, &xs, &|| pb.inc(1)).map_err(te)?;
+            let l = experiments::landscape(&setup, common.scene.tau, &xs, &|| pb.inc(1))?;
             pb.finish_and_clear();
-            std::fs::create_dir_all(&common.out).map_err(|e| e.to_string())?;
+            std::fs::create_dir_all(&common.out).map_err(DiscError::file("create", &common.out))?;
             let name = format!("landscape-tau{}", l.tau);
             plots::landscapes(&common.out, &name, &[(l.clone(), Vec::new())])?;
             if common.json {
@@ -213,12 +213,14 @@ fn run(cli: Cli) -> Result<(), String> {
             let setup = Setup::new(common.scene.clone())?;
             let f = if anneal {
                 if renderer == Renderer::Hard {
-                    return Err("--anneal needs the soft renderer (the hard one has no softness)".into());
+                    return Err(DiscError::Usage(
+                        "--anneal needs the soft renderer (the hard one has no softness)",
+                    ));
                 }
                 schedule.validate()?;
-                fit_annealed(&setup, start, &schedule, &adam).map_err(te)?
+                fit_annealed(&setup, start, &schedule, &adam)?
             } else {
-                experiments::fit(&setup, renderer, start, common.scene.tau, &adam).map_err(te)?
+                experiments::fit(&setup, renderer, start, common.scene.tau, &adam)?
             };
             if common.json {
                 return print_json(
@@ -244,7 +246,7 @@ fn run(cli: Cli) -> Result<(), String> {
         } => {
             let setup = Setup::new(common.scene.clone())?;
             let p = experiments::ray_profile(&setup, camera, pixel, x, common.scene.tau)?;
-            std::fs::create_dir_all(&common.out).map_err(|e| e.to_string())?;
+            std::fs::create_dir_all(&common.out).map_err(DiscError::file("create", &common.out))?;
             plots::ray(&common.out, &p)?;
             if common.json {
                 return print_json(&p);
@@ -263,7 +265,7 @@ fn run(cli: Cli) -> Result<(), String> {
         Command::Sampling { common, at, counts } => {
             let setup = Setup::new(common.scene.clone())?;
             if counts.contains(&0) {
-                return Err("--counts must be positive".into());
+                return Err(DiscError::Usage("--counts must be positive"));
             }
             let mut rows = Vec::new();
             for &x in &at {
@@ -294,13 +296,14 @@ fn run(cli: Cli) -> Result<(), String> {
             let timing = fogray_disc::report::Timing::STABLE;
             let rows = fogray_disc::report::run(&setup, common.scene.tau, timing, &|| pb.inc(1))?;
             pb.finish_and_clear();
-            std::fs::create_dir_all(&dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+            std::fs::create_dir_all(&dir).map_err(DiscError::file("create", &dir))?;
             let stamp = fogray::stamp::Stamp::now("cargo run --release -p fogray-disc -- report");
             let md = fogray_disc::report::markdown(&rows, common.scene.tau, timing, &stamp);
-            std::fs::write(dir.join("speed_vs_error.md"), &md).map_err(|e| e.to_string())?;
-            let js =
-                serde_json::to_string_pretty(&json!({ "stamp": stamp, "results": rows })).map_err(|e| e.to_string())?;
-            std::fs::write(dir.join("speed_vs_error.json"), &js).map_err(|e| e.to_string())?;
+            let md_path = dir.join("speed_vs_error.md");
+            std::fs::write(&md_path, &md).map_err(DiscError::file("write", &md_path))?;
+            let js = serde_json::to_string_pretty(&json!({ "stamp": stamp, "results": rows }))?;
+            let js_path = dir.join("speed_vs_error.json");
+            std::fs::write(&js_path, &js).map_err(DiscError::file("write", &js_path))?;
             fogray_disc::report::plot(&dir, &rows, common.scene.tau)?;
             if common.json {
                 println!("{js}");

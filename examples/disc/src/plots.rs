@@ -6,6 +6,7 @@ use std::path::Path;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
+use crate::error::DiscError;
 use crate::experiments::{Fit, Landscape, RayProfile};
 
 const GREY: RGBColor = RGBColor(150, 150, 150);
@@ -13,10 +14,10 @@ const ORANGE: RGBColor = RGBColor(230, 120, 20);
 const BLUE: RGBColor = RGBColor(40, 90, 200);
 const FONT: &str = "sans-serif";
 
-type Res = Result<(), String>;
+type Res = Result<(), DiscError>;
 
-fn err<E: std::fmt::Display>(e: E) -> String {
-    e.to_string()
+fn err<E: std::fmt::Display>(e: E) -> DiscError {
+    DiscError::plot(e)
 }
 
 /// Draws with `$draw` into `$stem.svg` and `$stem.png`.
@@ -35,7 +36,7 @@ macro_rules! both {
             $draw(&root, $($arg),*)?;
             root.present().map_err(err)?;
         }
-        Ok::<(), String>(())
+        Ok::<(), DiscError>(())
     }};
 }
 

@@ -11,13 +11,14 @@ use std::hint::black_box;
 use std::path::Path;
 use std::time::Instant;
 
-use fogray::ops::{twins, Background, Composite, CompositeInputs};
+use fogray::ops::{twins, Background, Composite, CompositeArrays, CompositeInputs, CompositeUpstream, CompositeWanted};
 use fogray::stamp::Stamp;
 use fogray::tape::{Float, Tape};
 use ndarray::{Array1, Array2, ArrayD};
 use plotters::prelude::*;
 use serde::Serialize;
 
+use crate::error::DiscError;
 use crate::sampling::{self, Sampling};
 use crate::setup::Setup;
 use crate::soft::Samples;
@@ -110,7 +111,7 @@ fn batch(setup: &Setup, sampling: Sampling, samples: usize, tau: f64) -> Batch {
 
 /// The median run time of `f` in microseconds and the runs' interquartile range over it,
 /// after a warm-up run.
-fn time_frame(timing: Timing, mut f: impl FnMut() -> Result<(), String>) -> Result<(f64, f64), String> {
+fn time_frame(timing: Timing, mut f: impl FnMut() -> Result<(), DiscError>) -> Result<(f64, f64), DiscError> {
     f()?;
     let mut t: Vec<f64> = Vec::new();
     let mut total = 0.0;
@@ -134,17 +135,17 @@ fn measure<F: Float>(
     sampling: Sampling,
     samples: usize,
     rows: &mut Vec<Row>,
-) -> Result<(), String> {
+) -> Result<(), DiscError> {
     let n = b.sigma.len();
     let ch = setup.scene.channels();
     let cast = |v: &[f64]| v.iter().map(|&x| F::lit(x)).collect::<Vec<F>>();
     let sigma = Array1::from(cast(&b.sigma));
     let delta = Array1::from(cast(&b.delta));
     let colors: Vec<f64> = (0..n).flat_map(|_| setup.scene.disc_color.iter().copied()).collect();
-    let color = Array2::from_shape_vec((n, ch), cast(&colors)).map_err(|e| e.to_string())?;
+    let color = Array2::from_shape_vec((n, ch), cast(&colors))?;
     let background = Array1::from(cast(&setup.scene.background));
     let rays = b.offsets.len() - 1;
-    let grad = ArrayD::from_shape_vec(vec![rays, ch], cast(&vec![1.0; rays * ch])).map_err(|e| e.to_string())?;
+    let grad = ArrayD::from_shape_vec(vec![rays, ch], cast(&vec![1.0; rays * ch]))?;
     let error = |image: &[f64]| {
         image
             .iter()
@@ -152,25 +153,27 @@ fn measure<F: Float>(
             .map(|(a, e)| (a - e).abs())
             .fold(0.0, f64::max)
     };
-    let views = [
+    let views = CompositeArrays::new(
         sigma.view().into_dyn(),
         delta.view().into_dyn(),
         color.view().into_dyn(),
-        background.view().into_dyn(),
-    ];
+    )
+    .with_background(background.view().into_dyn());
+    let upstream = CompositeUpstream::color(grad.view());
+    let wanted = CompositeWanted {
+        sigma: true,
+        color: true,
+        ..Default::default()
+    };
     for threshold in THRESHOLDS {
-        let op = Composite::new(&b.offsets)
-            .map_err(|e| e.to_string())?
+        let op = Composite::new(&b.offsets)?
             .background(Background::Shared)
-            .min_transmittance(threshold)
-            .map_err(|e| e.to_string())?;
-        let step = || -> Result<Vec<f64>, String> {
-            let (outs, res) = op.evaluate(&views).map_err(|e| e.to_string())?;
-            let g = op
-                .vjp(&views, &res, &[Some(grad.view()), None], &[true, false, true, false])
-                .map_err(|e| e.to_string())?;
+            .min_transmittance(threshold)?;
+        let step = || -> Result<Vec<f64>, DiscError> {
+            let (outs, res) = op.evaluate(&views)?;
+            let g = op.vjp(&views, &res, &upstream, wanted)?;
             black_box(g);
-            Ok(outs[0].iter().map(|v| v.as_f64()).collect())
+            Ok(outs.color.iter().map(|v| v.as_f64()).collect())
         };
         let (us_per_frame, spread) = time_frame(timing, || step().map(drop))?;
         rows.push(Row {
@@ -185,11 +188,9 @@ fn measure<F: Float>(
             pareto: false,
         });
     }
-    let op = Composite::new(&b.offsets)
-        .map_err(|e| e.to_string())?
-        .background(Background::Shared);
+    let op = Composite::new(&b.offsets)?.background(Background::Shared);
     for (method, naive) in [("taped", false), ("taped-naive", true)] {
-        let step = || -> Result<Vec<f64>, String> {
+        let step = || -> Result<Vec<f64>, DiscError> {
             let mut tape = Tape::<F>::new();
             let inputs = CompositeInputs {
                 sigma: tape.param(sigma.clone()),
@@ -202,15 +203,9 @@ fn measure<F: Float>(
                 twins::naive(&mut tape, &op, &inputs)
             } else {
                 twins::stable(&mut tape, &op, &inputs)
-            }
-            .map_err(|e| e.to_string())?;
-            black_box(tape.backward_with(out.color, grad.clone()).map_err(|e| e.to_string())?);
-            Ok(tape
-                .value(out.color)
-                .map_err(|e| e.to_string())?
-                .iter()
-                .map(|v| v.as_f64())
-                .collect())
+            }?;
+            black_box(tape.backward_with(out.color, grad.clone())?);
+            Ok(tape.value(out.color)?.iter().map(|v| v.as_f64()).collect())
         };
         let (us_per_frame, spread) = time_frame(timing, || step().map(drop))?;
         rows.push(Row {
@@ -229,7 +224,7 @@ fn measure<F: Float>(
 }
 
 /// Measures every configuration at softness `tau`; `progress` is called once per batch.
-pub fn run(setup: &Setup, tau: f64, timing: Timing, progress: &dyn Fn()) -> Result<Vec<Row>, String> {
+pub fn run(setup: &Setup, tau: f64, timing: Timing, progress: &dyn Fn()) -> Result<Vec<Row>, DiscError> {
     let mut rows = Vec::new();
     for sampling in [Sampling::Uniform, Sampling::Band] {
         for samples in COUNTS {
@@ -345,7 +340,7 @@ pub fn markdown(rows: &[Row], tau: f64, timing: Timing, stamp: &Stamp) -> String
 /// The log-log plot (`speed_vs_error.svg` and `.png` in `dir`): time per frame against
 /// error, one colour per method and precision, circles for uniform sampling and triangles for
 /// band sampling, the Pareto front as a line; the legend beside the chart, off the data.
-pub fn plot(dir: &Path, rows: &[Row], tau: f64) -> Result<(), String> {
+pub fn plot(dir: &Path, rows: &[Row], tau: f64) -> Result<(), DiscError> {
     let (svg, png) = (dir.join("speed_vs_error.svg"), dir.join("speed_vs_error.png"));
     draw_plot(SVGBackend::new(&svg, (1200, 700)).into_drawing_area(), rows, tau)?;
     draw_plot(BitMapBackend::new(&png, (1200, 700)).into_drawing_area(), rows, tau)
@@ -364,11 +359,11 @@ fn draw_plot<DB: DrawingBackend>(
     root: DrawingArea<DB, plotters::coord::Shift>,
     rows: &[Row],
     tau: f64,
-) -> Result<(), String>
+) -> Result<(), DiscError>
 where
     DB::ErrorType: 'static,
 {
-    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| x.to_string();
+    let e = |x: DrawingAreaErrorKind<DB::ErrorType>| DiscError::plot(x);
     root.fill(&WHITE).map_err(e)?;
     let (left, right) = root.split_horizontally(930);
     // Exact results (error 0) are drawn at the floor.

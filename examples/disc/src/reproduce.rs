@@ -8,6 +8,7 @@ use serde_json::{json, Value};
 
 use crate::adam::Adam;
 use crate::anneal::{fit_annealed, Schedule};
+use crate::error::DiscError;
 use crate::experiments::{self, grid, Fit, Renderer};
 use crate::plots;
 use crate::setup::Setup;
@@ -59,21 +60,20 @@ pub fn run(
     adam: &Adam,
     schedule: &Schedule,
     progress: &(dyn Fn(u64) + Sync),
-) -> Result<(Reproduction, Vec<Panel>), String> {
-    let e = |e: fogray::tape::TapeError| e.to_string();
+) -> Result<(Reproduction, Vec<Panel>), DiscError> {
     let stairs = experiments::staircase(setup);
-    let at = |x: f64, tau: f64| setup.soft(x, tau).map_err(e);
+    let at = |x: f64, tau: f64| setup.soft(x, tau);
     let s15 = at(-1.5, 0.15)?;
     let s28 = at(-2.8, 0.15)?;
     let profile = experiments::ray_profile(setup, 0, 36, -1.5, 0.15)?;
-    let soft_fit = |start: f64, tau: f64| experiments::fit(setup, Renderer::Soft, start, tau, adam).map_err(e);
+    let soft_fit = |start: f64, tau: f64| experiments::fit(setup, Renderer::Soft, start, tau, adam);
     let (f15, f28, f45, f60) = (
         soft_fit(-1.5, 0.15)?,
         soft_fit(-2.8, 0.15)?,
         soft_fit(-2.8, 0.45)?,
         soft_fit(-2.8, 0.6)?,
     );
-    let hard_fit = experiments::fit(setup, Renderer::Hard, -2.8, 0.15, adam).map_err(e)?;
+    let hard_fit = experiments::fit(setup, Renderer::Hard, -2.8, 0.15, adam)?;
     progress(10);
     let xs = grid(-3000, 3000, 10);
     let mut panels = Vec::new();
@@ -83,16 +83,13 @@ pub fn run(
         (0.45, vec![f45.clone()]),
         (0.6, vec![f60.clone()]),
     ] {
-        panels.push((
-            experiments::landscape(setup, tau, &xs, &|| progress(1)).map_err(e)?,
-            fits,
-        ));
+        panels.push((experiments::landscape(setup, tau, &xs, &|| progress(1))?, fits));
     }
     let starts: Vec<f64> = (0..=24).map(|i| -3.0 + 0.25 * i as f64).collect();
     let annealed: Vec<Fit> = starts
         .par_iter()
         .map(|&s| {
-            let f = fit_annealed(setup, s, schedule, adam).map_err(e);
+            let f = fit_annealed(setup, s, schedule, adam);
             progress(schedule.anneal_steps as u64);
             f
         })
@@ -240,15 +237,15 @@ pub fn plot_all(
     dir: &Path,
     r: &Reproduction,
     panels: &[(experiments::Landscape, Vec<Fit>)],
-) -> Result<Vec<String>, String> {
-    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+) -> Result<Vec<String>, DiscError> {
+    std::fs::create_dir_all(dir).map_err(DiscError::file("create", dir))?;
     plots::landscapes(dir, "landscape", panels)?;
     let profile = experiments::ray_profile(setup, 0, 36, -1.5, 0.15)?;
     plots::ray(dir, &profile)?;
     let pixels = setup.scene.pixels;
     let ch = setup.scene.channels();
     let cam = 0..pixels * ch;
-    let soft_img = setup.soft(-1.5, 0.15).map_err(|e| e.to_string())?.image;
+    let soft_img = setup.soft(-1.5, 0.15)?.image;
     let hard_img = crate::hard::render(&setup.scene, &setup.rays, -1.5, crate::hard::hits);
     plots::strips(
         dir,

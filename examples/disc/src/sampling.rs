@@ -17,6 +17,7 @@
 use clap::ValueEnum;
 use serde::Serialize;
 
+use crate::error::DiscError;
 use crate::scene::{Ray, Scene};
 use crate::soft::Samples;
 
@@ -178,7 +179,13 @@ pub struct SamplingError {
 }
 
 /// Uniform against band sampling at equal sample counts, for the model at `x`.
-pub fn compare(scene: &Scene, rays: &[Ray], x: f64, tau: f64, counts: &[usize]) -> Result<Vec<SamplingError>, String> {
+pub fn compare(
+    scene: &Scene,
+    rays: &[Ray],
+    x: f64,
+    tau: f64,
+    counts: &[usize],
+) -> Result<Vec<SamplingError>, DiscError> {
     let exact = exact_pixels(scene, rays, x, tau);
     let mut out = Vec::new();
     for &samples in counts {
@@ -193,14 +200,8 @@ pub fn compare(scene: &Scene, rays: &[Ray], x: f64, tau: f64, counts: &[usize]) 
                 Sampling::Band => band(&sc, rays, x, tau, sc.band_k),
             };
             let mut tape = fogray::tape::Tape::new();
-            let (_, vars) = crate::soft::render_on_tape(&mut tape, &sc, &s, x, tau, crate::soft::Compositor::Fused)
-                .map_err(|e| e.to_string())?;
-            let image: Vec<f64> = tape
-                .value(vars.color)
-                .map_err(|e| e.to_string())?
-                .iter()
-                .copied()
-                .collect();
+            let (_, vars) = crate::soft::render_on_tape(&mut tape, &sc, &s, x, tau, crate::soft::Compositor::Fused)?;
+            let image: Vec<f64> = tape.value(vars.color)?.iter().copied().collect();
             let errs: Vec<f64> = image.iter().zip(&exact).map(|(a, b)| a - b).collect();
             out.push(SamplingError {
                 sampling,

@@ -4,6 +4,8 @@
 
 use clap::Args;
 
+use crate::error::DiscError;
+
 /// The scene's parameters.
 #[derive(Debug, Clone, Args)]
 pub struct Scene {
@@ -82,7 +84,7 @@ pub struct Ray {
 
 impl Scene {
     /// Checks the parameters; the message says which is wrong.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), DiscError> {
         let positive = [
             ("cameras", self.cameras as f64),
             ("pixels", self.pixels as f64),
@@ -96,17 +98,26 @@ impl Scene {
         ];
         for (name, v) in positive {
             if !(v.is_finite() && v > 0.0) {
-                return Err(format!("--{name} must be positive and finite, got {v}"));
+                return Err(DiscError::Setting {
+                    name,
+                    value: v,
+                    rule: "positive and finite",
+                });
             }
         }
         if !(self.t0.is_finite() && self.t1.is_finite() && self.t0 < self.t1) {
-            return Err(format!("need t0 < t1, got {} and {}", self.t0, self.t1));
+            return Err(DiscError::Interval {
+                t0: self.t0,
+                t1: self.t1,
+            });
         }
         if self.disc_color.len() != self.background.len() || self.disc_color.is_empty() {
-            return Err("--disc-color and --background need the same number of channels".into());
+            return Err(DiscError::Usage(
+                "--disc-color and --background need the same number of channels",
+            ));
         }
         if self.disc_color.iter().chain(&self.background).any(|c| !c.is_finite()) {
-            return Err("colours must be finite".into());
+            return Err(DiscError::Usage("colours must be finite"));
         }
         Ok(())
     }

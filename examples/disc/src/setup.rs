@@ -4,6 +4,7 @@ use std::borrow::Cow;
 
 use fogray::tape::TapeError;
 
+use crate::error::DiscError;
 use crate::hard;
 use crate::sampling::{self, Sampling};
 use crate::scene::{Ray, Scene};
@@ -23,7 +24,7 @@ pub struct Setup {
 
 impl Setup {
     /// Builds the setup; errors if the scene's parameters are invalid.
-    pub fn new(scene: Scene) -> Result<Setup, String> {
+    pub fn new(scene: Scene) -> Result<Setup, DiscError> {
         scene.validate()?;
         let rays = scene.rays();
         let samples = Samples::uniform(&scene, &rays);

@@ -19,6 +19,7 @@ use serde_json::json;
 
 use super::evaluate::{evaluate, InputGrads, Method, Upstream, Wanted};
 use super::input::{Packed, Precision};
+use crate::cli::error::CliError;
 use problem::{batch_problem, check_in, options, ray_problem};
 use tally::{Against, Comparison, Place, Tally};
 
@@ -128,7 +129,7 @@ fn widen<F: Float>(g: InputGrads<F>) -> InputGrads<f64> {
     }
 }
 
-fn gradients<F: Float>(p: &Packed, method: Method, l: &Loss) -> Result<InputGrads<f64>, String> {
+fn gradients<F: Float>(p: &Packed, method: Method, l: &Loss) -> Result<InputGrads<f64>, CliError> {
     let want = Wanted {
         per_sample: false,
         grads: Some(Upstream {
@@ -139,7 +140,7 @@ fn gradients<F: Float>(p: &Packed, method: Method, l: &Loss) -> Result<InputGrad
     evaluate::<F>(p, method, want)?
         .grads
         .map(widen)
-        .ok_or_else(|| "no gradient".into())
+        .ok_or(CliError::Missing("no gradient"))
 }
 
 /// Every element of `fused` against `reference`.
@@ -193,7 +194,7 @@ fn elementwise(p: &Packed, fused: &InputGrads<f64>, reference: &InputGrads<f64>,
 }
 
 /// Full mode: every element of every ray, ray by ray.
-fn per_ray(p: &Packed, l: &Loss, tally: &mut Tally) -> Result<(), String> {
+fn per_ray(p: &Packed, l: &Loss, tally: &mut Tally) -> Result<(), CliError> {
     let reports: Vec<GradcheckReport> = (0..p.offsets.len() - 1)
         .into_par_iter()
         .map(|r| {
@@ -223,7 +224,7 @@ fn per_ray(p: &Packed, l: &Loss, tally: &mut Tally) -> Result<(), String> {
 }
 
 /// Fast mode: random directions through every input at once.
-fn directions(p: &mut Packed, l: &Loss, s: &Settings, tally: &mut Tally) -> Result<(), String> {
+fn directions(p: &mut Packed, l: &Loss, s: &Settings, tally: &mut Tally) -> Result<(), CliError> {
     let precision = p.precision;
     let problem = batch_problem(p, l)?;
     let opts = GradcheckOptions {
@@ -265,7 +266,7 @@ fn warn_if_slow(p: &Packed) {
 }
 
 /// Checks `p` as `s` asks; `Err` (exit status 2) for input or settings it cannot check.
-pub fn run(mut p: Packed, s: &Settings) -> Result<Outcome, String> {
+pub fn run(mut p: Packed, s: &Settings) -> Result<Outcome, CliError> {
     let (default_atol, default_rtol) = match p.precision {
         Precision::F32 => F32_TOLERANCE,
         Precision::F64 => F64_TOLERANCE,
@@ -273,11 +274,11 @@ pub fn run(mut p: Packed, s: &Settings) -> Result<Outcome, String> {
     let (atol, rtol) = (s.atol.unwrap_or(default_atol), s.rtol.unwrap_or(default_rtol));
     for (what, v) in [("atol", atol), ("rtol", rtol)] {
         if !(v.is_finite() && v >= 0.0) {
-            return Err(format!("--{what} must be finite and >= 0, got {v}"));
+            return Err(CliError::Option(format!("--{what} must be finite and >= 0, got {v}")));
         }
     }
     if s.fast && s.projections == 0 {
-        return Err("--projections must be at least 1".into());
+        return Err(CliError::Option("--projections must be at least 1".into()));
     }
     round_to(&mut p);
     let l = loss(&p);
@@ -322,7 +323,7 @@ pub fn run(mut p: Packed, s: &Settings) -> Result<Outcome, String> {
         v["precision"] = json!(precision);
         v["mode"] = json!(if s.fast { "fast" } else { "full" });
         v["notes"] = json!(notes);
-        serde_json::to_string_pretty(&v).map_err(|e| e.to_string())?
+        serde_json::to_string_pretty(&v)?
     } else {
         let mut out = format!(
             "fogray gradcheck: the fused op's gradient in {precision} against the stable taped twin (f64, every element) and finite differences of the fused op (f64, {mode})\n"

@@ -8,6 +8,7 @@ use ndarray::{Array1, Array2, ArrayD};
 
 use super::super::input::{Packed, Precision};
 use super::{subject, Loss, NAMES};
+use crate::cli::error::CliError;
 
 pub(super) fn options(inputs: usize) -> GradcheckOptions {
     GradcheckOptions {
@@ -15,10 +16,6 @@ pub(super) fn options(inputs: usize) -> GradcheckOptions {
         domains: vec![Domain::at_least(0.0), Domain::at_least(0.0)],
         ..Default::default()
     }
-}
-
-fn shape_err(e: ndarray::ShapeError) -> String {
-    e.to_string()
 }
 
 /// The op over `offsets` with a per-ray background, and its inputs from the packed slices.
@@ -30,18 +27,14 @@ pub(super) struct Problem {
 }
 
 /// Ray `r` alone (full mode) as a problem.
-pub(super) fn ray_problem(p: &Packed, l: &Loss, r: usize) -> Result<Problem, String> {
+pub(super) fn ray_problem(p: &Packed, l: &Loss, r: usize) -> Result<Problem, CliError> {
     let (s, ch) = (p.offsets[r]..p.offsets[r + 1], p.ch);
     let mut op = per_ray_op(&[0, s.len()], p.min_transmittance)?;
     let mut inputs = vec![
         Array1::from(p.sigma[s.clone()].to_vec()).into_dyn(),
         Array1::from(p.delta[s.clone()].to_vec()).into_dyn(),
-        Array2::from_shape_vec((s.len(), ch), p.color[s.start * ch..s.end * ch].to_vec())
-            .map_err(shape_err)?
-            .into_dyn(),
-        Array2::from_shape_vec((1, ch), p.background[r * ch..(r + 1) * ch].to_vec())
-            .map_err(shape_err)?
-            .into_dyn(),
+        Array2::from_shape_vec((s.len(), ch), p.color[s.start * ch..s.end * ch].to_vec())?.into_dyn(),
+        Array2::from_shape_vec((1, ch), p.background[r * ch..(r + 1) * ch].to_vec())?.into_dyn(),
     ];
     let mut depth = None;
     if let (Some(t), Some(gd), true) = (&p.t, &l.depth, p.has_t[r]) {
@@ -49,9 +42,7 @@ pub(super) fn ray_problem(p: &Packed, l: &Loss, r: usize) -> Result<Problem, Str
         inputs.push(Array1::from(t[s.clone()].to_vec()).into_dyn());
         depth = Some(Array1::from(vec![gd[r]]).into_dyn());
     }
-    let color = Array2::from_shape_vec((1, ch), l.color[r * ch..(r + 1) * ch].to_vec())
-        .map_err(shape_err)?
-        .into_dyn();
+    let color = Array2::from_shape_vec((1, ch), l.color[r * ch..(r + 1) * ch].to_vec())?.into_dyn();
     Ok(Problem {
         op,
         inputs,
@@ -61,26 +52,22 @@ pub(super) fn ray_problem(p: &Packed, l: &Loss, r: usize) -> Result<Problem, Str
 }
 
 /// The composite over `offsets` with a background per ray, as the input gives it.
-fn per_ray_op(offsets: &[usize], min_transmittance: f64) -> Result<Composite, String> {
-    Composite::new(offsets)
-        .and_then(|op| op.background(Background::PerRay).min_transmittance(min_transmittance))
-        .map_err(|e| e.to_string())
+fn per_ray_op(offsets: &[usize], min_transmittance: f64) -> Result<Composite, CliError> {
+    Ok(Composite::new(offsets)?
+        .background(Background::PerRay)
+        .min_transmittance(min_transmittance)?)
 }
 
 /// Every ray at once (fast mode), moving the values out of `p`.
-pub(super) fn batch_problem(p: &mut Packed, l: &Loss) -> Result<Problem, String> {
+pub(super) fn batch_problem(p: &mut Packed, l: &Loss) -> Result<Problem, CliError> {
     let (rays, n, ch) = (p.offsets.len() - 1, p.sigma.len(), p.ch);
     let mut op = per_ray_op(&p.offsets, p.min_transmittance)?;
     let take = std::mem::take;
     let mut inputs = vec![
         Array1::from(take(&mut p.sigma)).into_dyn(),
         Array1::from(take(&mut p.delta)).into_dyn(),
-        Array2::from_shape_vec((n, ch), take(&mut p.color))
-            .map_err(shape_err)?
-            .into_dyn(),
-        Array2::from_shape_vec((rays, ch), take(&mut p.background))
-            .map_err(shape_err)?
-            .into_dyn(),
+        Array2::from_shape_vec((n, ch), take(&mut p.color))?.into_dyn(),
+        Array2::from_shape_vec((rays, ch), take(&mut p.background))?.into_dyn(),
     ];
     let mut depth = None;
     if let (Some(t), Some(gd)) = (p.t.take(), &l.depth) {
@@ -88,9 +75,7 @@ pub(super) fn batch_problem(p: &mut Packed, l: &Loss) -> Result<Problem, String>
         inputs.push(Array1::from(t).into_dyn());
         depth = Some(Array1::from(gd.clone()).into_dyn());
     }
-    let color = Array2::from_shape_vec((rays, ch), l.color.clone())
-        .map_err(shape_err)?
-        .into_dyn();
+    let color = Array2::from_shape_vec((rays, ch), l.color.clone())?.into_dyn();
     Ok(Problem {
         op,
         inputs,
@@ -99,21 +84,25 @@ pub(super) fn batch_problem(p: &mut Packed, l: &Loss) -> Result<Problem, String>
     })
 }
 
-fn check<S: Float>(problem: &Problem, opts: &GradcheckOptions) -> Result<GradcheckReport, String> {
+fn check<S: Float>(problem: &Problem, opts: &GradcheckOptions) -> Result<GradcheckReport, CliError> {
     let Problem {
         op,
         inputs,
         color,
         depth,
     } = problem;
-    gradcheck(|t, v| subject::loss::<S>(t, v, op, color, depth.as_ref()), inputs, opts).map_err(|e| e.to_string())
+    Ok(gradcheck(
+        |t, v| subject::loss::<S>(t, v, op, color, depth.as_ref()),
+        inputs,
+        opts,
+    )?)
 }
 
 pub(super) fn check_in(
     precision: Precision,
     problem: &Problem,
     opts: &GradcheckOptions,
-) -> Result<GradcheckReport, String> {
+) -> Result<GradcheckReport, CliError> {
     match precision {
         Precision::F32 => check::<f32>(problem, opts),
         Precision::F64 => check::<f64>(problem, opts),

@@ -4,7 +4,7 @@
 
 use std::marker::PhantomData;
 
-use fogray_ops::Composite;
+use fogray_ops::{Composite, CompositeArrays, CompositeUpstream, CompositeWanted};
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError, Tape, TapeError, Var};
 use ndarray::{ArrayD, ArrayViewD};
 
@@ -23,6 +23,23 @@ fn cast<A: Float, B: Float>(x: &ArrayViewD<'_, A>) -> ArrayD<B> {
     x.mapv(|v| B::lit(v.as_f64()))
 }
 
+/// The subject's tape inputs by name: sigma, delta, colour, the per-ray background, then t
+/// when the op has depth.
+fn named<'a, T>(xs: &[ArrayViewD<'a, T>]) -> Result<CompositeArrays<'a, T>, OpError> {
+    let [sigma, delta, color, background, rest @ ..] = xs else {
+        return Err(OpError::InvalidArgument(format!(
+            "takes sigma, delta, colour, background (and t), got {} inputs",
+            xs.len()
+        )));
+    };
+    let arrays = CompositeArrays::new(sigma.clone(), delta.clone(), color.clone()).with_background(background.clone());
+    Ok(match rest {
+        [] => arrays,
+        [t] => arrays.with_t(t.clone()),
+        _ => return Err(OpError::InvalidArgument(format!("too many inputs: {}", xs.len()))),
+    })
+}
+
 impl<S: Float> CustomOp<f64> for Subject<S> {
     type Saved = ();
 
@@ -30,8 +47,14 @@ impl<S: Float> CustomOp<f64> for Subject<S> {
         "composite_under_check"
     }
 
+    /// The outputs colour, opacity, then the depth when the op has it (no weights nor
+    /// transmittance: [`loss`] does not read them).
     fn forward(&self, inputs: &[ArrayViewD<'_, f64>]) -> Result<(Vec<ArrayD<f64>>, ()), OpError> {
-        let (outs, _) = self.op.evaluate(inputs).map_err(op_error)?;
+        let (outs, _) = self.op.evaluate(&named(inputs)?).map_err(op_error)?;
+        let outs = [Some(outs.color), Some(outs.opacity), outs.depth]
+            .into_iter()
+            .flatten()
+            .collect();
         Ok((outs, ()))
     }
 
@@ -42,12 +65,31 @@ impl<S: Float> CustomOp<f64> for Subject<S> {
     ) -> Result<Vec<Option<ArrayD<f64>>>, OpError> {
         let xs: Vec<ArrayD<S>> = (0..ctx.num_inputs()).map(|i| cast(&ctx.input(i))).collect();
         let views: Vec<ArrayViewD<'_, S>> = xs.iter().map(ArrayD::view).collect();
-        let (_, residuals) = self.op.evaluate(&views).map_err(op_error)?;
+        let inputs = named(&views)?;
+        let (_, residuals) = self.op.evaluate(&inputs).map_err(op_error)?;
         let ups: Vec<Option<ArrayD<S>>> = grads.iter().map(|g| g.as_ref().map(cast)).collect();
-        let up_views: Vec<Option<ArrayViewD<'_, S>>> = ups.iter().map(|g| g.as_ref().map(ArrayD::view)).collect();
-        let needs: Vec<bool> = (0..xs.len()).map(|i| ctx.needs_input_grad(i)).collect();
-        let g = self.op.vjp(&views, &residuals, &up_views, &needs).map_err(op_error)?;
-        Ok(g.into_iter().map(|g| g.map(|g| cast(&g.view()))).collect())
+        let up = |k: usize| ups.get(k).and_then(|g| g.as_ref().map(ArrayD::view));
+        let upstream = CompositeUpstream {
+            color: up(0),
+            opacity: up(1),
+            depth: up(2),
+            ..Default::default()
+        };
+        let with_t = inputs.t.is_some();
+        let wanted = CompositeWanted {
+            sigma: ctx.needs_input_grad(0),
+            delta: ctx.needs_input_grad(1),
+            color: ctx.needs_input_grad(2),
+            background: ctx.needs_input_grad(3),
+            t: with_t && ctx.needs_input_grad(4),
+        };
+        let g = self.op.vjp(&inputs, &residuals, &upstream, wanted).map_err(op_error)?;
+        let back = |g: Option<ArrayD<S>>| g.map(|g| cast(&g.view()));
+        let mut out = vec![back(g.sigma), back(g.delta), back(g.color), back(g.background)];
+        if with_t {
+            out.push(back(g.t));
+        }
+        Ok(out)
     }
 }
 

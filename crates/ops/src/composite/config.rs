@@ -3,6 +3,7 @@
 
 use fogray_tape::{Float, Offsets, Tape, TapeError, Var};
 
+use super::tape_order::{ByInput, ByOutput};
 use crate::error::CompositeError;
 
 /// Where the background colour comes from.
@@ -148,27 +149,31 @@ impl Composite {
             op: "composite",
             reason: reason.into(),
         };
-        let mut vars = vec![inputs.sigma, inputs.delta, inputs.color];
         match (self.background, inputs.background) {
-            (Background::None, None) => {}
             (Background::None, Some(_)) => return Err(misfit("a background was given to an op built without one")),
-            (_, Some(bg)) => vars.push(bg),
-            (_, None) => return Err(misfit("the op needs a background input")),
+            (Background::Shared | Background::PerRay, None) => return Err(misfit("the op needs a background input")),
+            _ => {}
         }
         match (self.depth, inputs.t) {
-            (true, Some(t)) => vars.push(t),
             (true, None) => return Err(misfit("depth needs the t input")),
             (false, Some(_)) => return Err(misfit("t was given but depth was not requested")),
-            (false, None) => {}
+            _ => {}
         }
-        let outs = tape.apply(self.clone(), &vars)?;
-        let mut next = outs[2..].iter().copied();
+        let vars = ByInput {
+            sigma: inputs.sigma,
+            delta: inputs.delta,
+            color: inputs.color,
+            background: inputs.background,
+            t: inputs.t,
+        };
+        let outs = tape.apply(self.clone(), &vars.into_tape())?;
+        let outs = ByOutput::from_tape(self, outs)?;
         Ok(CompositeVars {
-            color: outs[0],
-            opacity: outs[1],
-            depth: if self.depth { next.next() } else { None },
-            weights: if self.weights { next.next() } else { None },
-            transmittance: if self.transmittance { next.next() } else { None },
+            color: outs.color,
+            opacity: outs.opacity,
+            depth: outs.depth,
+            weights: outs.weights,
+            transmittance: outs.transmittance,
         })
     }
 }

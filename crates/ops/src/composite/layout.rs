@@ -4,12 +4,11 @@
 use std::borrow::Cow;
 use std::ops::Range;
 
-use fogray_tape::buffer::flat;
-use fogray_tape::Float;
-use ndarray::ArrayViewD;
-
+use super::arrays::CompositeArrays;
 use super::config::{Background, Composite};
 use crate::error::CompositeError;
+use fogray_tape::buffer::flat;
+use fogray_tape::Float;
 
 /// Rays per parallel work item: fixed, so results never depend on the thread count.
 const RAYS_PER_BLOCK: usize = 64;
@@ -44,47 +43,50 @@ fn shape_err(what: &'static str, expected: String, got: &[usize]) -> CompositeEr
     }
 }
 
-/// Checks shapes and values of the inputs in the op's order
-/// (sigma, delta, color, [background], [t]) and returns them flat.
+/// Checks shapes and values of the inputs and returns them flat.
 pub(crate) fn validate<'a, F: Float>(
     op: &Composite,
-    inputs: &'a [ArrayViewD<'_, F>],
+    inputs: &'a CompositeArrays<'_, F>,
 ) -> Result<Flat<'a, F>, CompositeError> {
     let flat = flatten(op, inputs)?;
     check_values(op, &flat)?;
     Ok(flat)
 }
 
-/// Checks the shapes only (the backward's inputs are the forward's, already checked).
+/// An optional argument `given` (or not) against the op's configuration.
+pub(crate) fn mismatch(what: &'static str, given: bool) -> CompositeError {
+    CompositeError::Mismatch {
+        what,
+        problem: if given {
+            "given, but the op is configured without it"
+        } else {
+            "required by the op's configuration, not given"
+        },
+    }
+}
+
+/// Checks the shapes only, and that the optional inputs are those the configuration needs
+/// (the backward's inputs are the forward's, already checked).
 pub(crate) fn flatten<'a, F: Float>(
     op: &Composite,
-    inputs: &'a [ArrayViewD<'_, F>],
+    inputs: &'a CompositeArrays<'_, F>,
 ) -> Result<Flat<'a, F>, CompositeError> {
-    let expected_inputs = 3 + usize::from(op.background != Background::None) + usize::from(op.depth);
-    if inputs.len() != expected_inputs {
-        return Err(CompositeError::Shape {
-            what: "inputs",
-            expected: format!("{expected_inputs} inputs"),
-            got: format!("{}", inputs.len()),
-        });
-    }
     let (n, rays) = (op.samples(), op.rays());
-    for (what, x) in [("sigma", &inputs[0]), ("delta", &inputs[1])] {
+    for (what, x) in [("sigma", &inputs.sigma), ("delta", &inputs.delta)] {
         if x.shape() != [n] {
             return Err(shape_err(what, format!("[{n}] (the offsets end at {n})"), x.shape()));
         }
     }
-    let color = &inputs[2];
+    let color = &inputs.color;
     if color.ndim() != 2 || color.shape()[0] != n || color.shape()[1] == 0 {
         return Err(shape_err("color", format!("[{n}, ch] with ch >= 1"), color.shape()));
     }
     let ch = color.shape()[1];
-    let mut next = 3;
-    let background = match op.background {
-        Background::None => Cow::Borrowed(&[][..]),
-        mode => {
-            let bg = &inputs[next];
-            next += 1;
+    let background = match (op.background, &inputs.background) {
+        (Background::None, None) => Cow::Borrowed(&[][..]),
+        (Background::None, Some(_)) => return Err(mismatch("background", true)),
+        (_, None) => return Err(mismatch("background", false)),
+        (mode, Some(bg)) => {
             let want: &[usize] = if mode == Background::Shared { &[ch] } else { &[rays, ch] };
             if bg.shape() != want {
                 return Err(shape_err("background", format!("{want:?}"), bg.shape()));
@@ -92,18 +94,20 @@ pub(crate) fn flatten<'a, F: Float>(
             flat(bg)
         }
     };
-    let t = if op.depth {
-        let t = &inputs[next];
-        if t.shape() != [n] {
-            return Err(shape_err("t", format!("[{n}]"), t.shape()));
+    let t = match (op.depth, &inputs.t) {
+        (false, None) => None,
+        (false, Some(_)) => return Err(mismatch("t", true)),
+        (true, None) => return Err(mismatch("t", false)),
+        (true, Some(t)) => {
+            if t.shape() != [n] {
+                return Err(shape_err("t", format!("[{n}]"), t.shape()));
+            }
+            Some(flat(t))
         }
-        Some(flat(t))
-    } else {
-        None
     };
     Ok(Flat {
-        sigma: flat(&inputs[0]),
-        delta: flat(&inputs[1]),
+        sigma: flat(&inputs.sigma),
+        delta: flat(&inputs.delta),
         color: flat(color),
         ch,
         background,

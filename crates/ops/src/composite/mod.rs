@@ -73,10 +73,12 @@
 //! with `T_stop`. The forward and backward compute exactly that truncated function, whose
 //! colour differs from the exact one by at most `T_stop max|c - c_bg|`. The default 0 is exact.
 
+mod arrays;
 mod attenuation;
 mod backward;
 mod config;
 mod forward;
+mod gradients;
 mod layout;
 
 pub(crate) use layout::validate;
@@ -84,6 +86,9 @@ mod one_pass;
 mod op;
 mod rows;
 mod suffix;
+mod tape_order;
 
+pub use arrays::{CompositeArrays, CompositeOutputBuffers, CompositeOutputs};
 pub use config::{Background, Composite, CompositeInputs, CompositeVars};
 pub use forward::Residuals;
+pub use gradients::{CompositeGradientBuffers, CompositeGradients, CompositeUpstream, CompositeWanted};

@@ -8,11 +8,14 @@ use fogray_tape::buffer::{scratch, zeroed};
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
 use ndarray::{ArrayD, ArrayViewD, ArrayViewMutD, IxDyn};
 
+use super::arrays::{CompositeArrays, CompositeOutputBuffers, CompositeOutputs};
 use super::backward::{backward, InputGrads, Upstream, Wanted};
 use super::config::{Background, Composite};
 use super::forward::{forward, Outputs, Residuals};
-use super::layout::{check_background, check_values, flatten, Flat};
+use super::gradients::{CompositeGradientBuffers, CompositeGradients, CompositeUpstream, CompositeWanted};
+use super::layout::{check_background, check_values, flatten, mismatch, Flat};
 use super::one_pass::one_pass;
+use super::tape_order;
 use crate::error::CompositeError;
 
 fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, CompositeError> {
@@ -47,8 +50,7 @@ fn buffer<'a, F: Float>(
     })
 }
 
-/// The backward's arguments, checked: upstream gradients as flat slices, and which input
-/// gradients can be non-zero.
+/// The upstream gradients, checked, as flat slices.
 struct Prepared<'g, F: Float> {
     gc: Option<Cow<'g, [F]>>,
     go: Option<Cow<'g, [F]>>,
@@ -68,47 +70,40 @@ impl<F: Float> Prepared<'_, F> {
         }
     }
 
-    /// Which gradients the backward computes, given which are asked for (in input order);
-    /// one asked for but not computed is zero (no upstream reaches it).
-    fn wanted(&self, op: &Composite, asked: &[bool]) -> Wanted {
-        wanted(op, asked, self.gc.is_some(), self.gd.is_some())
+    /// Which gradients the backward computes, given those asked for; one asked for but not
+    /// computed is zero (no upstream reaches it).
+    fn wanted(&self, asked: CompositeWanted) -> Wanted {
+        wanted(asked, self.gc.is_some(), self.gd.is_some())
     }
 }
 
-/// Which gradients a backward computes, given which are asked for (in input order) and
-/// whether the colour and the depth have an upstream gradient.
-fn wanted(op: &Composite, asked: &[bool], color_upstream: bool, depth_upstream: bool) -> Wanted {
-    let has_bg = op.background != Background::None;
-    let t_at = 3 + usize::from(has_bg);
+/// Which gradients a backward computes, given those asked for (already checked against the
+/// configuration) and whether the colour and the depth have an upstream gradient.
+fn wanted(asked: CompositeWanted, color_upstream: bool, depth_upstream: bool) -> Wanted {
     Wanted {
-        sigma: asked[0],
-        delta: asked[1],
-        color: asked[2] && color_upstream,
-        background: has_bg && asked[3] && color_upstream,
-        t: op.depth && asked[t_at] && depth_upstream,
+        sigma: asked.sigma,
+        delta: asked.delta,
+        color: asked.color && color_upstream,
+        background: asked.background && color_upstream,
+        t: asked.t && depth_upstream,
     }
+}
+
+/// A background gradient only for an op with a background, a t gradient only with depth.
+fn check_wanted(op: &Composite, asked: CompositeWanted) -> Result<(), CompositeError> {
+    if asked.background && op.background == Background::None {
+        return Err(mismatch("background gradient", true));
+    }
+    if asked.t && !op.depth {
+        return Err(mismatch("t gradient", true));
+    }
+    Ok(())
 }
 
 impl Composite {
-    /// The output shapes, in the order of [`Composite::apply`].
-    fn output_shapes(&self, ch: usize) -> Vec<Vec<usize>> {
-        let (n, rays) = (self.samples(), self.rays());
-        let mut shapes = vec![vec![rays, ch], vec![rays]];
-        if self.depth {
-            shapes.push(vec![rays]);
-        }
-        if self.weights {
-            shapes.push(vec![n]);
-        }
-        if self.transmittance {
-            shapes.push(vec![n]);
-        }
-        shapes
-    }
-
-    /// The forward into checked output slices (in the order of [`Composite::output_shapes`]).
-    fn forward_into<F: Float>(&self, x: &Flat<'_, F>, outs: Vec<&mut [F]>) -> Result<Residuals<F>, CompositeError> {
-        let (residuals, valid) = forward(self, x, self.outputs(outs));
+    /// The forward into checked output slices.
+    fn forward_into<F: Float>(&self, x: &Flat<'_, F>, outs: Outputs<'_, F>) -> Result<Residuals<F>, CompositeError> {
+        let (residuals, valid) = forward(self, x, outs);
         if !valid {
             // Find and name the first offending value.
             check_values(self, x)?;
@@ -116,66 +111,86 @@ impl Composite {
         Ok(residuals)
     }
 
-    /// The output buffers (one per output, in order) as the kernels take them.
-    fn outputs<'a, F: Float>(&self, outs: Vec<&'a mut [F]>) -> Outputs<'a, F> {
-        let mut outs = outs.into_iter();
-        let mut next = |on: bool| {
-            if on {
-                outs.next().unwrap_or_default()
-            } else {
-                Default::default()
-            }
-        };
-        let (color, opacity) = (next(true), next(true));
-        let (depth, weights, transmittance) = (next(self.depth), next(self.weights), next(self.transmittance));
-        Outputs {
+    /// The contiguous data of each output buffer, each of exactly its output's shape, and
+    /// present exactly when the op has that output.
+    fn output_slices<'a, F: Float>(
+        &self,
+        buffers: &'a mut CompositeOutputBuffers<'_, F>,
+        ch: usize,
+    ) -> Result<Outputs<'a, F>, CompositeError> {
+        let (n, rays) = (self.samples(), self.rays());
+        let CompositeOutputBuffers {
             color,
             opacity,
             depth,
             weights,
             transmittance,
-        }
+        } = buffers;
+        Ok(Outputs {
+            color: buffer("colour buffer", color, &[rays, ch])?,
+            opacity: buffer("opacity buffer", opacity, &[rays])?,
+            depth: optional_buffer("depth buffer", self.depth, depth, &[rays])?,
+            weights: optional_buffer("weights buffer", self.weights, weights, &[n])?,
+            transmittance: optional_buffer("transmittance buffer", self.transmittance, transmittance, &[n])?,
+        })
     }
 
-    /// The forward pass without a tape: the outputs in the order of [`Composite::apply`]
-    /// (colour, opacity, then depth, weights, transmittance as configured) and the residuals
-    /// that [`Composite::vjp`] needs.
+    /// The forward pass without a tape: the outputs (colour, opacity, and depth, weights and
+    /// transmittance as configured) and the residuals that [`Composite::vjp`] needs.
     ///
-    /// `inputs` are sigma `[n]`, delta `[n]`, color `[n, ch]`, then the background unless
-    /// [`Background::None`], then t with depth. Errors name the ray and sample at fault; no
-    /// output is returned then.
+    /// `inputs` are as [`CompositeArrays`] describes: the background given exactly when the
+    /// op has one, `t` exactly with depth. Errors name the ray and sample at fault; no output
+    /// is returned then.
     pub fn evaluate<F: Float>(
         &self,
-        inputs: &[ArrayViewD<'_, F>],
-    ) -> Result<(Vec<ArrayD<F>>, Residuals<F>), CompositeError> {
+        inputs: &CompositeArrays<'_, F>,
+    ) -> Result<(CompositeOutputs<F>, Residuals<F>), CompositeError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
-        let shapes = self.output_shapes(x.ch);
+        let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
         // forward_into overwrites every value (what evaluate_into promises), so no zeros first.
-        let mut data: Vec<Vec<F>> = shapes.iter().map(|s| scratch(s.iter().product())).collect();
-        let residuals = self.forward_into(&x, data.iter_mut().map(|d| &mut d[..]).collect())?;
-        let outs = shapes
-            .iter()
-            .zip(data)
-            .map(|(shape, d)| array(shape, d))
-            .collect::<Result<_, _>>()?;
-        Ok((outs, residuals))
+        let sized = |on: bool, len: usize| scratch::<F>(if on { len } else { 0 });
+        let (mut color, mut opacity) = (scratch::<F>(rays * ch), scratch::<F>(rays));
+        let mut depth = sized(self.depth, rays);
+        let mut weights = sized(self.weights, n);
+        let mut transmittance = sized(self.transmittance, n);
+        let outs = Outputs {
+            color: &mut color,
+            opacity: &mut opacity,
+            depth: &mut depth,
+            weights: &mut weights,
+            transmittance: &mut transmittance,
+        };
+        let residuals = self.forward_into(&x, outs)?;
+        let optional = |on: bool, shape: &[usize], data: Vec<F>| on.then(|| array(shape, data)).transpose();
+        let outputs = CompositeOutputs {
+            color: array(&[rays, ch], color)?,
+            opacity: array(&[rays], opacity)?,
+            depth: optional(self.depth, &[rays], depth)?,
+            weights: optional(self.weights, &[n], weights)?,
+            transmittance: optional(self.transmittance, &[n], transmittance)?,
+        };
+        Ok((outputs, residuals))
     }
 
-    /// [`Composite::evaluate`] into caller-owned buffers, one per output in the same order
-    /// and of exactly its shape (contiguous, row-major), every value overwritten: a training
-    /// loop that keeps its buffers allocates nothing per step but the residuals (one index
-    /// per ray), and the kernel does not clear fresh pages for it.
+    /// [`Composite::evaluate`] into caller-owned buffers ([`CompositeOutputBuffers`]: one per
+    /// output of the op, each of exactly its shape, contiguous, row-major), every value
+    /// overwritten: a training loop that keeps its buffers allocates nothing per step but the
+    /// residuals (one index per ray), and the kernel does not clear fresh pages for it.
     ///
-    /// Errors in shapes (inputs or buffers) leave the buffers untouched; on an invalid input
-    /// value (named in the error, as for [`Composite::evaluate`]) their contents are
-    /// unspecified. The inputs are never modified.
+    /// Errors in shapes (inputs or buffers) or a buffer missing or superfluous for the
+    /// configuration leave the buffers untouched; on an invalid input value (named in the
+    /// error, as for [`Composite::evaluate`]) their contents are unspecified. The inputs are
+    /// never modified.
     ///
     /// A training step that keeps its buffers (here two rays, RGB, a shared background, and
     /// gradients wanted for sigma and colour):
     ///
     /// ```
-    /// use fogray_ops::{Background, Composite};
+    /// use fogray_ops::{
+    ///     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeOutputBuffers,
+    ///     CompositeUpstream, CompositeWanted,
+    /// };
     /// use ndarray::{arr1, ArrayD};
     ///
     /// let op = Composite::new(&[0, 3, 5])?.background(Background::Shared);
@@ -183,30 +198,37 @@ impl Composite {
     /// let delta = ArrayD::from_elem(vec![5], 0.5f32);
     /// let color = ArrayD::from_elem(vec![5, 3], 0.25f32);
     /// let background = arr1(&[1.0f32, 1.0, 1.0]).into_dyn();
-    /// let inputs = [sigma.view(), delta.view(), color.view(), background.view()];
+    /// let inputs = CompositeArrays::new(sigma.view(), delta.view(), color.view()).with_background(background.view());
     /// let (mut c, mut opacity) = (ArrayD::zeros(vec![2, 3]), ArrayD::zeros(vec![2]));
     /// let (mut g_sigma, mut g_color) = (ArrayD::zeros(vec![5]), ArrayD::zeros(vec![5, 3]));
-    /// let upstream = ArrayD::from_elem(vec![2, 3], 1.0f32); // dL/dC
+    /// let dl_dc = ArrayD::from_elem(vec![2, 3], 1.0f32);
+    /// let upstream = CompositeUpstream::color(dl_dc.view());
     /// for _step in 0..3 {
-    ///     let res = op.evaluate_into(&inputs, &mut [c.view_mut(), opacity.view_mut()])?;
-    ///     let mut grads = [Some(g_sigma.view_mut()), None, Some(g_color.view_mut()), None];
-    ///     op.vjp_into(&inputs, &res, &[Some(upstream.view()), None], &mut grads)?;
+    ///     let res = op.evaluate_into(&inputs, &mut CompositeOutputBuffers::new(c.view_mut(), opacity.view_mut()))?;
+    ///     let mut grads = CompositeGradientBuffers {
+    ///         sigma: Some(g_sigma.view_mut()),
+    ///         color: Some(g_color.view_mut()),
+    ///         ..Default::default()
+    ///     };
+    ///     op.vjp_into(&inputs, &res, &upstream, &mut grads)?;
     /// }
     /// // The same numbers as the allocating calls.
     /// let (outs, res) = op.evaluate(&inputs)?;
-    /// assert_eq!(outs[0], c);
-    /// let g = op.vjp(&inputs, &res, &[Some(upstream.view()), None], &[true, false, true, false])?;
-    /// assert_eq!(g[0].as_ref().unwrap(), &g_sigma);
+    /// assert_eq!(outs.color, c);
+    /// let wanted = CompositeWanted { sigma: true, color: true, ..Default::default() };
+    /// let g = op.vjp(&inputs, &res, &upstream, wanted)?;
+    /// assert_eq!(g.sigma.as_ref(), Some(&g_sigma));
+    /// assert_eq!(g.delta, None);
     /// # Ok::<(), fogray_ops::CompositeError>(())
     /// ```
     pub fn evaluate_into<F: Float>(
         &self,
-        inputs: &[ArrayViewD<'_, F>],
-        outputs: &mut [ArrayViewMutD<'_, F>],
+        inputs: &CompositeArrays<'_, F>,
+        outputs: &mut CompositeOutputBuffers<'_, F>,
     ) -> Result<Residuals<F>, CompositeError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
-        let slices = output_buffers(outputs, &self.output_shapes(x.ch))?;
+        let slices = self.output_slices(outputs, x.ch)?;
         self.forward_into(&x, slices)
     }
 
@@ -215,27 +237,34 @@ impl Composite {
         &self,
         x: &Flat<'_, F>,
         residuals: &Residuals<F>,
-        grads: &'g [Option<ArrayViewD<'_, F>>],
+        upstream: &'g CompositeUpstream<'_, F>,
     ) -> Result<Prepared<'g, F>, CompositeError> {
-        let outputs = self.output_shapes(x.ch).len();
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
-        if grads.len() != outputs || residuals.stop.len() != rays {
+        if residuals.stop.len() != rays {
             return Err(CompositeError::Shape {
-                what: "vjp arguments",
-                expected: format!("{outputs} upstream gradients, residuals of {rays} rays"),
-                got: format!("{} gradients, residuals of {} rays", grads.len(), residuals.stop.len()),
+                what: "residuals",
+                expected: format!("residuals of {rays} rays"),
+                got: format!("residuals of {} rays", residuals.stop.len()),
             });
         }
-        let mut slot = 2..grads.len();
-        let mut next = |on: bool| if on { slot.next() } else { None };
-        let (depth_at, weights_at, trans_at) = (next(self.depth), next(self.weights), next(self.transmittance));
-        let pick = |at: Option<usize>| at.and_then(|i| flat(&grads[i]));
+        let configured = [
+            ("depth upstream gradient", self.depth, upstream.depth.is_some()),
+            ("weights upstream gradient", self.weights, upstream.weights.is_some()),
+            (
+                "transmittance upstream gradient",
+                self.transmittance,
+                upstream.transmittance.is_some(),
+            ),
+        ];
+        if let Some((what, _, _)) = configured.iter().find(|(_, on, given)| *given && !on) {
+            return Err(mismatch(what, true));
+        }
         let p = Prepared {
-            gc: flat(&grads[0]),
-            go: flat(&grads[1]),
-            gd: pick(depth_at),
-            gw: pick(weights_at),
-            gt: pick(trans_at),
+            gc: flat(&upstream.color),
+            go: flat(&upstream.opacity),
+            gd: flat(&upstream.depth),
+            gw: flat(&upstream.weights),
+            gt: flat(&upstream.transmittance),
         };
         let expect = [
             (p.gc.as_deref(), rays * ch),
@@ -254,30 +283,26 @@ impl Composite {
         Ok(p)
     }
 
-    /// The backward pass without a tape: gradients of the inputs (in the order of
-    /// [`Composite::evaluate`]) from upstream gradients of the outputs (`None` for an unused
-    /// output), for the inputs whose `needs` entry is true (`None` where no upstream reaches
-    /// an input: its gradient is zero).
+    /// The backward pass without a tape: the gradients `wanted` of the inputs, from upstream
+    /// gradients of the outputs. A gradient is `Some` exactly when it is wanted and an
+    /// upstream gradient reaches it (the colour and background gradients need `dL/dC`, the t
+    /// gradient `dL/ddepth`); it is zero otherwise.
     ///
     /// `inputs` and `residuals` must be those of the matching [`Composite::evaluate`] call;
-    /// shapes are checked, values are not checked again.
+    /// shapes are checked, values are not checked again. Errors: shapes, an upstream
+    /// gradient for an output the op does not have, a background or t gradient wanted from
+    /// an op without that input.
     pub fn vjp<F: Float>(
         &self,
-        inputs: &[ArrayViewD<'_, F>],
+        inputs: &CompositeArrays<'_, F>,
         residuals: &Residuals<F>,
-        grads: &[Option<ArrayViewD<'_, F>>],
-        needs: &[bool],
-    ) -> Result<Vec<Option<ArrayD<F>>>, CompositeError> {
+        upstream: &CompositeUpstream<'_, F>,
+        wanted: CompositeWanted,
+    ) -> Result<CompositeGradients<F>, CompositeError> {
         let x = flatten(self, inputs)?;
-        if needs.len() != inputs.len() {
-            return Err(CompositeError::Shape {
-                what: "needs",
-                expected: format!("{} flags", inputs.len()),
-                got: format!("{}", needs.len()),
-            });
-        }
-        let p = self.prepare(&x, residuals, grads)?;
-        let want = p.wanted(self, needs);
+        check_wanted(self, wanted)?;
+        let p = self.prepare(&x, residuals, upstream)?;
+        let want = p.wanted(wanted);
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
         // The backward overwrites every value of a wanted gradient (vjp_into's promise).
         let sized = |on: bool, len: usize| scratch::<F>(if on { len } else { 0 });
@@ -291,66 +316,62 @@ impl Composite {
             t: &mut gt,
         };
         backward(self, &x, residuals, &p.upstream(), want, out);
-        let mut out: Vec<Option<ArrayD<F>>> = vec![
-            want.sigma.then(|| array(&[n], gs)).transpose()?,
-            want.delta.then(|| array(&[n], gd)).transpose()?,
-            want.color.then(|| array(&[n, ch], gc)).transpose()?,
-        ];
-        if self.background != Background::None {
-            let bg = match self.background {
-                Background::PerRay => want.background.then(|| array(&[rays, ch], gb)).transpose()?,
-                _ => want.background.then(|| array(&[ch], sum_rows(&gb, ch))).transpose()?,
-            };
-            out.push(bg);
-        }
-        if self.depth {
-            out.push(want.t.then(|| array(&[n], gt)).transpose()?);
-        }
-        Ok(out)
+        let background = match self.background {
+            Background::PerRay => want.background.then(|| array(&[rays, ch], gb)),
+            _ => want.background.then(|| array(&[ch], sum_rows(&gb, ch))),
+        };
+        Ok(CompositeGradients {
+            sigma: want.sigma.then(|| array(&[n], gs)).transpose()?,
+            delta: want.delta.then(|| array(&[n], gd)).transpose()?,
+            color: want.color.then(|| array(&[n, ch], gc)).transpose()?,
+            background: background.transpose()?,
+            t: want.t.then(|| array(&[n], gt)).transpose()?,
+        })
     }
 
-    /// [`Composite::vjp`] into caller-owned buffers: `out` has one entry per input (in the
-    /// order of [`Composite::evaluate`]), `Some` with a buffer of exactly that input's shape
-    /// (contiguous, row-major) for each gradient wanted, every value overwritten (with zeros
-    /// where no upstream reaches the input), `None` for the others.
+    /// [`Composite::vjp`] into caller-owned buffers: `out` has a buffer of exactly its
+    /// input's shape (contiguous, row-major) for each gradient wanted, every value
+    /// overwritten (with zeros where no upstream reaches the input), `None` for the others.
     ///
     /// `inputs` and `residuals` must be those of the matching forward call. On error nothing
     /// is written.
     pub fn vjp_into<F: Float>(
         &self,
-        inputs: &[ArrayViewD<'_, F>],
+        inputs: &CompositeArrays<'_, F>,
         residuals: &Residuals<F>,
-        grads: &[Option<ArrayViewD<'_, F>>],
-        out: &mut [Option<ArrayViewMutD<'_, F>>],
+        upstream: &CompositeUpstream<'_, F>,
+        out: &mut CompositeGradientBuffers<'_, F>,
     ) -> Result<(), CompositeError> {
         let x = flatten(self, inputs)?;
-        let p = self.prepare(&x, residuals, grads)?;
-        let asked: Vec<bool> = out.iter().map(Option::is_some).collect();
-        let slices = gradient_buffers(out, inputs)?;
-        let want = p.wanted(self, &asked);
+        let asked = out.wanted();
+        check_wanted(self, asked)?;
+        let p = self.prepare(&x, residuals, upstream)?;
+        let slices = gradient_slices(out, inputs)?;
+        let want = p.wanted(asked);
         self.gradients_into(&x, want, slices, |g| {
             backward(self, &x, residuals, &p.upstream(), want, g)
         });
         Ok(())
     }
 
-    /// Runs `kernel` on the gradient buffers of `slices` (one per input, empty where not asked
-    /// for) as the kernel wants them, then completes them: zeros where asked for but not
-    /// wanted (no upstream reaches the input), and a shared background's gradient as the sum
-    /// of the per-ray ones the kernel writes.
+    /// Runs `kernel` on the gradient buffers `asked` (empty where not asked for) as the kernel
+    /// wants them, then completes them: zeros where asked for but not wanted (no upstream
+    /// reaches the input), and a shared background's gradient as the sum of the per-ray ones
+    /// the kernel writes.
     fn gradients_into<F: Float>(
         &self,
         x: &Flat<'_, F>,
         want: Wanted,
-        slices: Vec<&mut [F]>,
+        asked: InputGrads<'_, F>,
         kernel: impl FnOnce(InputGrads<'_, F>),
     ) {
-        let mut slices = slices.into_iter();
-        let mut next = || slices.next().unwrap_or_default();
-        let (gs, gd, gc) = (next(), next(), next());
-        let has_bg = self.background != Background::None;
-        let gb = if has_bg { next() } else { Default::default() };
-        let gt = if self.depth { next() } else { Default::default() };
+        let InputGrads {
+            sigma: gs,
+            delta: gd,
+            color: gc,
+            background: gb,
+            t: gt,
+        } = asked;
         // The kernel writes a per-ray background gradient; a shared one is its sum.
         let rays = self.rays();
         let mut per_ray_bg = Vec::new();
@@ -404,7 +425,10 @@ impl Composite {
     /// buffers' contents are unspecified. The inputs are never modified.
     ///
     /// ```
-    /// use fogray_ops::{Background, Composite};
+    /// use fogray_ops::{
+    ///     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeOutputBuffers,
+    ///     CompositeUpstream, CompositeWanted,
+    /// };
     /// use ndarray::{arr1, arr2, ArrayD};
     ///
     /// let op = Composite::new(&[0, 3, 5])?.background(Background::Shared);
@@ -413,7 +437,7 @@ impl Composite {
     /// let color = ArrayD::from_elem(vec![5, 3], 0.25f32);
     /// let background = arr1(&[1.0f32, 1.0, 1.0]).into_dyn();
     /// let photo = arr2(&[[0.3f32, 0.3, 0.3], [0.9, 0.9, 0.9]]);
-    /// let inputs = [sigma.view(), delta.view(), color.view(), background.view()];
+    /// let inputs = CompositeArrays::new(sigma.view(), delta.view(), color.view()).with_background(background.view());
     /// let (mut c, mut opacity) = (ArrayD::zeros(vec![2, 3]), ArrayD::zeros(vec![2]));
     /// let (mut g_sigma, mut g_color) = (ArrayD::zeros(vec![5]), ArrayD::zeros(vec![5, 3]));
     /// // L = sum over rays and channels of (C - photo)^2.
@@ -425,33 +449,39 @@ impl Composite {
     /// op.evaluate_vjp_into(
     ///     &inputs,
     ///     upstream,
-    ///     &mut [c.view_mut(), opacity.view_mut()],
-    ///     &mut [Some(g_sigma.view_mut()), None, Some(g_color.view_mut()), None],
+    ///     &mut CompositeOutputBuffers::new(c.view_mut(), opacity.view_mut()),
+    ///     &mut CompositeGradientBuffers {
+    ///         sigma: Some(g_sigma.view_mut()),
+    ///         color: Some(g_color.view_mut()),
+    ///         ..Default::default()
+    ///     },
     /// )?;
     /// // The same numbers as the forward, then the backward with dL/dC = 2 (C - photo).
     /// let (outs, res) = op.evaluate(&inputs)?;
-    /// assert_eq!(outs[0], c);
-    /// let dl_dc = ((&outs[0] - &photo.into_dyn()) * 2.0f32).into_dyn();
-    /// let g = op.vjp(&inputs, &res, &[Some(dl_dc.view()), None], &[true, false, true, false])?;
-    /// assert_eq!(g[0].as_ref().unwrap(), &g_sigma);
+    /// assert_eq!(outs.color, c);
+    /// let dl_dc = ((&outs.color - &photo.into_dyn()) * 2.0f32).into_dyn();
+    /// let wanted = CompositeWanted { sigma: true, color: true, ..Default::default() };
+    /// let g = op.vjp(&inputs, &res, &CompositeUpstream::color(dl_dc.view()), wanted)?;
+    /// assert_eq!(g.sigma.as_ref(), Some(&g_sigma));
     /// # Ok::<(), fogray_ops::CompositeError>(())
     /// ```
     pub fn evaluate_vjp_into<F: Float>(
         &self,
-        inputs: &[ArrayViewD<'_, F>],
+        inputs: &CompositeArrays<'_, F>,
         upstream: impl Fn(usize, &[F], &mut [F]) + Sync,
-        outputs: &mut [ArrayViewMutD<'_, F>],
-        grads: &mut [Option<ArrayViewMutD<'_, F>>],
+        outputs: &mut CompositeOutputBuffers<'_, F>,
+        grads: &mut CompositeGradientBuffers<'_, F>,
     ) -> Result<(), CompositeError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
-        let outs = output_buffers(outputs, &self.output_shapes(x.ch))?;
-        let asked: Vec<bool> = grads.iter().map(Option::is_some).collect();
-        let slices = gradient_buffers(grads, inputs)?;
-        let want = wanted(self, &asked, true, false);
+        let asked = grads.wanted();
+        check_wanted(self, asked)?;
+        let outs = self.output_slices(outputs, x.ch)?;
+        let slices = gradient_slices(grads, inputs)?;
+        let want = wanted(asked, true, false);
         let mut valid = true;
         self.gradients_into(&x, want, slices, |g| {
-            valid = one_pass(self, &x, self.outputs(outs), g, want, &upstream);
+            valid = one_pass(self, &x, outs, g, want, &upstream);
         });
         if !valid {
             check_values(self, &x)?;
@@ -460,45 +490,55 @@ impl Composite {
     }
 }
 
-/// The contiguous data of one output buffer per output, each of exactly its shape.
-fn output_buffers<'a, F: Float>(
-    outputs: &'a mut [ArrayViewMutD<'_, F>],
-    shapes: &[Vec<usize>],
-) -> Result<Vec<&'a mut [F]>, CompositeError> {
-    if outputs.len() != shapes.len() {
-        return Err(CompositeError::Shape {
-            what: "output buffers",
-            expected: format!("{} buffers", shapes.len()),
-            got: format!("{}", outputs.len()),
-        });
+/// The contiguous data of an optional output buffer: present exactly when the op has the
+/// output (`on`), of exactly `shape`; empty when absent.
+fn optional_buffer<'a, F: Float>(
+    what: &'static str,
+    on: bool,
+    b: &'a mut Option<ArrayViewMutD<'_, F>>,
+    shape: &[usize],
+) -> Result<&'a mut [F], CompositeError> {
+    match (on, b) {
+        (true, Some(b)) => buffer(what, b, shape),
+        (false, None) => Ok(Default::default()),
+        (on, _) => Err(mismatch(what, !on)),
     }
-    outputs
-        .iter_mut()
-        .zip(shapes)
-        .map(|(b, shape)| buffer("output buffer", b, shape))
-        .collect()
 }
 
-/// The contiguous data of each gradient buffer asked for (one entry per input, of its shape),
-/// empty where `None`.
-fn gradient_buffers<'a, F: Float>(
-    out: &'a mut [Option<ArrayViewMutD<'_, F>>],
-    inputs: &[ArrayViewD<'_, F>],
-) -> Result<Vec<&'a mut [F]>, CompositeError> {
-    if out.len() != inputs.len() {
-        return Err(CompositeError::Shape {
-            what: "gradient buffers",
-            expected: format!("{} entries (one per input)", inputs.len()),
-            got: format!("{}", out.len()),
-        });
+/// The contiguous data of a gradient buffer asked for, of its input's shape; empty where not
+/// asked for.
+fn gradient_slice<'a, F: Float>(
+    what: &'static str,
+    b: &'a mut Option<ArrayViewMutD<'_, F>>,
+    input: Option<&ArrayViewD<'_, F>>,
+) -> Result<&'a mut [F], CompositeError> {
+    match (b, input) {
+        (None, _) => Ok(Default::default()),
+        (Some(b), Some(input)) => buffer(what, b, input.shape()),
+        (Some(_), None) => Err(mismatch(what, true)),
     }
-    out.iter_mut()
-        .zip(inputs)
-        .map(|(b, input)| match b {
-            Some(b) => buffer("gradient buffer", b, input.shape()),
-            None => Ok(Default::default()),
-        })
-        .collect()
+}
+
+/// The contiguous data of each gradient buffer asked for (each of its input's shape), empty
+/// where `None`.
+fn gradient_slices<'a, F: Float>(
+    out: &'a mut CompositeGradientBuffers<'_, F>,
+    inputs: &CompositeArrays<'_, F>,
+) -> Result<InputGrads<'a, F>, CompositeError> {
+    let CompositeGradientBuffers {
+        sigma,
+        delta,
+        color,
+        background,
+        t,
+    } = out;
+    Ok(InputGrads {
+        sigma: gradient_slice("sigma gradient buffer", sigma, Some(&inputs.sigma))?,
+        delta: gradient_slice("delta gradient buffer", delta, Some(&inputs.delta))?,
+        color: gradient_slice("colour gradient buffer", color, Some(&inputs.color))?,
+        background: gradient_slice("background gradient buffer", background, inputs.background.as_ref())?,
+        t: gradient_slice("t gradient buffer", t, inputs.t.as_ref())?,
+    })
 }
 
 /// Column sums of `[rows][ch]`, in row order (so the result does not depend on the thread
@@ -527,7 +567,9 @@ impl<F: Float> CustomOp<F> for Composite {
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, Residuals<F>), OpError> {
-        self.evaluate(inputs).map_err(op_error)
+        let inputs = tape_order::arrays(self, inputs).map_err(op_error)?;
+        let (outputs, residuals) = self.evaluate(&inputs).map_err(op_error)?;
+        Ok((tape_order::outputs_in_order(outputs), residuals))
     }
 
     fn backward(
@@ -537,7 +579,11 @@ impl<F: Float> CustomOp<F> for Composite {
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let inputs: Vec<ArrayViewD<'_, F>> = (0..ctx.num_inputs()).map(|i| ctx.input(i)).collect();
         let needs: Vec<bool> = (0..inputs.len()).map(|i| ctx.needs_input_grad(i)).collect();
-        self.vjp(&inputs, ctx.saved(), grads, &needs).map_err(op_error)
+        let arrays = tape_order::arrays(self, &inputs).map_err(op_error)?;
+        let wanted = tape_order::wanted(self, needs).map_err(op_error)?;
+        let upstream = tape_order::upstream(self, grads).map_err(op_error)?;
+        let g = self.vjp(&arrays, ctx.saved(), &upstream, wanted).map_err(op_error)?;
+        Ok(tape_order::gradients_in_order(self, g))
     }
 
     fn saved_bytes(&self, saved: &Residuals<F>) -> usize {

@@ -146,11 +146,12 @@ mod tests {
         let sigma = ndarray::Array1::from_elem(s.len(), 0.5).into_dyn();
         let color = ndarray::Array2::from_elem((s.len(), 1), 1.0).into_dyn();
         let delta = s.delta.clone().into_dyn();
-        let (outs, _) = op.evaluate(&[sigma.view(), delta.view(), color.view()]).unwrap();
-        assert!((outs[1][0] - (1.0 - (-1.0f64).exp())).abs() < 1e-14);
-        assert_eq!(outs[1][1], 0.0);
+        let inputs = crate::CompositeArrays::new(sigma.view(), delta.view(), color.view());
+        let (outs, _) = op.evaluate(&inputs).unwrap();
+        assert!((outs.opacity[0] - (1.0 - (-1.0f64).exp())).abs() < 1e-14);
+        assert_eq!(outs.opacity[1], 0.0);
         // 1 - exp(-0.5 * 1) for ray 2's [0, 1].
-        assert!((outs[1][2] - (1.0 - (-0.5f64).exp())).abs() < 1e-14);
+        assert!((outs.opacity[2] - (1.0 - (-0.5f64).exp())).abs() < 1e-14);
     }
 
     #[test]

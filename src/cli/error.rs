@@ -1,0 +1,153 @@
+//! Why a `fogray` command failed: the one line it prints on stderr (exit status 2) is the
+//! error's message.
+
+use std::path::Path;
+
+use fogray_ops::{CompositeError, GridError};
+use fogray_tape::TapeError;
+use thiserror::Error;
+
+/// Why a JSON input of `fogray composite` or `fogray gradcheck` was refused (the rules the
+/// CLI adds to those of the op; the op's own errors name the ray and sample too).
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum InputError {
+    /// Not JSON, or not of the input's format.
+    #[error("invalid input JSON: {0}")]
+    Json(#[source] serde_json::Error),
+    /// A precision other than `f32` and `f64`.
+    #[error("unknown precision {0:?} (expected \"f32\" or \"f64\")")]
+    UnknownPrecision(String),
+    /// `min_transmittance` outside `[0, 1]`.
+    #[error("min_transmittance must be in [0, 1], got {0}")]
+    MinTransmittance(f64),
+    /// An empty `rays` list.
+    #[error("rays: at least one ray is needed")]
+    NoRays,
+    /// Colours of zero channels.
+    #[error("colours need at least one channel")]
+    NoChannels,
+    /// A per-sample list whose length is not the ray's number of samples.
+    #[error("ray {ray}: {what} has {got} entries, sigma has {samples}")]
+    SampleCount {
+        /// The ray.
+        ray: usize,
+        /// Which list.
+        what: &'static str,
+        /// Its length.
+        got: usize,
+        /// The ray's number of samples (the length of its sigma).
+        samples: usize,
+    },
+    /// A sample's colour whose channel count is not the input's.
+    #[error("ray {ray}, sample {sample}: color has {got} channels, expected {channels}")]
+    SampleChannels {
+        /// The ray.
+        ray: usize,
+        /// The sample within the ray.
+        sample: usize,
+        /// Its channel count.
+        got: usize,
+        /// The input's channel count.
+        channels: usize,
+    },
+    /// A per-ray colour (background, grad_color) whose channel count is not the input's.
+    #[error("ray {ray}: {what} has {got} channels, expected {channels}")]
+    RayChannels {
+        /// The ray.
+        ray: usize,
+        /// Which value.
+        what: &'static str,
+        /// Its channel count.
+        got: usize,
+        /// The input's channel count.
+        channels: usize,
+    },
+    /// A NaN or infinite number.
+    #[error("{what} is not finite")]
+    NotFinite {
+        /// Where (`ray 2, sample 5: sigma`).
+        what: String,
+    },
+    /// A number too large for an f32 input.
+    #[error("{what} = {value} overflows f32")]
+    OverflowsF32 {
+        /// Where.
+        what: String,
+        /// The number.
+        value: f64,
+    },
+    /// A `grad_depth` on a ray without sample depths.
+    #[error("ray {0}: grad_depth needs t (the depth needs sample depths)")]
+    GradDepthWithoutT(usize),
+}
+
+/// Why a `fogray` command failed.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum CliError {
+    /// The JSON input was refused.
+    #[error("{0}")]
+    Input(#[from] InputError),
+    /// The composite refused its input (its message names the ray and sample).
+    #[error("{0}")]
+    Composite(#[from] CompositeError),
+    /// The grid field refused its input.
+    #[error("{0}")]
+    Grid(#[from] GridError),
+    /// A tape operation failed.
+    #[error("{0}")]
+    Tape(#[from] TapeError),
+    /// Arrays that do not fit the shapes built from them.
+    #[error("{0}")]
+    Shape(#[from] ndarray::ShapeError),
+    /// The output could not be serialised.
+    #[error("{0}")]
+    Json(#[from] serde_json::Error),
+    /// Standard input could not be read.
+    #[error("cannot read standard input: {0}")]
+    Stdin(#[source] std::io::Error),
+    /// A file or directory could not be read, written or created.
+    #[error("cannot {action} {path}: {source}")]
+    File {
+        /// `"read"`, `"write"` or `"create"`.
+        action: &'static str,
+        /// The path, as displayed.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A README without the markers of the generated block to replace.
+    #[error("{path} has no {start} ... {end} block")]
+    MissingMarkers {
+        /// The README, as displayed.
+        path: String,
+        /// The start marker.
+        start: String,
+        /// The end marker.
+        end: String,
+    },
+    /// The thread pool of a one-thread run could not be built.
+    #[error("{0}")]
+    ThreadPool(#[from] rayon::ThreadPoolBuildError),
+    /// A command-line option outside its domain, or a combination of options not offered.
+    #[error("{0}")]
+    Option(String),
+    /// A computation that should have produced a value did not (a gradient missing...).
+    #[error("{0}")]
+    Missing(&'static str),
+    /// The platform does not offer what was asked for.
+    #[error("{0}")]
+    Unsupported(&'static str),
+}
+
+impl CliError {
+    /// A file operation's error, naming the path.
+    pub fn file<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> CliError + 'a {
+        move |source| CliError::File {
+            action,
+            path: path.display().to_string(),
+            source,
+        }
+    }
+}
