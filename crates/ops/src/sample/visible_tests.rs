@@ -13,7 +13,11 @@ fn packed<F: fogray_tape::Float>(rays: &[Vec<f64>]) -> PackedSamples<F> {
         t: Array1::from_iter((0..n).map(|k| F::lit(k as f64))),
         delta: Array1::from_iter(rays.iter().flatten().map(|&d| F::lit(d))),
         offsets: Offsets::from_lengths(rays.iter().map(Vec::len)),
-        ray: rays.iter().enumerate().flat_map(|(r, v)| std::iter::repeat_n(r, v.len())).collect(),
+        ray: rays
+            .iter()
+            .enumerate()
+            .flat_map(|(r, v)| std::iter::repeat_n(r, v.len()))
+            .collect(),
     }
 }
 
@@ -52,7 +56,9 @@ fn the_kept_samples_render_within_the_threshold_of_the_full_ray() {
     // truncation does drop samples.
     let n = 200;
     let delta: Vec<f64> = vec![0.01; n];
-    let sigma: Vec<f64> = (0..n).map(|k| if k < 50 { 0.0 } else { 3.0 * (k - 50) as f64 }).collect();
+    let sigma: Vec<f64> = (0..n)
+        .map(|k| if k < 50 { 0.0 } else { 3.0 * (k - 50) as f64 })
+        .collect();
     let color: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin().abs()).collect();
     let s = packed::<f64>(&[delta.clone()]);
     for min_t in [1e-2, 1e-3, 1e-4] {
@@ -90,9 +96,15 @@ fn bad_input_is_refused() {
     let s = packed::<f64>(&[vec![1.0; 2], vec![1.0]]);
     let ok = arr1(&[0.0, 1.0, 2.0]);
     for min_t in [1.0, -0.1, f64::NAN, 2.0] {
-        assert!(matches!(s.visible(ok.view(), min_t), Err(SampleError::Config { .. })), "{min_t}");
+        assert!(
+            matches!(s.visible(ok.view(), min_t), Err(SampleError::Config { .. })),
+            "{min_t}"
+        );
     }
-    assert!(matches!(s.visible(arr1(&[0.0, 1.0]).view(), 0.1), Err(SampleError::Shape { .. })));
+    assert!(matches!(
+        s.visible(arr1(&[0.0, 1.0]).view(), 0.1),
+        Err(SampleError::Shape { .. })
+    ));
     for bad in [f64::NAN, -1.0, f64::INFINITY] {
         let sigma = arr1(&[0.0, 1.0, bad]);
         match s.visible(sigma.view(), 0.1) {
