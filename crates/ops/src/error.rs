@@ -235,6 +235,35 @@ pub enum FieldError {
     },
 }
 
+/// Why a prior's configuration or input was rejected. Nothing is computed (and nothing of the
+/// caller's is changed) when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum PriorError {
+    /// A weight that is negative or not finite.
+    #[error("weight is {value} (must be finite and non-negative)")]
+    InvalidWeight {
+        /// The offending value.
+        value: f64,
+    },
+    /// An array whose shape does not fit.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input or output.
+        what: &'static str,
+        /// What is required.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+}
+
+impl From<PriorError> for TapeError {
+    fn from(e: PriorError) -> Self {
+        TapeError::from_op("total_variation", OpError::typed(e))
+    }
+}
+
 impl From<FieldError> for TapeError {
     fn from(e: FieldError) -> Self {
         TapeError::from_op("density_color", OpError::typed(e))

@@ -19,7 +19,8 @@
 //!   into the grid values and the positions, and its taped twin;
 //! - [`field`]: the activations of a grid renderer's raw values, density
 //!   `softplus(raw_0 + shift)` and colour `sigmoid(raw_1..)`, as a fused op
-//!   ([`DensityColor`]) with a hand-written backward, and its taped twin.
+//!   ([`DensityColor`]) with a hand-written backward, and its taped twin;
+//! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]).
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
@@ -49,6 +50,7 @@ pub mod field;
 pub mod grid;
 pub mod hard;
 mod math;
+pub mod prior;
 pub mod rays;
 pub mod sample;
 pub mod twins;
@@ -57,7 +59,7 @@ pub use composite::{
     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
-pub use error::{CompositeError, FieldError, GeometryError, GridError, SampleError};
+pub use error::{CompositeError, FieldError, GeometryError, GridError, PriorError, SampleError};
 pub use field::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
 pub use grid::{GridBox, GridField, GridGradients, GridWanted};
 pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

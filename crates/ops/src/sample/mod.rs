@@ -52,6 +52,9 @@ mod occupancy_tests;
 mod packed;
 mod stratified;
 mod uniform;
+mod visible;
+#[cfg(test)]
+mod visible_tests;
 
 pub use importance::Importance;
 pub use occupancy::{GridAxis, OccupancyGrid, OccupancySlice};
