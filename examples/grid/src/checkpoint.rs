@@ -11,7 +11,7 @@
 //! (the grid's, `N`), `step`, `seconds` (training seconds so far), `stage` (growth stage),
 //! `batch_stream` (words of the ChaCha12 batch generator used), `adam.updates`, the fit's
 //! settings (`grid`, `batch`, `budget` as `steps:N` or `seconds:S`, `method`, `sampling`,
-//! `seed`, `lr`, `shift`, `evaluations`, `grow`), the cameras (`views`, `test_views`, `size`)
+//! `seed`, `lr`, `shift`, `evaluations`, `grow`, `smoothness`), the cameras (`views`, `test_views`, `size`)
 //! and the scene as JSON (`scene`). Numbers are written so that they read back bit for bit.
 //!
 //! ```
@@ -49,8 +49,8 @@ use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 use thiserror::Error;
 
-use crate::model::CHANNELS;
 use crate::fit::{Budget, FitConfig, Sampling};
+use crate::model::CHANNELS;
 use crate::model::{GridModel, Method};
 use crate::ring::Ring;
 use crate::scene::Scene;
@@ -280,6 +280,7 @@ fn metadata<F: Float>(model: &GridModel<F>, training: &TrainingState<F>, fit: &S
         ("shift", c.shift.to_string()),
         ("evaluations", c.evaluations.to_string()),
         ("grow", c.grow.to_string()),
+        ("smoothness", c.smoothness.to_string()),
         ("views", fit.cameras.views.to_string()),
         ("test_views", fit.cameras.test_views.to_string()),
         ("size", fit.cameras.size.to_string()),
@@ -420,6 +421,7 @@ impl Meta<'_> {
             shift: self.finite("shift")?,
             evaluations: self.parse("evaluations")?,
             grow: self.parse("grow")?,
+            smoothness: self.finite("smoothness")?,
         };
         let cameras = Cameras {
             views: self.parse("views")?,

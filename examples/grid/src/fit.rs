@@ -19,6 +19,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 
+use fogray::ops::prior::TotalVariation;
 use fogray::ops::rays::{Aabb, RayBatch};
 use fogray::ops::sample::{CellPoints, Jitter, OccupancyConfig, OccupancyGrid, PackedSamples, Spacing, Uniform};
 use fogray::ops::{GeometryError, GridError, SampleError};
@@ -115,6 +116,9 @@ pub struct FitConfig {
     /// Coarse to fine: start at a quarter of `grid` nodes per axis, double at [`GROWTH`]
     /// fractions of the budget (trilinear resampling, fresh Adam moments).
     pub grow: bool,
+    /// Weight of the total-variation prior on the raw grid added to the loss
+    /// ([`TotalVariation`]); 0 for none.
+    pub smoothness: f64,
 }
 
 /// Fractions of the budget at which a growing grid doubles its nodes per axis.
@@ -136,12 +140,13 @@ impl Default for FitConfig {
             batch: 8192,
             budget: Budget::Seconds(60.0),
             method: Method::Fused,
-            sampling: Sampling::Uniform,
+            sampling: Sampling::Occupancy,
             seed: 0,
-            lr: 0.1,
+            lr: 0.2,
             shift: -4.0,
             evaluations: 20,
             grow: true,
+            smoothness: 3e-4,
         }
     }
 }
@@ -202,13 +207,42 @@ enum Sampler {
 }
 
 impl Sampler {
-    fn sample<F: Float>(&self, rays: &RayBatch<F>, step: f64) -> Result<PackedSamples<F>, FitError> {
-        let clip = Aabb::new(BOUNDS.0, BOUNDS.1)?.clip(rays);
-        Ok(match self {
-            Sampler::Uniform => Uniform::new(Spacing::Step(step))?.sample(rays, &clip)?,
-            Sampler::Occupancy(g) => g.march(rays, &clip, step, Jitter::None)?,
-        })
+    fn occupancy(&self) -> Option<&OccupancyGrid> {
+        match self {
+            Sampler::Uniform => None,
+            Sampler::Occupancy(g) => Some(g),
+        }
     }
+}
+
+/// Samples `rays` every `step` across the box, or only in the occupied cells of `occupancy`.
+fn sample_rays<F: Float>(
+    occupancy: Option<&OccupancyGrid>,
+    rays: &RayBatch<F>,
+    step: f64,
+) -> Result<PackedSamples<F>, FitError> {
+    let clip = Aabb::new(BOUNDS.0, BOUNDS.1)?.clip(rays);
+    Ok(match occupancy {
+        None => Uniform::new(Spacing::Step(step))?.sample(rays, &clip)?,
+        Some(g) => g.march(rays, &clip, step, Jitter::None)?,
+    })
+}
+
+/// An occupancy grid as a fit of `grid` nodes per axis keeps one: one cell per voxel, a cell
+/// occupied while a step of half the final voxel through it would stop at least 1 % of the
+/// light. Every cell is occupied until its first update.
+///
+/// Errors: fewer than 2 nodes.
+pub fn occupancy_grid(grid: usize) -> Result<OccupancyGrid, FitError> {
+    if grid < 2 {
+        return Err(FitError::Config("--grid must be at least 2".into()));
+    }
+    let final_step = 1.0 / (grid - 1) as f64;
+    Ok(OccupancyGrid::new(
+        Aabb::new(BOUNDS.0, BOUNDS.1)?,
+        grid - 1,
+        OccupancyConfig::opacity(final_step, 0.01)?,
+    )?)
 }
 
 fn batch_of<F: Float>(o: &Array2<f64>, d: &Array2<f64>, rows: &[usize]) -> Result<RayBatch<F>, FitError> {
@@ -219,7 +253,7 @@ fn batch_of<F: Float>(o: &Array2<f64>, d: &Array2<f64>, rows: &[usize]) -> Resul
 /// Renders rays in chunks without recording a backward, as `[R, 3]` f64.
 fn render_rays<F: Float>(
     model: &GridModel<F>,
-    sampler: &Sampler,
+    occupancy: Option<&OccupancyGrid>,
     origins: &Array2<f64>,
     directions: &Array2<f64>,
     background: [f64; 3],
@@ -232,7 +266,7 @@ fn render_rays<F: Float>(
     for start in (0..n).step_by(CHUNK) {
         let rows: Vec<usize> = (start..(start + CHUNK).min(n)).collect();
         let rays = batch_of::<F>(origins, directions, &rows)?;
-        let samples = sampler.sample(&rays, model.voxel() / 2.0)?;
+        let samples = sample_rays(occupancy, &rays, model.voxel() / 2.0)?;
         let color = model.render(&mut tape, &samples, background, method)?;
         let values = tape.value(color)?;
         for (k, &r) in rows.iter().enumerate() {
@@ -245,18 +279,21 @@ fn render_rays<F: Float>(
     Ok(out)
 }
 
-/// Renders every test view, `[W][W][3]` each, unclamped.
+/// Renders every test view, `[W][W][3]` each, unclamped: every half voxel across the box, or
+/// only in the occupied cells of `occupancy`. A model fitted with an occupancy grid is rendered
+/// with it, as it was trained: its empty cells got no samples, so whatever density they hold
+/// was never fitted.
 pub fn render_test_views<F: Float>(
     model: &GridModel<F>,
     data: &Dataset,
     method: Method,
+    occupancy: Option<&OccupancyGrid>,
 ) -> Result<Vec<Array3<f64>>, FitError> {
-    let sampler = Sampler::Uniform;
     data.test
         .iter()
         .map(|t| {
             let w = t.photograph.shape()[0];
-            let flat = render_rays(model, &sampler, &t.origins, &t.directions, data.background, method)?;
+            let flat = render_rays(model, occupancy, &t.origins, &t.directions, data.background, method)?;
             flat.into_shape_with_order((w, w, 3))
                 .map_err(|e| FitError::Config(e.to_string()))
         })
@@ -331,16 +368,12 @@ pub fn fit_from<F: Float>(
         )));
     }
     let mut next_stage = stage + 1;
-    // The final grid's half voxel: the occupancy threshold means the same at every stage.
-    let final_step = 1.0 / (config.grid - 1) as f64;
+    // The final grid's half voxel sets the threshold: it means the same at every stage.
     let mut sampler = match config.sampling {
         Sampling::Uniform => Sampler::Uniform,
-        Sampling::Occupancy => Sampler::Occupancy(OccupancyGrid::new(
-            Aabb::new(BOUNDS.0, BOUNDS.1)?,
-            config.grid - 1,
-            OccupancyConfig::opacity(final_step, 0.01)?,
-        )?),
+        Sampling::Occupancy => Sampler::Occupancy(occupancy_grid(config.grid)?),
     };
+    let prior = TotalVariation::new(config.smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
     let adam_config = AdamConfig {
         lr: config.lr,
         ..AdamConfig::default()
@@ -365,17 +398,18 @@ pub fn fit_from<F: Float>(
         Budget::Steps(n) => step as f64 / n as f64,
         Budget::Seconds(s) => seconds / s,
     };
-    let evaluate = |model: &GridModel<F>, step, seconds, loss, samples| -> Result<LogEntry, FitError> {
-        let renders = render_test_views(model, data, config.method)?;
-        Ok(LogEntry {
-            step,
-            seconds,
-            train_loss: loss,
-            test_psnr: test_psnr(&renders, data)?,
-            samples,
-        })
-    };
-    let mut log = vec![evaluate(&model, step, seconds, loss, samples_total)?];
+    let evaluate =
+        |model: &GridModel<F>, sampler: &Sampler, step, seconds, loss, samples| -> Result<LogEntry, FitError> {
+            let renders = render_test_views(model, data, config.method, sampler.occupancy())?;
+            Ok(LogEntry {
+                step,
+                seconds,
+                train_loss: loss,
+                test_psnr: test_psnr(&renders, data)?,
+                samples,
+            })
+        };
+    let mut log = vec![evaluate(&model, &sampler, step, seconds, loss, samples_total)?];
     let mut next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
     while fraction(step, seconds) < 1.0 {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
@@ -390,15 +424,22 @@ pub fn fit_from<F: Float>(
         }
         let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();
         let rays = batch_of::<F>(&data.origins, &data.directions, &rows)?;
-        let samples = sampler.sample(&rays, model.voxel() / 2.0)?;
+        let samples = sample_rays(sampler.occupancy(), &rays, model.voxel() / 2.0)?;
         samples_total += samples.len();
         let target = tape.constant(data.colors.select(Axis(0), &rows).mapv(F::lit));
-        let color = model.render(&mut tape, &samples, data.background, config.method)?;
+        let grid = tape.param_from(model.params(), model.grid_id())?;
+        let color = model.render_grid(&mut tape, grid, &samples, data.background, config.method)?;
         let residual = tape.sub(color, target)?;
         let squared = tape.square(residual)?;
         let mse = tape.mean(squared)?;
         loss = tape.value(mse)?.iter().next().map_or(f64::NAN, |v| v.as_f64());
-        let grads = tape.backward(mse)?;
+        let objective = if config.smoothness > 0.0 {
+            let smooth = prior.apply(&mut tape, grid)?;
+            tape.add(mse, smooth)?
+        } else {
+            mse
+        };
+        let grads = tape.backward(objective)?;
         tape.clear();
         adam.step(model.params_mut(), &grads)?;
         tape.recycle(grads);
@@ -416,11 +457,11 @@ pub fn fit_from<F: Float>(
         });
         let done = fraction(step, seconds) >= 1.0;
         if done || fraction(step, seconds) * config.evaluations as f64 >= next_eval as f64 {
-            log.push(evaluate(&model, step, seconds, loss, samples_total)?);
+            log.push(evaluate(&model, &sampler, step, seconds, loss, samples_total)?);
             next_eval = (fraction(step, seconds) * config.evaluations as f64).floor() as usize + 1;
         }
     }
-    let renders = render_test_views(&model, data, config.method)?;
+    let renders = render_test_views(&model, data, config.method, sampler.occupancy())?;
     let occupancy = match sampler {
         Sampler::Occupancy(g) => Some(g),
         Sampler::Uniform => None,

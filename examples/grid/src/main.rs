@@ -15,6 +15,7 @@ use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use serde::Serialize;
 
+use fogray::ops::sample::CellPoints;
 use fogray_grid::checkpoint::{self, Cameras, ModelInfo, SavedFit};
 use fogray_grid::dataset::Dataset;
 use fogray_grid::depth::write_depth_png;
@@ -145,15 +146,20 @@ struct FitArgs {
     /// Floating-point type of the model and the render.
     #[arg(long, value_enum, default_value = "f32")]
     precision: Precision,
-    /// Samples every half voxel across the box, or only in occupied cells.
-    #[arg(long, value_enum, default_value = "uniform")]
+    /// Samples every half voxel across the box, or only in the cells an occupancy grid marks
+    /// occupied (test views are then rendered with it too).
+    #[arg(long, value_enum, default_value = "occupancy")]
     sampling: SamplingArg,
     /// Seed of the batches.
     #[arg(long, default_value_t = 0)]
     seed: u64,
     /// Adam's learning rate.
-    #[arg(long, default_value_t = 0.1)]
+    #[arg(long, default_value_t = 0.2)]
     lr: f64,
+    /// Weight of the total-variation prior on the raw grid (the mean squared difference of
+    /// neighbouring nodes) added to the loss; 0 for none.
+    #[arg(long, default_value_t = 3e-4)]
+    tv: f64,
     /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
     /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).
     #[arg(long)]
@@ -452,6 +458,7 @@ fn flag_config(args: &FitArgs) -> FitConfig {
         seed: args.seed,
         lr: args.lr,
         grow: !args.no_grow,
+        smoothness: args.tv,
         ..FitConfig::default()
     }
 }
@@ -488,6 +495,7 @@ fn resumed_settings(
         seed: if pick("seed") { flags.seed } else { file.seed },
         lr: if pick("lr") { flags.lr } else { file.lr },
         grow: if pick("no_grow") { flags.grow } else { file.grow },
+        smoothness: if pick("tv") { flags.smoothness } else { file.smoothness },
         ..file
     };
     let cameras = Cameras {
@@ -752,7 +760,17 @@ fn run_render(args: RenderArgs) -> Result<()> {
 }
 
 fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &Scene, views: &[usize]) -> Result<()> {
-    let model = checkpoint::load::<F>(&args.model)?.start.model;
+    let saved = checkpoint::load::<F>(&args.model)?;
+    let model = saved.start.model;
+    // The occupancy grid is not in the file: rebuilt from the saved density, one update.
+    let occupancy = match saved.fit.config.sampling {
+        Sampling::Uniform => None,
+        Sampling::Occupancy => {
+            let mut grid = fogray_grid::fit::occupancy_grid(saved.fit.config.grid)?;
+            grid.update(|p| model.densities(p), CellPoints::Centre)?;
+            Some(grid)
+        }
+    };
     // PNGs of about 256 pixels a side whatever the image size.
     let scale = (256 / ring.size()).clamp(1, 16) as u32;
     let mut summary = RenderSummary {
@@ -761,7 +779,7 @@ fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &
         psnr: Vec::new(),
     };
     for &view in views {
-        let r = render_view(&model, ring, view, scene.background)?;
+        let r = render_view(&model, ring, view, scene.background, occupancy.as_ref())?;
         let exact = photograph(scene, &ring.camera(view), ring.size());
         let db = fogray_grid::images::psnr(&[r.color.view()], &[exact.view()])?;
         let image_path = args.out.join(format!("view-{view:03}.png"));

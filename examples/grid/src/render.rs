@@ -9,7 +9,7 @@
 //!
 //! let ring = Ring::new(4, 1, 8)?;
 //! let model = GridModel::<f32>::new(6, -4.0)?;
-//! let r = render_view(&model, &ring, 3, [1.0, 1.0, 1.0])?;
+//! let r = render_view(&model, &ring, 3, [1.0, 1.0, 1.0], None)?;
 //! assert_eq!(r.color.shape(), &[8, 8, 3]);
 //! // A fresh grid is a thin fog (opacity under 0.07 across the box): all background.
 //! assert!(r.depth.iter().all(|d| d.is_nan()));
@@ -17,7 +17,7 @@
 //! ```
 
 use fogray::ops::rays::{Aabb, RayBatch};
-use fogray::ops::sample::{Spacing, Uniform};
+use fogray::ops::sample::{Jitter, OccupancyGrid, Spacing, Uniform};
 use fogray::ops::{GeometryError, SampleError};
 use fogray::tape::{Float, Tape, TapeError};
 use ndarray::{Array2, Array3};
@@ -71,7 +71,8 @@ pub struct ViewRender {
     pub depth: Array2<f64>,
 }
 
-/// Renders view `view` of `ring` from `model` over `background`.
+/// Renders view `view` of `ring` from `model` over `background`, with samples every half voxel
+/// across the box, or only in the occupied cells of `occupancy` (for a model fitted with one).
 ///
 /// Errors: [`RenderError::ViewOutOfRange`], or an error of the ops.
 pub fn render_view<F: Float>(
@@ -79,6 +80,7 @@ pub fn render_view<F: Float>(
     ring: &Ring,
     view: usize,
     background: [f64; 3],
+    occupancy: Option<&OccupancyGrid>,
 ) -> Result<ViewRender, RenderError> {
     if view >= ring.len() {
         return Err(RenderError::ViewOutOfRange {
@@ -98,7 +100,11 @@ pub fn render_view<F: Float>(
         let origins = Array2::from_shape_fn((chunk.len(), 3), |(i, k)| F::lit(chunk[i].origin[k]));
         let directions = Array2::from_shape_fn((chunk.len(), 3), |(i, k)| F::lit(chunk[i].direction[k]));
         let batch = RayBatch::new(origins, directions)?;
-        let samples = sampler.sample(&batch, &bounds.clip(&batch))?;
+        let clip = bounds.clip(&batch);
+        let samples = match occupancy {
+            None => sampler.sample(&batch, &clip)?,
+            Some(g) => g.march(&batch, &clip, model.voxel() / 2.0, Jitter::None)?,
+        };
         let out = model.render_with_depth(&mut tape, &samples, background)?;
         let (c, o) = (tape.value(out.color)?, tape.value(out.opacity)?);
         let Some(d) = out.depth else {

@@ -131,6 +131,7 @@ fn k_steps_saved_and_continued_equal_2k_steps_bitwise() {
         batch: 128,
         lr: 0.2,
         grow: false,
+        sampling: Sampling::Uniform,
         ..FitConfig::default()
     };
     split_equals_whole::<f32>(base, 12, 6, false, "split-f32.safetensors");
@@ -154,6 +155,7 @@ fn a_reloaded_model_renders_bitwise_as_the_fit_and_as_render_view() {
         batch: 128,
         budget: Budget::Steps(5),
         grow: false,
+        sampling: Sampling::Uniform,
         ..FitConfig::default()
     };
     let result = run::<f32>(&data, &config, None, None);
@@ -161,12 +163,12 @@ fn a_reloaded_model_renders_bitwise_as_the_fit_and_as_render_view() {
     save(&file, &result.model, &result.training, &saved::<f32>(config)).unwrap();
     let back = load::<f32>(&file).unwrap();
     assert_eq!(grid_bits(&back.start.model), grid_bits(&result.model));
-    let again = render_test_views(&back.start.model, &data, Method::Fused).unwrap();
+    let again = render_test_views(&back.start.model, &data, Method::Fused, None).unwrap();
     assert_eq!(image_bits(&again), image_bits(&result.renders));
     // The render subcommand's renderer, with depth, gives the same colours.
     let ring = CAMERAS.ring().unwrap();
     for (t, want) in data.test.iter().zip(&result.renders) {
-        let r = render_view(&back.start.model, &ring, t.view, data.background).unwrap();
+        let r = render_view(&back.start.model, &ring, t.view, data.background, None).unwrap();
         assert_eq!(image_bits(&[r.color]), image_bits(std::slice::from_ref(want)));
     }
     let info = read_info(&file).unwrap();
@@ -195,7 +197,7 @@ fn the_depth_of_a_homogeneous_box_is_its_closed_form() {
     let ring = Ring::new(3, 1, 24).unwrap();
     let mut checked = (0, 0);
     for view in 0..ring.len() {
-        let r = render_view(&model, &ring, view, [1.0, 1.0, 1.0]).unwrap();
+        let r = render_view(&model, &ring, view, [1.0, 1.0, 1.0], None).unwrap();
         for (p, ray) in ring.rays(view).iter().enumerate() {
             let (a, b) = (p / 24, p % 24);
             // Slab clipping of the unit ray against the box, by hand.

@@ -51,7 +51,21 @@ fn saved_models_render_as_the_fit_and_resume() {
     let dir = temp_dir("render");
     let (model, renders) = (dir.join("m.safetensors"), dir.join("renders.json"));
     let (model_s, renders_s) = (model.to_str().unwrap(), renders.to_str().unwrap());
-    let fit_args = [&TINY[..], &["--steps", "6", "--json", "--save-model", model_s]].concat();
+    // Uniform sampling: its renders need nothing but the saved grid (an occupancy grid is not
+    // saved, and `render` rebuilds one from the density).
+    let fit_args = [
+        &TINY[..],
+        &[
+            "--steps",
+            "6",
+            "--sampling",
+            "uniform",
+            "--json",
+            "--save-model",
+            model_s,
+        ],
+    ]
+    .concat();
     ok(&[&["fit"], &fit_args[..], &["--save-renders", renders_s]].concat());
     let out_dir = dir.join("pngs");
     let rendered = ok(&[

@@ -60,7 +60,7 @@ fn the_kept_samples_render_within_the_threshold_of_the_full_ray() {
         .map(|k| if k < 50 { 0.0 } else { 3.0 * (k - 50) as f64 })
         .collect();
     let color: Vec<f64> = (0..n).map(|k| (k as f64 * 0.37).sin().abs()).collect();
-    let s = packed::<f64>(&[delta.clone()]);
+    let s = packed::<f64>(std::slice::from_ref(&delta));
     for min_t in [1e-2, 1e-3, 1e-4] {
         let v = s.visible(Array1::from(sigma.clone()).view(), min_t).unwrap();
         let m = v.len();
