@@ -1,36 +1,12 @@
 //! The `fogray-grid` binary: its JSON, its PNGs, and one line on stderr with status 2 for
 //! every kind of bad input.
 
-use std::path::PathBuf;
-use std::process::Command;
-
 use fogray_grid::photographs::photographs;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
-fn grid(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_fogray-grid"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
-}
-
-fn ok(args: &[&str]) -> String {
-    let (code, out, err) = grid(args);
-    assert_eq!(code, 0, "{args:?}: {err}");
-    out
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fogray-grid-cli-{}-{name}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
+mod common;
+use common::{grid, ok, temp_dir};
 
 #[test]
 fn scene_writes_the_built_in_scene_which_reads_back() {

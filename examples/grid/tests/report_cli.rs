@@ -1,19 +1,8 @@
 //! `fogray-grid report` as a user runs it: on a tiny problem budgeted by steps it writes its
 //! files and prints one line per configuration; bad input exits 2 with one line on stderr.
 
-use std::process::Command;
-
-fn grid(args: &[&str]) -> (i32, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_fogray-grid"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.code().unwrap_or(-1),
-        String::from_utf8(out.stdout).unwrap(),
-        String::from_utf8(out.stderr).unwrap(),
-    )
-}
+mod common;
+use common::grid;
 
 #[test]
 fn report_writes_its_files_and_names_its_command() {
