@@ -5,7 +5,9 @@
 //! Tensors, little-endian `F32` or `F64` as the fit was trained:
 //! - `grid`: the raw grid `[N, N, N, 4]` (raw density, raw RGB per node);
 //! - `adam.first_moment`, `adam.second_moment`: Adam's moments, the grid's shape (absent before
-//!   the growth stage's first step).
+//!   the growth stage's first step);
+//! - with occupancy sampling, `occupancy.estimate` (`F32`, `[R, R, R]` with `R = grid - 1`, the
+//!   occupancy grid's density estimates) and `occupancy.occupied` (`BOOL`, the same shape).
 //!
 //! Metadata (strings): `format` (`fogray-grid model`), `version` (`1`), `precision`, `nodes`
 //! (the grid's, `N`), `step`, `seconds` (training seconds so far), `stage` (growth stage),
@@ -22,7 +24,7 @@
 //! use fogray_grid::scene::Scene;
 //!
 //! let model = GridModel::<f32>::new(4, -4.0)?;
-//! let training = TrainingState { step: 0, seconds: 0.0, stage: 0, batch_stream: 0, adam: None };
+//! let training = TrainingState { step: 0, seconds: 0.0, stage: 0, batch_stream: 0, adam: None, occupancy: None };
 //! let fit = SavedFit {
 //!     precision: Precision::F32,
 //!     config: FitConfig { grid: 4, ..FitConfig::default() },
@@ -42,9 +44,10 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
+use fogray::ops::sample::OccupancyState;
 use fogray::tape::optim::{Adam, AdamConfig, AdamState};
 use fogray::tape::Float;
-use ndarray::{ArrayD, ArrayViewD, IxDyn};
+use ndarray::{Array3, ArrayD, ArrayViewD, IxDyn};
 use safetensors::tensor::{Dtype, TensorView};
 use safetensors::SafeTensors;
 use thiserror::Error;
@@ -334,9 +337,17 @@ pub fn save<F: Float>(
         ));
     }
     let dtype = fit.precision.dtype();
+    let mut tensors: Vec<_> = tensors.into_iter().map(|(n, s, b)| (n, dtype, s, b)).collect();
+    if let Some(occupancy) = &training.occupancy {
+        let shape = occupancy.estimate.shape().to_vec();
+        let estimate = occupancy.estimate.iter().flat_map(|e| e.to_le_bytes()).collect();
+        let occupied = occupancy.occupied.iter().map(|&o| u8::from(o)).collect();
+        tensors.push(("occupancy.estimate", Dtype::F32, shape.clone(), estimate));
+        tensors.push(("occupancy.occupied", Dtype::BOOL, shape, occupied));
+    }
     let views = tensors
         .iter()
-        .map(|(name, shape, bytes)| Ok((*name, TensorView::new(dtype, shape.clone(), bytes)?)))
+        .map(|(name, dtype, shape, bytes)| Ok((*name, TensorView::new(*dtype, shape.clone(), bytes)?)))
         .collect::<Result<Vec<_>, safetensors::SafeTensorError>>()
         .map_err(|e| write_error(e.to_string()))?;
     safetensors::serialize_to_file(views, Some(metadata(model, training, fit)), path)
@@ -545,7 +556,9 @@ pub fn load<F: Float>(path: &Path) -> Result<Checkpoint<F>, CheckpointError> {
             Some(state)
         }
     };
+    let occupancy = occupancy_state(&meta, &tensors, fit.config.sampling)?;
     let training = TrainingState {
+        occupancy,
         step: meta.parse("step")?,
         seconds: meta.finite("seconds")?,
         stage: meta.parse("stage")?,
@@ -556,4 +569,53 @@ pub fn load<F: Float>(path: &Path) -> Result<Checkpoint<F>, CheckpointError> {
         start: Start { model, training },
         fit,
     })
+}
+
+/// The occupancy grid's tensors of an occupancy fit's file, checked as
+/// [`OccupancyGrid::restore`](fogray::ops::sample::OccupancyGrid::restore) would: absent (a
+/// file written before grids were saved) is `None`, one without the other is an error.
+fn occupancy_state(meta: &Meta<'_>, tensors: &SafeTensors<'_>, sampling: Sampling) -> Result<Option<OccupancyState>, CheckpointError> {
+    let names = ["occupancy.estimate", "occupancy.occupied"];
+    let present = names.map(|n| tensors.tensor(n).is_ok());
+    if sampling == Sampling::Uniform || present == [false, false] {
+        return Ok(None);
+    }
+    let cells = meta.parse::<usize>("grid")?.saturating_sub(1);
+    let shape = [cells; 3];
+    let read = |name: &str, dtype: Dtype| -> Result<Vec<u8>, CheckpointError> {
+        let view = tensors
+            .tensor(name)
+            .map_err(|e| meta.error(format!("tensor {name:?}: {e}")))?;
+        if view.dtype() != dtype || view.shape() != shape {
+            return Err(meta.error(format!(
+                "tensor {name:?} is {:?} {:?}, expected {dtype:?} {shape:?}",
+                view.dtype(),
+                view.shape()
+            )));
+        }
+        Ok(view.data().to_vec())
+    };
+    let estimate: Vec<f32> = read(names[0], Dtype::F32)?
+        .chunks_exact(4)
+        .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
+        .collect();
+    let occupied = read(names[1], Dtype::BOOL)?
+        .into_iter()
+        .map(|b| match b {
+            0 => Ok(false),
+            1 => Ok(true),
+            other => Err(meta.error(format!("tensor \"occupancy.occupied\" holds the byte {other}"))),
+        })
+        .collect::<Result<Vec<bool>, _>>()?;
+    let to_array = |e: ndarray::ShapeError| meta.error(e.to_string());
+    let state = OccupancyState {
+        estimate: Array3::from_shape_vec(shape, estimate).map_err(to_array)?,
+        occupied: Array3::from_shape_vec(shape, occupied).map_err(to_array)?,
+    };
+    // Checked now, so that a bad file fails here rather than in the fit.
+    crate::fit::occupancy_grid(cells + 1)
+        .map_err(|e| meta.error(e.to_string()))?
+        .restore(&state)
+        .map_err(|e| meta.error(e.to_string()))?;
+    Ok(Some(state))
 }

@@ -338,12 +338,13 @@ pub fn fit<F: Float>(
 ///
 /// Continuing a fit stopped at step `k` takes the same steps, bit for bit, as the fit that
 /// was never stopped, given the same `config` (growth happens at fractions of the budget, so
-/// the first part must have had the same budget or no growth), uniform sampling (an occupancy
-/// grid is not part of the state: it starts afresh, every cell occupied until its next
-/// refresh) and a budget of steps (a budget of seconds stops where the clock says).
+/// the first part must have had the same budget or no growth) and a budget of steps (a budget
+/// of seconds stops where the clock says). The occupancy grid is part of the state; a start
+/// without one (or one saved by a uniform fit) begins with every cell occupied until the next
+/// refresh.
 ///
-/// Test views are rendered with uniform samples whatever the training sampling, so that the
-/// PSNR of the two samplings measures the same thing.
+/// Test views are rendered as the model is trained: with the occupancy grid under occupancy
+/// sampling ([`render_test_views`]).
 ///
 /// Errors: a setting out of range ([`FitError::Config`]), or an error of the ops.
 pub fn fit_from<F: Float>(
@@ -373,6 +374,9 @@ pub fn fit_from<F: Float>(
         Sampling::Uniform => Sampler::Uniform,
         Sampling::Occupancy => Sampler::Occupancy(occupancy_grid(config.grid)?),
     };
+    if let (Sampler::Occupancy(grid), Some(state)) = (&mut sampler, resumed.as_ref().and_then(|t| t.occupancy.as_ref())) {
+        grid.restore(state)?;
+    }
     let prior = TotalVariation::new(config.smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
     let adam_config = AdamConfig {
         lr: config.lr,
@@ -421,6 +425,15 @@ pub fn fit_from<F: Float>(
             model = model.resampled(stages[next_stage].1)?;
             adam = Adam::new(adam_config)?;
             next_stage += 1;
+        }
+        {
+            let f = fraction(step, seconds);
+            let lr_final: f64 = std::env::var("XLR_FINAL").ok().and_then(|v| v.parse().ok()).unwrap_or(config.lr);
+            let d0: f64 = std::env::var("XDECAY_START").ok().and_then(|v| v.parse().ok()).unwrap_or(0.3);
+            if f > d0 {
+                let u = ((f - d0) / (1.0 - d0)).min(1.0);
+                adam.set_lr(config.lr * (lr_final / config.lr).powf(u))?;
+            }
         }
         let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();
         let rays = batch_of::<F>(&data.origins, &data.directions, &rows)?;
@@ -472,6 +485,7 @@ pub fn fit_from<F: Float>(
         stage: next_stage - 1,
         batch_stream: rng.get_word_pos(),
         adam: adam.state(model.params(), model.grid_id())?,
+        occupancy: occupancy.as_ref().map(OccupancyGrid::state),
     };
     let occupied_fraction = occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction());
     Ok(FitResult {

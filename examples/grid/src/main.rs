@@ -762,12 +762,16 @@ fn run_render(args: RenderArgs) -> Result<()> {
 fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &Scene, views: &[usize]) -> Result<()> {
     let saved = checkpoint::load::<F>(&args.model)?;
     let model = saved.start.model;
-    // The occupancy grid is not in the file: rebuilt from the saved density, one update.
+    // An occupancy model renders with its saved grid; a file without one (written before
+    // grids were saved) gets one rebuilt from the saved density, one update.
     let occupancy = match saved.fit.config.sampling {
         Sampling::Uniform => None,
         Sampling::Occupancy => {
             let mut grid = fogray_grid::fit::occupancy_grid(saved.fit.config.grid)?;
-            grid.update(|p| model.densities(p), CellPoints::Centre)?;
+            match &saved.start.training.occupancy {
+                Some(state) => grid.restore(state)?,
+                None => grid.update(|p| model.densities(p), CellPoints::Centre)?,
+            }
             Some(grid)
         }
     };

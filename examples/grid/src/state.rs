@@ -1,8 +1,10 @@
 //! Where a fit stands between two steps: the model, and the rest of what
 //! [`fit_from`](crate::fit::fit_from) needs to continue it exactly (Adam's moments, the step,
-//! the training seconds, the growth stage, the position in the stream of random batches).
+//! the training seconds, the growth stage, the position in the stream of random batches, the
+//! occupancy grid).
 //! [`checkpoint`](crate::checkpoint) writes both to a file and reads them back.
 
+use fogray::ops::sample::OccupancyState;
 use fogray::tape::optim::AdamState;
 use fogray::tape::Float;
 
@@ -22,6 +24,8 @@ pub struct TrainingState<F> {
     pub batch_stream: u128,
     /// Adam's state for the grid; `None` before the stage's first step.
     pub adam: Option<AdamState<F>>,
+    /// The occupancy grid's state, for a fit with occupancy sampling.
+    pub occupancy: Option<OccupancyState>,
 }
 
 /// A fit to continue: its model and state.

@@ -10,7 +10,9 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use fogray::tape::Float;
 use fogray_grid::checkpoint::{load, read_info, save, Cameras, CheckpointError, Precision, SavedFit};
 use fogray_grid::dataset::Dataset;
-use fogray_grid::fit::{fit_from, render_test_views, Budget, FitConfig, FitResult, Sampling};
+use fogray_grid::fit::{
+    fit_from, render_test_views, Budget, FitConfig, FitResult, Sampling, OCCUPANCY_EVERY, OCCUPANCY_WARMUP,
+};
 use fogray_grid::model::{GridModel, Method};
 use fogray_grid::photographs::photographs;
 use fogray_grid::render::{render_view, BACKGROUND_OPACITY};
@@ -109,6 +111,7 @@ fn split_equals_whole<F: Float>(config: FitConfig, total: usize, k: usize, stopp
         "{name}"
     );
     assert_eq!(a.adam, b.adam, "{name}");
+    assert_eq!(a.occupancy, b.occupancy, "{name}");
     assert!(a.seconds > first.training.seconds);
     assert_eq!(image_bits(&second.renders), image_bits(&whole.renders));
     assert_eq!(second.log[0].step, k);
@@ -145,6 +148,32 @@ fn k_steps_saved_and_continued_equal_2k_steps_bitwise() {
     };
     split_equals_whole::<f32>(growing, 20, 4, true, "split-grow.safetensors");
     split_equals_whole::<f32>(base, 8, 3, true, "split-stop.safetensors");
+}
+
+#[test]
+fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
+    // The occupancy grid is first refreshed at step 64, then every 16 steps: saved at step 72
+    // (one refresh in), continued through the refreshes at 80 and 96.
+    let occupancy = FitConfig {
+        grid: 6,
+        batch: 64,
+        lr: 0.2,
+        grow: false,
+        sampling: Sampling::Occupancy,
+        ..FitConfig::default()
+    };
+    assert!(OCCUPANCY_WARMUP < 72 && 72 < OCCUPANCY_WARMUP + 2 * OCCUPANCY_EVERY);
+    split_equals_whole::<f32>(occupancy, 100, 72, false, "split-occupancy.safetensors");
+    // The grid in the file is the one the fit had, and it is not the fresh grid a file
+    // without one would give.
+    let data = data();
+    let first = run::<f32>(&data, &FitConfig { budget: Budget::Steps(72), ..occupancy }, None, None);
+    let fraction = first.occupancy.as_ref().unwrap().occupied_fraction();
+    assert!(fraction < 1.0, "{fraction}");
+    let file = temp("occupancy.safetensors");
+    save(&file, &first.model, &first.training, &saved::<f32>(occupancy)).unwrap();
+    let back = load::<f32>(&file).unwrap().start.training.occupancy.unwrap();
+    assert_eq!(Some(back), first.occupancy.map(|g| g.state()));
 }
 
 #[test]
@@ -361,4 +390,58 @@ fn bad_files_are_refused_with_a_typed_error() {
         rewrite(&good, &bad, edit);
         format(load::<f32>(&bad).unwrap_err(), what);
     }
+}
+
+#[test]
+fn bad_occupancy_tensors_are_refused_with_a_typed_error() {
+    let data = data();
+    let config = FitConfig {
+        grid: 4,
+        batch: 64,
+        budget: Budget::Steps(2),
+        sampling: Sampling::Occupancy,
+        grow: false,
+        ..FitConfig::default()
+    };
+    let result = run::<f32>(&data, &config, None, None);
+    let good = temp("good-occupancy.safetensors");
+    save(&good, &result.model, &result.training, &saved::<f32>(config)).unwrap();
+    // Before its first refresh every cell of the grid is occupied, and so after loading.
+    let state = load::<f32>(&good).unwrap().start.training.occupancy.unwrap();
+    assert!(state.occupied.iter().all(|&o| o) && state.occupied.shape() == [3, 3, 3]);
+    let bad = temp("bad-occupancy.safetensors");
+    let cases: Vec<(&str, Box<Edit>)> = vec![
+        (
+            "holds the byte 2",
+            Box::new(|t, _| t.iter_mut().find(|(n, _)| n == "occupancy.occupied").unwrap().1.bytes[5] = 2),
+        ),
+        (
+            "must be finite and non-negative",
+            Box::new(|t, _| {
+                let v = &mut t.iter_mut().find(|(n, _)| n == "occupancy.estimate").unwrap().1;
+                v.bytes[8..12].copy_from_slice(&(-2.0f32).to_le_bytes());
+            }),
+        ),
+        (
+            "tensor \"occupancy.estimate\"",
+            Box::new(|t, _| t.retain(|(n, _)| n != "occupancy.estimate")),
+        ),
+        (
+            "expected BOOL [3, 3, 3]",
+            Box::new(|t, _| {
+                let v = &mut t.iter_mut().find(|(n, _)| n == "occupancy.occupied").unwrap().1;
+                v.shape = vec![27];
+            }),
+        ),
+    ];
+    for (what, edit) in cases {
+        rewrite(&good, &bad, edit);
+        match load::<f32>(&bad).unwrap_err() {
+            CheckpointError::Format { message, .. } => assert!(message.contains(what), "{message} / {what}"),
+            other => panic!("{other:?} for {what}"),
+        }
+    }
+    // Without both tensors (a file from before grids were saved) there is no state to restore.
+    rewrite(&good, &bad, |t, _| t.retain(|(n, _)| !n.starts_with("occupancy.")));
+    assert_eq!(load::<f32>(&bad).unwrap().start.training.occupancy, None);
 }

@@ -57,7 +57,7 @@ mod visible;
 mod visible_tests;
 
 pub use importance::Importance;
-pub use occupancy::{GridAxis, OccupancyGrid, OccupancySlice};
+pub use occupancy::{GridAxis, OccupancyGrid, OccupancySlice, OccupancyState};
 pub use occupancy_config::{CellPoints, OccupancyConfig, Threshold};
 pub use packed::{PackedSamples, SampleVars};
 pub use stratified::{Jitter, Stratified};

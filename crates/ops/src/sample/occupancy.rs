@@ -5,7 +5,7 @@
 use std::fmt::Display;
 
 use fogray_tape::Float;
-use ndarray::{Array1, Array2, ArrayView2, ArrayView3};
+use ndarray::{Array1, Array2, Array3, ArrayView2, ArrayView3};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
@@ -35,6 +35,17 @@ pub struct OccupancySlice {
     pub estimate: Array2<f32>,
 }
 
+/// What an [`OccupancyGrid`] has learnt, to be saved and given back to
+/// [`OccupancyGrid::restore`]: each cell's density estimate and whether it is occupied (which
+/// the estimate alone does not say before the first update, when every cell is occupied).
+#[derive(Debug, Clone, PartialEq)]
+pub struct OccupancyState {
+    /// Each cell's density estimate `[r, r, r]`, indexed `[ix, iy, iz]`: finite, at least 0.
+    pub estimate: Array3<f32>,
+    /// Whether each cell is occupied `[r, r, r]`.
+    pub occupied: Array3<bool>,
+}
+
 /// `r^3` cells over a box, cell `(ix, iy, iz)` covering
 /// `min + (ix, iy, iz) * size .. min + (ix + 1, iy + 1, iz + 1) * size`, stored at
 /// `(ix * r + iy) * r + iz`. Every cell starts occupied (nothing is known yet) with estimate 0.
@@ -59,12 +70,17 @@ impl OccupancyGrid {
         }
         let cells = resolution.pow(3);
         let (lo, hi) = (bounds.min(), bounds.max());
+        let mut bits = vec![u64::MAX; cells.div_ceil(64)];
+        // No bit past the last cell, as after an update or a restore.
+        if cells % 64 != 0 {
+            bits[cells / 64] = (1u64 << (cells % 64)) - 1;
+        }
         Ok(OccupancyGrid {
             bounds,
             resolution,
             cell: std::array::from_fn(|a| (hi[a] - lo[a]) / resolution as f64),
             estimate: vec![0.0; cells],
-            bits: vec![u64::MAX; cells.div_ceil(64)],
+            bits,
             config,
         })
     }
@@ -130,6 +146,57 @@ impl OccupancyGrid {
     pub fn estimate(&self) -> ArrayView3<'_, f32> {
         let r = self.resolution;
         ArrayView3::from_shape((r, r, r), &self.estimate).expect("r^3 estimates")
+    }
+
+    /// The grid's state (estimates and occupied cells), for [`OccupancyGrid::restore`].
+    pub fn state(&self) -> OccupancyState {
+        let r = self.resolution;
+        OccupancyState {
+            estimate: self.estimate().to_owned(),
+            occupied: Array3::from_shape_fn((r, r, r), |(x, y, z)| self.is_occupied([x, y, z])),
+        }
+    }
+
+    /// Replaces the estimates and occupied cells with `state` (from [`OccupancyGrid::state`]
+    /// of a grid of the same resolution), so that a saved grid marches and updates exactly as
+    /// the one it was taken from.
+    ///
+    /// Errors (the grid is unchanged then): either array not `[r, r, r]`, an estimate negative
+    /// or not finite (named by linear cell index).
+    pub fn restore(&mut self, state: &OccupancyState) -> Result<(), SampleError> {
+        let r = self.resolution;
+        for (what, shape) in [
+            ("occupancy estimate", state.estimate.shape()),
+            ("occupied cells", state.occupied.shape()),
+        ] {
+            if shape != [r, r, r] {
+                return Err(SampleError::Shape {
+                    what,
+                    expected: format!("[{r}, {r}, {r}]"),
+                    got: format!("{shape:?}"),
+                });
+            }
+        }
+        if let Some((i, &e)) = state
+            .estimate
+            .iter()
+            .enumerate()
+            .find(|(_, e)| !(e.is_finite() && **e >= 0.0))
+        {
+            return Err(SampleError::InvalidValue {
+                ray: i,
+                what: "occupancy estimate of this cell".into(),
+                value: f64::from(e),
+                rule: "must be finite and non-negative",
+            });
+        }
+        // Standard layout iteration is the grid's own order, (ix * r + iy) * r + iz.
+        self.estimate = state.estimate.iter().copied().collect();
+        self.bits.iter_mut().for_each(|w| *w = 0);
+        for (i, _) in state.occupied.iter().enumerate().filter(|(_, &o)| o) {
+            self.bits[i / 64] |= 1 << (i % 64);
+        }
+        Ok(())
     }
 
     /// The plane of cells with index `index` along `axis`. Errors: `index >= resolution`.

@@ -151,3 +151,68 @@ fn bad_densities_are_errors_and_change_nothing() {
     assert!(OccupancyConfig::density(f64::NAN).is_err());
     assert!(OccupancyConfig::density(1.0).unwrap().with_decay(1.5).is_err());
 }
+
+fn ball_density(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
+    Ok(Array1::from_iter(
+        p.rows()
+            .into_iter()
+            .map(|q| if q.dot(&q) < 0.3 { 5.0 + q[0] } else { 0.01 }),
+    ))
+}
+
+#[test]
+fn a_restored_state_is_the_grid_it_was_taken_from() {
+    let config = OccupancyConfig::density(0.5).unwrap().with_decay(0.9).unwrap();
+    // r = 5: 125 cells, so the last word of bits is partly used.
+    for updates in 0..3 {
+        let mut grid = OccupancyGrid::new(cube(), 5, config).unwrap();
+        for k in 0..updates {
+            grid.update(ball_density, CellPoints::CentreAndRandom { seed: k }).unwrap();
+        }
+        let state = grid.state();
+        let expected_fraction = if updates == 0 { 1.0 } else { grid.occupied_fraction() };
+        assert_eq!(state.occupied.iter().filter(|&&o| o).count() as f64 / 125.0, expected_fraction);
+        let mut back = OccupancyGrid::new(cube(), 5, config).unwrap();
+        back.update(constant(100.0), CellPoints::Centre).unwrap(); // something to overwrite
+        back.restore(&state).unwrap();
+        assert_eq!(back, grid, "after {updates} updates");
+        // And they go on alike.
+        grid.update(ball_density, CellPoints::Random { seed: 9 }).unwrap();
+        back.update(ball_density, CellPoints::Random { seed: 9 }).unwrap();
+        assert_eq!(back, grid);
+    }
+}
+
+#[test]
+fn a_fresh_grid_restored_from_a_state_of_its_own_is_unchanged() {
+    let config = OccupancyConfig::density(0.5).unwrap();
+    let fresh = OccupancyGrid::new(cube(), 3, config).unwrap();
+    let mut back = fresh.clone();
+    back.restore(&fresh.state()).unwrap();
+    assert_eq!(back, fresh);
+    assert_eq!(back.occupied_fraction(), 1.0);
+}
+
+#[test]
+fn restore_rejects_bad_states_and_leaves_the_grid_alone() {
+    let config = OccupancyConfig::density(0.5).unwrap();
+    let mut grid = OccupancyGrid::new(cube(), 4, config).unwrap();
+    grid.update(ball_density, CellPoints::Centre).unwrap();
+    let before = grid.clone();
+    let good = grid.state();
+    let mut wrong_shape = good.clone();
+    wrong_shape.occupied = ndarray::Array3::from_elem((4, 4, 3), true);
+    assert!(matches!(
+        grid.restore(&wrong_shape),
+        Err(SampleError::Shape { what: "occupied cells", .. })
+    ));
+    for (cell, bad) in [(7usize, -1.0f32), (63, f32::NAN), (0, f32::INFINITY)] {
+        let mut s = good.clone();
+        s.estimate.as_slice_mut().unwrap()[cell] = bad;
+        match grid.restore(&s) {
+            Err(SampleError::InvalidValue { ray, .. }) => assert_eq!(ray, cell),
+            other => panic!("{other:?}"),
+        }
+    }
+    assert_eq!(grid, before);
+}
