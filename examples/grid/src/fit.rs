@@ -377,7 +377,7 @@ pub fn fit_from<F: Float>(
     if let (Sampler::Occupancy(grid), Some(state)) = (&mut sampler, resumed.as_ref().and_then(|t| t.occupancy.as_ref())) {
         grid.restore(state)?;
     }
-    let prior = TotalVariation::new(config.smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
+    let mut prior = TotalVariation::new(config.smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
     let adam_config = AdamConfig {
         lr: config.lr,
         ..AdamConfig::default()
@@ -430,9 +430,11 @@ pub fn fit_from<F: Float>(
             let f = fraction(step, seconds);
             let lr_final: f64 = std::env::var("XLR_FINAL").ok().and_then(|v| v.parse().ok()).unwrap_or(config.lr);
             let d0: f64 = std::env::var("XDECAY_START").ok().and_then(|v| v.parse().ok()).unwrap_or(0.3);
+            let tv_final: f64 = std::env::var("XTV_FINAL").ok().and_then(|v| v.parse().ok()).unwrap_or(config.smoothness);
             if f > d0 {
                 let u = ((f - d0) / (1.0 - d0)).min(1.0);
                 adam.set_lr(config.lr * (lr_final / config.lr).powf(u))?;
+                prior = TotalVariation::new(config.smoothness + (tv_final - config.smoothness) * u).unwrap();
             }
         }
         let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();

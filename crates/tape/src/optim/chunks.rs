@@ -66,11 +66,21 @@ pub(crate) fn zip4<F: Float>(
 
 /// The position of the first NaN or infinity in `g`, if any.
 pub(crate) fn first_non_finite<F: Float>(g: &[F]) -> Option<usize> {
-    if g.len() <= CHUNK {
-        g.iter().position(|x| !x.is_finite())
+    // Whole chunks are scanned without an early exit, which vectorises; only the chunk with a
+    // bad element is searched element by element. Rayon's per-element `position_first` costs
+    // more than the optimiser's update it guards.
+    let any_bad = |c: &[F]| c.iter().fold(false, |bad, x| bad | !x.is_finite());
+    let chunk = if g.len() <= CHUNK {
+        usize::from(!any_bad(g)) // 0 if bad, past the end if not
     } else {
-        g.par_iter().with_min_len(CHUNK).position_first(|x| !x.is_finite())
-    }
+        g.par_chunks(CHUNK).position_first(|c| any_bad(c))?
+    };
+    let start = chunk * CHUNK;
+    g.get(start..)?
+        .iter()
+        .take(CHUNK)
+        .position(|x| !x.is_finite())
+        .map(|i| start + i)
 }
 
 #[cfg(test)]
@@ -111,5 +121,17 @@ mod tests {
         g[2 * CHUNK + 1] = f32::NAN;
         assert_eq!(first_non_finite(&g), Some(2 * CHUNK + 1));
         assert_eq!(first_non_finite(&[1.0f64, f64::NEG_INFINITY]), Some(1));
+        assert_eq!(first_non_finite(&[1.0f64, 2.0]), None);
+        assert_eq!(first_non_finite::<f64>(&[]), None);
+        // The first bad element of the first bad chunk, at a chunk's first and last element.
+        let mut h = vec![1.0f64; 3 * CHUNK + 3];
+        assert_eq!(first_non_finite(&h), None);
+        h[3 * CHUNK + 2] = f64::NAN;
+        assert_eq!(first_non_finite(&h), Some(3 * CHUNK + 2));
+        h[CHUNK] = f64::INFINITY;
+        h[2 * CHUNK - 1] = f64::NAN;
+        assert_eq!(first_non_finite(&h), Some(CHUNK));
+        h[CHUNK] = 0.0;
+        assert_eq!(first_non_finite(&h), Some(2 * CHUNK - 1));
     }
 }
