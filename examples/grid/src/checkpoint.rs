@@ -13,7 +13,7 @@
 //! (the grid's, `N`), `step`, `seconds` (training seconds so far), `stage` (growth stage),
 //! `batch_stream` (words of the ChaCha12 batch generator used), `adam.updates`, the fit's
 //! settings (`grid`, `batch`, `budget` as `steps:N` or `seconds:S`, `method`, `sampling`,
-//! `seed`, `lr`, `shift`, `evaluations`, `grow`, `smoothness`), the cameras (`views`, `test_views`, `size`)
+//! `seed`, `lr`, `lr_final`, `shift`, `evaluations`, `grow`, `smoothness`), the cameras (`views`, `test_views`, `size`)
 //! and the scene as JSON (`scene`). Numbers are written so that they read back bit for bit.
 //!
 //! ```
@@ -280,6 +280,7 @@ fn metadata<F: Float>(model: &GridModel<F>, training: &TrainingState<F>, fit: &S
         ("sampling", sampling_name(c.sampling).into()),
         ("seed", c.seed.to_string()),
         ("lr", c.lr.to_string()),
+        ("lr_final", c.lr_final.to_string()),
         ("shift", c.shift.to_string()),
         ("evaluations", c.evaluations.to_string()),
         ("grow", c.grow.to_string()),
@@ -429,6 +430,11 @@ impl Meta<'_> {
             sampling,
             seed: self.parse("seed")?,
             lr: self.finite("lr")?,
+            // Files written before the rate annealed ran at a constant rate.
+            lr_final: match self.entries.get("lr_final") {
+                Some(_) => self.finite("lr_final")?,
+                None => self.finite("lr")?,
+            },
             shift: self.finite("shift")?,
             evaluations: self.parse("evaluations")?,
             grow: self.parse("grow")?,
@@ -574,7 +580,11 @@ pub fn load<F: Float>(path: &Path) -> Result<Checkpoint<F>, CheckpointError> {
 /// The occupancy grid's tensors of an occupancy fit's file, checked as
 /// [`OccupancyGrid::restore`](fogray::ops::sample::OccupancyGrid::restore) would: absent (a
 /// file written before grids were saved) is `None`, one without the other is an error.
-fn occupancy_state(meta: &Meta<'_>, tensors: &SafeTensors<'_>, sampling: Sampling) -> Result<Option<OccupancyState>, CheckpointError> {
+fn occupancy_state(
+    meta: &Meta<'_>,
+    tensors: &SafeTensors<'_>,
+    sampling: Sampling,
+) -> Result<Option<OccupancyState>, CheckpointError> {
     let names = ["occupancy.estimate", "occupancy.occupied"];
     let present = names.map(|n| tensors.tensor(n).is_ok());
     if sampling == Sampling::Uniform || present == [false, false] {

@@ -107,8 +107,11 @@ pub struct FitConfig {
     pub sampling: Sampling,
     /// Seed of the batches.
     pub seed: u64,
-    /// Adam's learning rate.
+    /// Adam's learning rate, until [`ANNEAL_START`] of the budget.
     pub lr: f64,
+    /// Adam's learning rate at the end of the budget: from [`ANNEAL_START`] on, the rate falls
+    /// geometrically from `lr` to `lr_final` (equal to `lr` for a constant rate).
+    pub lr_final: f64,
     /// The density's shift (raw 0 is density `softplus(shift)`).
     pub shift: f64,
     /// Test evaluations over the budget (evenly spaced, plus one at the start and the end).
@@ -119,6 +122,20 @@ pub struct FitConfig {
     /// Weight of the total-variation prior on the raw grid added to the loss
     /// ([`TotalVariation`]); 0 for none.
     pub smoothness: f64,
+}
+
+/// The fraction of the budget from which the learning rate anneals from `lr` to `lr_final`.
+/// Adam at a constant rate keeps the grid jittering about its fit; shrinking the steps over
+/// the last part settles it.
+pub const ANNEAL_START: f64 = 0.6;
+
+/// Adam's learning rate at `fraction` of the budget (see [`FitConfig::lr_final`]).
+pub fn learning_rate(config: &FitConfig, fraction: f64) -> f64 {
+    if fraction <= ANNEAL_START {
+        return config.lr;
+    }
+    let u = ((fraction - ANNEAL_START) / (1.0 - ANNEAL_START)).min(1.0);
+    config.lr * (config.lr_final / config.lr).powf(u)
 }
 
 /// Fractions of the budget at which a growing grid doubles its nodes per axis.
@@ -143,6 +160,7 @@ impl Default for FitConfig {
             sampling: Sampling::Occupancy,
             seed: 0,
             lr: 0.2,
+            lr_final: 0.02,
             shift: -4.0,
             evaluations: 20,
             grow: true,
@@ -314,6 +332,12 @@ fn check(config: &FitConfig) -> Result<(), FitError> {
     if config.batch == 0 {
         return bad("--batch must be at least 1");
     }
+    if !(config.lr.is_finite() && config.lr > 0.0) {
+        return bad("--lr must be finite and positive");
+    }
+    if !(config.lr_final.is_finite() && config.lr_final > 0.0) {
+        return bad("--lr-final must be finite and positive");
+    }
     match config.budget {
         Budget::Steps(0) => bad("--steps must be at least 1"),
         Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => bad("--seconds must be finite and positive"),
@@ -337,8 +361,10 @@ pub fn fit<F: Float>(
 /// each step, so the step under way is finished). Calls `progress` after every step.
 ///
 /// Continuing a fit stopped at step `k` takes the same steps, bit for bit, as the fit that
-/// was never stopped, given the same `config` (growth happens at fractions of the budget, so
-/// the first part must have had the same budget or no growth) and a budget of steps (a budget
+/// was never stopped, given the same `config` (growth and the learning rate's anneal happen at
+/// fractions of the budget, so the first part must have had the same budget, or no growth and
+/// a constant rate; a finished fit continued with a larger budget starts its anneal again
+/// from where the new budget puts it) and a budget of steps (a budget
 /// of seconds stops where the clock says). The occupancy grid is part of the state; a start
 /// without one (or one saved by a uniform fit) begins with every cell occupied until the next
 /// refresh.
@@ -374,10 +400,11 @@ pub fn fit_from<F: Float>(
         Sampling::Uniform => Sampler::Uniform,
         Sampling::Occupancy => Sampler::Occupancy(occupancy_grid(config.grid)?),
     };
-    if let (Sampler::Occupancy(grid), Some(state)) = (&mut sampler, resumed.as_ref().and_then(|t| t.occupancy.as_ref())) {
+    if let (Sampler::Occupancy(grid), Some(state)) = (&mut sampler, resumed.as_ref().and_then(|t| t.occupancy.as_ref()))
+    {
         grid.restore(state)?;
     }
-    let mut prior = TotalVariation::new(config.smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
+    let prior = TotalVariation::new(config.smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
     let adam_config = AdamConfig {
         lr: config.lr,
         ..AdamConfig::default()
@@ -426,17 +453,7 @@ pub fn fit_from<F: Float>(
             adam = Adam::new(adam_config)?;
             next_stage += 1;
         }
-        {
-            let f = fraction(step, seconds);
-            let lr_final: f64 = std::env::var("XLR_FINAL").ok().and_then(|v| v.parse().ok()).unwrap_or(config.lr);
-            let d0: f64 = std::env::var("XDECAY_START").ok().and_then(|v| v.parse().ok()).unwrap_or(0.3);
-            let tv_final: f64 = std::env::var("XTV_FINAL").ok().and_then(|v| v.parse().ok()).unwrap_or(config.smoothness);
-            if f > d0 {
-                let u = ((f - d0) / (1.0 - d0)).min(1.0);
-                adam.set_lr(config.lr * (lr_final / config.lr).powf(u))?;
-                prior = TotalVariation::new(config.smoothness + (tv_final - config.smoothness) * u).unwrap();
-            }
-        }
+        adam.set_lr(learning_rate(config, fraction(step, seconds)))?;
         let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();
         let rays = batch_of::<F>(&data.origins, &data.directions, &rows)?;
         let samples = sample_rays(sampler.occupancy(), &rays, model.voxel() / 2.0)?;

@@ -153,9 +153,13 @@ struct FitArgs {
     /// Seed of the batches.
     #[arg(long, default_value_t = 0)]
     seed: u64,
-    /// Adam's learning rate.
+    /// Adam's learning rate, until 60 % of the budget.
     #[arg(long, default_value_t = 0.2)]
     lr: f64,
+    /// Adam's learning rate at the end: from 60 % of the budget on it falls geometrically
+    /// from --lr to this (pass the --lr value for a constant rate).
+    #[arg(long, default_value_t = 0.02)]
+    lr_final: f64,
     /// Weight of the total-variation prior on the raw grid (the mean squared difference of
     /// neighbouring nodes) added to the loss; 0 for none.
     #[arg(long, default_value_t = 3e-4)]
@@ -457,6 +461,7 @@ fn flag_config(args: &FitArgs) -> FitConfig {
         },
         seed: args.seed,
         lr: args.lr,
+        lr_final: args.lr_final,
         grow: !args.no_grow,
         smoothness: args.tv,
         ..FitConfig::default()
@@ -494,6 +499,11 @@ fn resumed_settings(
         },
         seed: if pick("seed") { flags.seed } else { file.seed },
         lr: if pick("lr") { flags.lr } else { file.lr },
+        lr_final: if pick("lr_final") {
+            flags.lr_final
+        } else {
+            file.lr_final
+        },
         grow: if pick("no_grow") { flags.grow } else { file.grow },
         smoothness: if pick("tv") { flags.smoothness } else { file.smoothness },
         ..file

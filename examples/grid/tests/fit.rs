@@ -162,3 +162,42 @@ fn densities_are_the_softplus_of_the_shifted_raw_density() {
     assert!((outside[0] - (-2f64).exp().ln_1p()).abs() < 1e-16);
     assert!(GridModel::<f32>::new(3, f64::NAN).is_err());
 }
+
+#[test]
+fn the_learning_rate_anneals_geometrically_over_the_end_of_the_budget() {
+    use fogray_grid::fit::{learning_rate, ANNEAL_START};
+    let config = FitConfig {
+        lr: 0.2,
+        lr_final: 0.02,
+        ..FitConfig::default()
+    };
+    for f in [0.0, 0.3, ANNEAL_START] {
+        assert_eq!(learning_rate(&config, f), 0.2);
+    }
+    // Halfway through the anneal the rate is the geometric mean, sqrt(0.2 * 0.02).
+    let mid = ANNEAL_START + 0.5 * (1.0 - ANNEAL_START);
+    assert!((learning_rate(&config, mid) - 0.004f64.sqrt()).abs() < 1e-15);
+    assert!((learning_rate(&config, 1.0) - 0.02).abs() < 1e-15);
+    assert!((learning_rate(&config, 1.5) - 0.02).abs() < 1e-15);
+    let constant = FitConfig {
+        lr_final: 0.2,
+        ..config
+    };
+    assert_eq!(learning_rate(&constant, 0.9), 0.2);
+    // Bad rates are refused before any step.
+    let data = {
+        let ring = Ring::new(4, 1, 4).unwrap();
+        let scene = Scene::default();
+        Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap()
+    };
+    for bad in [
+        FitConfig {
+            lr_final: 0.0,
+            ..config
+        },
+        FitConfig { lr: f64::NAN, ..config },
+    ] {
+        let e = fit::<f32>(&data, &bad, &mut |_| {}).unwrap_err();
+        assert!(e.to_string().contains("must be finite and positive"), "{e}");
+    }
+}

@@ -129,21 +129,25 @@ fn split_equals_whole<F: Float>(config: FitConfig, total: usize, k: usize, stopp
 
 #[test]
 fn k_steps_saved_and_continued_equal_2k_steps_bitwise() {
+    // A constant rate and no growth: the first part's budget of k steps does what the first k
+    // steps of the whole's do.
     let base = FitConfig {
         grid: 6,
         batch: 128,
         lr: 0.2,
+        lr_final: 0.2,
         grow: false,
         sampling: Sampling::Uniform,
         ..FitConfig::default()
     };
     split_equals_whole::<f32>(base, 12, 6, false, "split-f32.safetensors");
     split_equals_whole::<f64>(base, 12, 6, false, "split-f64.safetensors");
-    // A growing grid (3, 5 then 10 nodes from steps 2 and 6 of 20), stopped between stages
-    // after step 4 and continued through the growth.
+    // A growing grid (3, 5 then 10 nodes from steps 2 and 6 of 20) with an annealed rate,
+    // stopped between stages after step 4 and continued through the growth and the anneal.
     let growing = FitConfig {
         grid: 10,
         grow: true,
+        lr_final: 0.02,
         ..base
     };
     split_equals_whole::<f32>(growing, 20, 4, true, "split-grow.safetensors");
@@ -158,6 +162,7 @@ fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
         grid: 6,
         batch: 64,
         lr: 0.2,
+        lr_final: 0.2,
         grow: false,
         sampling: Sampling::Occupancy,
         ..FitConfig::default()
@@ -167,7 +172,15 @@ fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
     // The grid in the file is the one the fit had, and it is not the fresh grid a file
     // without one would give.
     let data = data();
-    let first = run::<f32>(&data, &FitConfig { budget: Budget::Steps(72), ..occupancy }, None, None);
+    let first = run::<f32>(
+        &data,
+        &FitConfig {
+            budget: Budget::Steps(72),
+            ..occupancy
+        },
+        None,
+        None,
+    );
     let fraction = first.occupancy.as_ref().unwrap().occupied_fraction();
     assert!(fraction < 1.0, "{fraction}");
     let file = temp("occupancy.safetensors");

@@ -25,12 +25,47 @@ const TINY: [&str; 10] = [
 ];
 
 #[test]
+fn a_saved_occupancy_model_renders_bitwise_as_the_fit() {
+    // 80 steps: the occupancy grid is refreshed at steps 64 and 80, so it is no longer the
+    // fresh all-occupied grid; `render` uses the saved one.
+    let dir = temp_dir("render-occupancy");
+    let (model, renders) = (dir.join("m.safetensors"), dir.join("renders.json"));
+    let (model_s, renders_s) = (model.to_str().unwrap(), renders.to_str().unwrap());
+    ok(&[
+        &["fit"],
+        &TINY[..],
+        &[
+            "--steps",
+            "80",
+            "--json",
+            "--save-model",
+            model_s,
+            "--save-renders",
+            renders_s,
+        ],
+    ]
+    .concat());
+    let out_dir = dir.join("pngs");
+    let rendered = ok(&[
+        "render",
+        "--model",
+        model_s,
+        "--json",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    let fit: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&renders).unwrap()).unwrap();
+    let render: serde_json::Value = serde_json::from_str(&rendered).unwrap();
+    assert_eq!(render["images"], fit["images"]);
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
 fn saved_models_render_as_the_fit_and_resume() {
     let dir = temp_dir("render");
     let (model, renders) = (dir.join("m.safetensors"), dir.join("renders.json"));
     let (model_s, renders_s) = (model.to_str().unwrap(), renders.to_str().unwrap());
-    // Uniform sampling: its renders need nothing but the saved grid (an occupancy grid is not
-    // saved, and `render` rebuilds one from the density).
+    // Uniform sampling: its renders need nothing but the saved grid.
     let fit_args = [
         &TINY[..],
         &[
