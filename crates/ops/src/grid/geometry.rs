@@ -82,6 +82,10 @@ pub(crate) struct AxisMap {
     pub(crate) scale: f64,
     /// `n - 2`, the index of the last cell.
     pub(crate) last_cell: usize,
+    /// `n - 1` as a float: where `u` ends.
+    end: f64,
+    /// `last_cell` as a signed integer (see [`AxisMap::locate`]).
+    last_signed: i64,
 }
 
 impl AxisMap {
@@ -92,6 +96,9 @@ impl AxisMap {
             max,
             scale: cells / (max - min),
             last_cell: nodes - 2,
+            end: cells,
+            // A grid's values fit in memory, so an axis's node count fits in an i64.
+            last_signed: (nodes - 2) as i64,
         }
     }
 
@@ -103,9 +110,12 @@ impl AxisMap {
             return None;
         }
         // u >= 0 here; rounding may carry the max face a hair past n - 1, hence the clamp.
-        let u = ((p - self.min) * self.scale).min((self.last_cell + 1) as f64);
-        let i = (u as usize).min(self.last_cell);
-        Some((i, u - i as f64))
+        let u = ((p - self.min) * self.scale).min(self.end);
+        // u is finite and in [0, n - 1], so truncating through i64 gives floor(u) as a
+        // conversion to usize would; the signed conversions are one instruction each on
+        // x86_64, the unsigned ones a branchy sequence (most of this function's time).
+        let i = (u as i64).min(self.last_signed);
+        Some((i as usize, u - i as f64))
     }
 }
 

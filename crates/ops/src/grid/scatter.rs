@@ -213,12 +213,14 @@ fn sum_slabs<F: Float, const D: usize>(
             if j < tiles.slabs {
                 let task = SlabTask { layout, slab: j, tiles };
                 match ch {
-                    // A constant channel count lets the compiler unroll the channel loop.
-                    1 => task.sum(blocks, dst, 1),
-                    2 => task.sum(blocks, dst, 2),
-                    3 => task.sum(blocks, dst, 3),
-                    4 => task.sum(blocks, dst, 4),
-                    _ => task.sum(blocks, dst, ch),
+                    // A channel group the compiler knows the width of is summed in vector
+                    // lanes.
+                    1 => task.sum::<F, 1>(blocks, dst, 1),
+                    2 => task.sum::<F, 2>(blocks, dst, 2),
+                    3 => task.sum::<F, 3>(blocks, dst, 3),
+                    4 => task.sum::<F, 4>(blocks, dst, 4),
+                    _ if ch % 4 == 0 => task.sum::<F, 4>(blocks, dst, ch),
+                    _ => task.sum::<F, 1>(blocks, dst, ch),
                 }
             }
         });
@@ -234,12 +236,13 @@ struct SlabTask<'a, const D: usize> {
 
 impl<const D: usize> SlabTask<'_, D> {
     /// Adds the slab's terms, tile by tile, to `dst`: the f64 sums from the slab's first node
-    /// layer on.
+    /// layer on; `ch` channels per row in groups of `G` (`G` divides `ch`).
     #[inline(always)]
-    fn sum<F: Float>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
+    fn sum<F: Float, const G: usize>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
         // The slab's first node, as a linear node index.
         let origin = self.slab * self.tiles.thickness * self.layout.strides[0];
         let first = self.slab * self.tiles.per_slab;
+        let corners = &self.layout.corners[..1 << D];
         for tile in first..first + self.tiles.per_slab {
             for block in blocks {
                 let (lo, hi) = (block.starts[tile] as usize, block.starts[tile + 1] as usize);
@@ -250,10 +253,15 @@ impl<const D: usize> SlabTask<'_, D> {
                         continue;
                     };
                     let w = weights(cell.t);
-                    for (k, &corner) in self.layout.corners[..1 << D].iter().enumerate() {
-                        let row = &mut dst[(cell.node - origin + corner) * ch..][..ch];
-                        for (a, &v) in row.iter_mut().zip(g) {
-                            *a += w[k] * v.as_f64();
+                    let rows = &mut dst[(cell.node - origin) * ch..];
+                    for (group, g) in g.chunks_exact(G).enumerate() {
+                        let g: [f64; G] = std::array::from_fn(|c| g[c].as_f64());
+                        for (&wk, &corner) in w.iter().zip(corners) {
+                            let at = corner * ch + group * G;
+                            let row: &mut [f64; G] = (&mut rows[at..at + G]).try_into().expect("G values");
+                            for c in 0..G {
+                                row[c] += wk * g[c];
+                            }
                         }
                     }
                 }
