@@ -90,11 +90,33 @@ impl Tiles {
     fn count(&self) -> usize {
         self.slabs * self.per_slab
     }
+}
+
+/// The tile of a cell from two tables, one entry per cell layer and per cell row: two loads
+/// where [`Tiles`]' arithmetic takes two integer divisions, the slowest instructions of the
+/// sort.
+struct TileOf {
+    /// The first tile of each cell layer's slab.
+    layer: Vec<u32>,
+    /// Each cell row's tile within its slab.
+    row: Vec<u32>,
+}
+
+impl TileOf {
+    fn new<const D: usize>(layout: &Layout<D>, tiles: Tiles) -> Self {
+        let cells = |a: usize| layout.axes[a].last_cell + 1;
+        TileOf {
+            layer: (0..cells(0))
+                .map(|i| ((i / tiles.thickness) * tiles.per_slab) as u32)
+                .collect(),
+            row: (0..cells(1)).map(|i| (i / tiles.rows) as u32).collect(),
+        }
+    }
 
     /// The tile of the cell with indices `i0` and `i1` along axes 0 and 1.
     #[inline(always)]
-    fn of(&self, i0: usize, i1: usize) -> usize {
-        (i0 / self.thickness) * self.per_slab + i1 / self.rows
+    fn of(&self, i0: usize, i1: usize) -> u32 {
+        self.layer[i0] + self.row[i1]
     }
 }
 
@@ -103,6 +125,7 @@ fn sort_block<F: Float, const D: usize>(
     sorted: &mut Sorted<F>,
     layout: &Layout<D>,
     tiles: Tiles,
+    tile_of: &TileOf,
     positions: &[F],
     upstream: &[F],
     ch: usize,
@@ -119,7 +142,7 @@ fn sort_block<F: Float, const D: usize>(
         }
         layout
             .locate(position::<F, D>(positions, s))
-            .map_or(skip, |c| tiles.of(c.index[0], c.index[1])) as u32
+            .map_or(skip as u32, |c| tile_of.of(c.index[0], c.index[1]))
     }));
     starts.clear();
     starts.resize(skip + 2, 0);
@@ -164,13 +187,14 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
     scratch: &Scratch,
 ) {
     let tiles = Tiles::new(layout, ch);
+    let tile_of = TileOf::new(layout, tiles);
     let mut blocks: Vec<Sorted<F>> = scratch.take_blocks();
     blocks.resize_with(positions.len().div_ceil(BLOCK * D), Sorted::default);
     blocks
         .par_iter_mut()
         .zip(positions.par_chunks(BLOCK * D))
         .zip(upstream.par_chunks(BLOCK * ch))
-        .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, p, g, ch));
+        .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, &tile_of, p, g, ch));
     // f64 data sums in place; f32 data in an f64 buffer rounded once at the end.
     if let Some(out) = (out as &mut dyn Any).downcast_mut::<Vec<f64>>() {
         sum_slabs(layout, tiles, &blocks, ch, out);
@@ -290,5 +314,22 @@ mod tests {
         let bbox = GridBox::new(&[0.0; 2], &[1.0; 2]).unwrap();
         let t = Tiles::new(&Layout::<2>::new(&bbox, &[9, 4096]), 4);
         assert_eq!((t.thickness, t.slabs, t.rows, t.per_slab), (1, 8, 2047, 3));
+    }
+
+    #[test]
+    fn tile_tables_agree_with_the_division() {
+        let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).unwrap();
+        for (nodes, ch) in [([128, 128, 128], 4), ([9, 6, 5], 3), ([70, 33, 2], 1)] {
+            let layout = Layout::<3>::new(&bbox, &nodes);
+            let tiles = Tiles::new(&layout, ch);
+            let tile_of = TileOf::new(&layout, tiles);
+            for i0 in 0..nodes[0] - 1 {
+                for i1 in 0..nodes[1] - 1 {
+                    let want = (i0 / tiles.thickness) * tiles.per_slab + i1 / tiles.rows;
+                    assert_eq!(tile_of.of(i0, i1) as usize, want, "{nodes:?} cell ({i0}, {i1})");
+                    assert!(want < tiles.count());
+                }
+            }
+        }
     }
 }
