@@ -13,8 +13,6 @@
 //! 2^20 equal terms is off by several percent), in one buffer the size of the grid, rounded
 //! once at the end. Nothing depends on the thread count, so neither does any bit of the result.
 
-use std::any::Any;
-
 use fogray_tape::Float;
 use rayon::prelude::*;
 
@@ -173,17 +171,15 @@ fn sort_block<F: Float, const D: usize>(
     }
 }
 
-/// Adds `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
-/// (`[n, D]`, flat) into `out` (the grid's shape, flat; zeros on entry), with the working
-/// memory kept in `scratch`.
-// A Vec, not a slice: recognising f64 data by downcasting needs a sized type.
-#[allow(clippy::ptr_arg)]
+/// Writes `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
+/// (`[n, D]`, flat) into `out` (the grid's shape, flat; every value written), with the
+/// working memory kept in `scratch`.
 pub(crate) fn grid_gradient<F: Float, const D: usize>(
     layout: &Layout<D>,
     positions: &[F],
     upstream: &[F],
     ch: usize,
-    out: &mut Vec<F>,
+    out: &mut [F],
     scratch: &Scratch,
 ) {
     let tiles = Tiles::new(layout, ch);
@@ -195,23 +191,19 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
         .zip(positions.par_chunks(BLOCK * D))
         .zip(upstream.par_chunks(BLOCK * ch))
         .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, &tile_of, p, g, ch));
-    // f64 data sums in place; f32 data in an f64 buffer rounded once at the end.
-    if let Some(out) = (out as &mut dyn Any).downcast_mut::<Vec<f64>>() {
-        sum_slabs(layout, tiles, &blocks, ch, out);
-    } else {
-        let mut acc = scratch.take_zeros(out.len());
-        sum_slabs(layout, tiles, &blocks, ch, &mut acc);
-        out.par_chunks_mut(1 << 16)
-            .zip(acc.par_chunks_mut(1 << 16))
-            .for_each(|(o, a)| {
-                for (o, a) in o.iter_mut().zip(a) {
-                    *o += F::lit(*a);
-                    // The kept sums must be zeros for the next call.
-                    *a = 0.0;
-                }
-            });
-        scratch.give_zeros(acc);
-    }
+    // The sums go to kept f64 zeros, are rounded once into `out` (which therefore needs no
+    // zeros of its own: one pass over it, in either precision) and cleared for the next call.
+    let mut acc = scratch.take_zeros(out.len());
+    sum_slabs(layout, tiles, &blocks, ch, &mut acc);
+    out.par_chunks_mut(1 << 16)
+        .zip(acc.par_chunks_mut(1 << 16))
+        .for_each(|(o, a)| {
+            for (o, a) in o.iter_mut().zip(a) {
+                *o = F::lit(*a);
+                *a = 0.0;
+            }
+        });
+    scratch.give_zeros(acc);
     scratch.give_blocks(blocks);
 }
 
