@@ -4,7 +4,8 @@
 //! 128^3 x 4 and 64^3 x 4 grids, as `fogray bench --op grid` measures them; and the grid
 //! example's case (`grid/<prec>/fused-rays/64^3x4`): 8192 rays through random points of the
 //! box in random directions, a sample every half cell, in ray order, so that consecutive
-//! lookups fall in neighbouring cells.
+//! lookups fall in neighbouring cells; `fused-rays-into` runs them through `evaluate_into` and
+//! `vjp_into` into buffers kept across runs.
 //!
 //! `cargo bench --bench grid` runs them all; `cargo bench --bench grid -- fused/f32` selects.
 //! `fogray bench --op grid` gives the same speeds beside each method's error and memory.
@@ -13,7 +14,7 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use fogray::ops::grid::twin;
-use fogray::ops::{GridBox, GridField, GridWanted};
+use fogray::ops::{GridBox, GridField, GridGradientBuffers, GridWanted};
 use fogray::tape::{Float, Tape};
 use ndarray::{Array2, ArrayD, IxDyn};
 use rand::{Rng, SeedableRng};
@@ -86,6 +87,21 @@ fn fused<F: Float>(x: &Inputs<F>, backward: bool) {
     black_box(out);
 }
 
+/// Forward + backward into the grid through `evaluate_into` / `vjp_into`, into buffers kept
+/// across runs (a training loop's steady state).
+fn fused_into<F: Float>(x: &Inputs<F>, out: &mut ArrayD<F>, dgrid: &mut ArrayD<F>) {
+    let p = x.positions.view().into_dyn();
+    x.field.evaluate_into(&x.grid.view(), &p, &mut out.view_mut()).unwrap();
+    let mut buffers = GridGradientBuffers {
+        grid: Some(dgrid.view_mut()),
+        positions: None,
+    };
+    x.field
+        .vjp_into(&x.grid.view(), &p, &x.upstream.view(), &mut buffers)
+        .unwrap();
+    black_box((out, dgrid));
+}
+
 fn taped<F: Float>(x: &Inputs<F>) {
     let mut tape = Tape::new();
     let grid = tape.param(x.grid.clone());
@@ -130,6 +146,11 @@ fn bench_rays<F: Float>(c: &mut Criterion) {
     });
     group.bench_with_input(BenchmarkId::new("fused-rays-forward", &id), &x, |b, x| {
         b.iter(|| fused(x, false))
+    });
+    let mut out = ArrayD::zeros(vec![n, CHANNELS]);
+    let mut dgrid = ArrayD::zeros(x.grid.shape());
+    group.bench_with_input(BenchmarkId::new("fused-rays-into", &id), &x, |b, x| {
+        b.iter(|| fused_into(x, &mut out, &mut dgrid))
     });
     group.finish();
 }

@@ -61,5 +61,5 @@ pub use composite::{
 };
 pub use error::{CompositeError, FieldError, GeometryError, GridError, PriorError, SampleError};
 pub use field::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
-pub use grid::{GridBox, GridField, GridGradients, GridWanted};
+pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted};
 pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

@@ -3,7 +3,7 @@
 
 mod grid_common;
 
-use fogray_ops::{GridBox, GridField, GridWanted};
+use fogray_ops::{GridBox, GridField, GridGradientBuffers, GridWanted};
 use grid_common::random_field;
 use ndarray::{Array2, Array4, ArrayD};
 use rand::{Rng, SeedableRng};
@@ -199,4 +199,55 @@ fn kept_buffers_leave_no_trace() {
     }
     kept.release_buffers();
     assert_eq!(grad(&kept, &cases[0], true), grad(&field, &cases[0], true));
+}
+
+/// The training loop's path: ray-ordered lookups with 8 channels (summed in groups of 4)
+/// through `evaluate_into` and `vjp_into`, into kept buffers first filled with NaN. On 1, 2 and
+/// 3 threads the f32 results are bitwise the same, every value is written, the output is the
+/// f64 oracle's within f32 rounding of its terms, and the grid gradient is the f64 oracle's
+/// rounded once.
+#[test]
+fn ray_ordered_lookups_into_kept_buffers_with_channel_groups() {
+    let ch = 8;
+    let (field, grid) = random_field(31, &[24, 20, 28], ch);
+    let pts = ray_ordered(32, &field, 900);
+    assert!(
+        pts.nrows() > 32_768,
+        "{} samples: more than one sorting block",
+        pts.nrows()
+    );
+    let mut rng = rand::rngs::StdRng::seed_from_u64(33);
+    let up = Array2::from_shape_fn((pts.nrows(), ch), |_| f64::from(rng.gen_range(-1.0f32..1.0)));
+    let (grid32, pts32, up32) = (grid.mapv(|v| v as f32), pts.mapv(|v| v as f32), up.mapv(|v| v as f32));
+    let mut out = ArrayD::from_elem(vec![pts.nrows(), ch], f32::NAN);
+    let mut dgrid = ArrayD::from_elem(field.shape(), f32::NAN);
+    let mut dpos = ArrayD::from_elem(vec![pts.nrows(), 3], f32::NAN);
+    let mut run = |threads: usize| -> Vec<Vec<u32>> {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let (g, p, u) = (grid32.view(), pts32.view().into_dyn(), up32.view().into_dyn());
+            field.evaluate_into(&g, &p, &mut out.view_mut()).unwrap();
+            let mut buffers = GridGradientBuffers {
+                grid: Some(dgrid.view_mut()),
+                positions: Some(dpos.view_mut()),
+            };
+            field.vjp_into(&g, &p, &u, &mut buffers).unwrap();
+        });
+        [&out, &dgrid, &dpos]
+            .map(|a| a.iter().map(|v| v.to_bits()).collect())
+            .to_vec()
+    };
+    let one = run(1);
+    for threads in [2, 3] {
+        assert_eq!(one, run(threads), "{threads} threads");
+    }
+    let exact_out = grid_common::oracle(&field, &grid32.mapv(f64::from), &pts32.mapv(f64::from));
+    for (&got, &want) in out.iter().zip(exact_out.iter()) {
+        assert!((f64::from(got) - want).abs() <= 4e-7, "{got} vs {want}");
+    }
+    let exact = grid_common::oracle_grid_gradient(&field, &pts32.mapv(f64::from), &up);
+    for (&got, &want) in dgrid.iter().zip(exact.iter()) {
+        assert_eq!(got, want as f32, "{got} vs {want}");
+    }
+    assert!(dpos.iter().all(|v| v.is_finite()));
 }

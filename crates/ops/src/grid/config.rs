@@ -14,7 +14,7 @@ use crate::error::GridError;
 /// passed to [`GridField::apply`] (or arrays passed to [`GridField::evaluate`]).
 ///
 /// It also keeps the working memory of its backward into the grid between calls (about
-/// `(D + C)` values per lookup, and for f32 data 8 bytes per grid value), shared with its
+/// `(D + C)` values per lookup, and 8 bytes per grid value for its f64 sums), shared with its
 /// clones, so that a training loop's steps reuse it instead of faulting in fresh pages;
 /// [`GridField::release_buffers`] gives it back.
 #[derive(Debug, Clone, PartialEq)]
@@ -41,6 +41,16 @@ pub struct GridGradients<F: Float> {
     pub grid: Option<ndarray::ArrayD<F>>,
     /// `dL/dpositions`, `[n, D]`.
     pub positions: Option<ndarray::ArrayD<F>>,
+}
+
+/// Buffers [`GridField::vjp_into`] writes the gradients into: each `Some` is a gradient
+/// wanted, a contiguous array in standard (row-major) order whose every value is overwritten.
+#[derive(Debug)]
+pub struct GridGradientBuffers<'a, F> {
+    /// `dL/dgrid`, the grid's shape.
+    pub grid: Option<ndarray::ArrayViewMutD<'a, F>>,
+    /// `dL/dpositions`, `[n, D]`.
+    pub positions: Option<ndarray::ArrayViewMutD<'a, F>>,
 }
 
 impl GridField {

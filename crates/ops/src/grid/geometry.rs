@@ -82,6 +82,10 @@ pub(crate) struct AxisMap {
     pub(crate) scale: f64,
     /// `n - 2`, the index of the last cell.
     pub(crate) last_cell: usize,
+    /// `n - 1` as a float: where `u` ends.
+    end: f64,
+    /// `last_cell` as a signed integer (see [`AxisMap::cell`]).
+    last_signed: i64,
 }
 
 impl AxisMap {
@@ -92,20 +96,38 @@ impl AxisMap {
             max,
             scale: cells / (max - min),
             last_cell: nodes - 2,
+            end: cells,
+            // A grid's values fit in memory, so an axis's node count fits in an i64.
+            last_signed: (nodes - 2) as i64,
         }
+    }
+
+    /// Whether `p` lies in the axis's closed range (false for NaN).
+    #[inline(always)]
+    fn contains(&self, p: f64) -> bool {
+        (p >= self.min) & (p <= self.max)
     }
 
     /// The cell and the fraction within it of coordinate `p`, or `None` outside the axis's
     /// range (or for NaN).
-    #[inline(always)]
+    #[cfg(test)]
     pub(crate) fn locate(&self, p: f64) -> Option<(usize, f64)> {
-        if !(p >= self.min && p <= self.max) {
-            return None;
-        }
-        // u >= 0 here; rounding may carry the max face a hair past n - 1, hence the clamp.
-        let u = ((p - self.min) * self.scale).min((self.last_cell + 1) as f64);
-        let i = (u as usize).min(self.last_cell);
-        Some((i, u - i as f64))
+        self.contains(p).then(|| self.cell(p))
+    }
+
+    /// The cell and the fraction within it of a coordinate `p` in the axis's range.
+    #[inline(always)]
+    fn cell(&self, p: f64) -> (usize, f64) {
+        debug_assert!(self.contains(p));
+        // u >= 0 here (or NaN, from an infinite scale); rounding may carry the max face a
+        // hair past n - 1, hence the clamp, which also turns a NaN into n - 1 (`f64::min`
+        // returns the other operand): u is a finite number in [0, n - 1].
+        let u = ((p - self.min) * self.scale).min(self.end);
+        // SAFETY: u is finite and in [0, n - 1] (above), and n - 1 fits in an i64 (a grid's
+        // values fit in memory), so the truncation is defined; it is floor(u). The checked
+        // conversions cost a branchy sequence each, most of this function's time.
+        let i = unsafe { u.to_int_unchecked::<i64>() }.min(self.last_signed);
+        (i as usize, u - i as f64)
     }
 }
 
@@ -147,11 +169,20 @@ impl<const D: usize> Layout<D> {
     /// The cell of position `p`, or `None` if it lies outside the box.
     #[inline(always)]
     pub(crate) fn locate(&self, p: [f64; D]) -> Option<Cell<D>> {
+        // One branch for the whole position (most lie inside).
+        if !self
+            .axes
+            .iter()
+            .zip(&p)
+            .fold(true, |inside, (axis, &x)| inside & axis.contains(x))
+        {
+            return None;
+        }
         let mut node = 0;
         let mut index = [0; D];
         let mut t = [0.0; D];
         for a in 0..D {
-            let (i, f) = self.axes[a].locate(p[a])?;
+            let (i, f) = self.axes[a].cell(p[a]);
             node += i * self.strides[a];
             index[a] = i;
             t[a] = f;
@@ -208,6 +239,13 @@ mod tests {
         assert_eq!(axis.locate(4.000000000000001), None);
         assert_eq!(axis.locate(f64::INFINITY), None);
         assert_eq!(axis.locate(f64::NAN), None);
+        // A box too thin for its scale to be finite: (p - min) * scale is NaN at p = min,
+        // which the clamp turns into n - 1, a cell in range (the unchecked conversion needs
+        // a finite u in [0, n - 1]).
+        let thin = AxisMap::new(0.0, 5e-324, 3);
+        assert_eq!(thin.scale, f64::INFINITY);
+        assert_eq!(thin.locate(0.0), Some((1, 1.0)));
+        assert_eq!(thin.locate(5e-324), Some((1, 1.0)));
     }
 
     #[test]

@@ -63,5 +63,5 @@ mod scatter;
 mod scratch;
 pub mod twin;
 
-pub use config::{GridField, GridGradients, GridWanted};
+pub use config::{GridField, GridGradientBuffers, GridGradients, GridWanted};
 pub use geometry::GridBox;

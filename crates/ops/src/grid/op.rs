@@ -3,13 +3,13 @@
 
 use std::borrow::Cow;
 
-use fogray_tape::buffer::{scratch, zeroed};
+use fogray_tape::buffer::scratch;
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
-use ndarray::{ArrayD, ArrayViewD, IxDyn};
+use ndarray::{ArrayD, ArrayViewD, ArrayViewMutD, IxDyn};
 use rayon::prelude::*;
 
 use super::backward::position_gradient;
-use super::config::{GridField, GridGradients, GridWanted};
+use super::config::{GridField, GridGradientBuffers, GridGradients, GridWanted};
 use super::forward::{forward, CHUNK};
 use super::geometry::Layout;
 use super::scatter::grid_gradient;
@@ -28,6 +28,26 @@ fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, GridError
         what: "output",
         expected: format!("{shape:?}"),
         got: e.to_string(),
+    })
+}
+
+/// A caller's buffer as a flat slice: of shape `shape`, contiguous in standard order.
+fn buffer<'a, F: Float>(
+    what: &'static str,
+    b: &'a mut ArrayViewMutD<'_, F>,
+    shape: &[usize],
+) -> Result<&'a mut [F], GridError> {
+    if b.shape() != shape {
+        return Err(GridError::Shape {
+            what,
+            expected: format!("{shape:?}"),
+            got: format!("{:?}", b.shape()),
+        });
+    }
+    b.as_slice_mut().ok_or_else(|| GridError::Shape {
+        what,
+        expected: "a contiguous array in standard (row-major) order".into(),
+        got: "a strided view".into(),
     })
 }
 
@@ -93,26 +113,47 @@ impl GridField {
         positions: &ArrayViewD<'_, F>,
     ) -> Result<ArrayD<F>, GridError> {
         let x = self.check(grid, positions)?;
+        // The forward writes every value, so no zeros first.
+        let mut out = scratch(x.n * self.channels());
+        self.forward_flat(&x, &mut out);
+        array(&[x.n, self.channels()], out)
+    }
+
+    /// [`GridField::evaluate`] into `out`, a buffer the caller keeps (`[n, C]`, contiguous in
+    /// standard order; every value overwritten): a training loop then allocates nothing.
+    ///
+    /// Errors: as [`GridField::evaluate`], and an `out` of another shape or strided
+    /// ([`GridError::Shape`]); `out` is unchanged on error.
+    pub fn evaluate_into<F: Float>(
+        &self,
+        grid: &ArrayViewD<'_, F>,
+        positions: &ArrayViewD<'_, F>,
+        out: &mut ArrayViewMutD<'_, F>,
+    ) -> Result<(), GridError> {
+        let x = self.check(grid, positions)?;
+        let out = buffer("output buffer", out, &[x.n, self.channels()])?;
+        self.forward_flat(&x, out);
+        Ok(())
+    }
+
+    fn forward_flat<F: Float>(&self, x: &Checked<'_, F>, out: &mut [F]) {
         let ch = self.channels();
-        // forward writes every value, so no zeros first.
-        let mut out = scratch(x.n * ch);
         match self.dims() {
             2 => forward(
                 &Layout::<2>::new(&self.bbox, self.nodes()),
                 &x.grid,
                 &x.positions,
                 ch,
-                &mut out,
+                out,
             ),
             _ => forward(
                 &Layout::<3>::new(&self.bbox, self.nodes()),
                 &x.grid,
                 &x.positions,
                 ch,
-                &mut out,
+                out,
             ),
         }
-        array(&[x.n, ch], out)
     }
 
     /// The gradients of a loss `L` with `upstream = dL/doutput` (`[n, C]`) for the lookup of
@@ -131,6 +172,55 @@ impl GridField {
         upstream: &ArrayViewD<'_, F>,
         wanted: GridWanted,
     ) -> Result<GridGradients<F>, GridError> {
+        let (x, g) = self.check_vjp(grid, positions, upstream)?;
+        // Both gradients are written whole, so no zeros first.
+        let mut grid_out = wanted.grid.then(|| scratch(x.grid.len()));
+        let mut positions_out = wanted.positions.then(|| scratch(x.positions.len()));
+        self.gradients_flat(&x, &g, grid_out.as_deref_mut(), positions_out.as_deref_mut());
+        Ok(GridGradients {
+            grid: grid_out.map(|v| array(&self.shape, v)).transpose()?,
+            positions: positions_out.map(|v| array(&[x.n, self.dims()], v)).transpose()?,
+        })
+    }
+
+    /// [`GridField::vjp`] into buffers the caller keeps: the gradients wanted are those whose
+    /// buffer is `Some` (the grid's shape, and `[n, D]`), every value overwritten. Gives the
+    /// same bits as [`GridField::vjp`].
+    ///
+    /// Errors: as [`GridField::vjp`], and a buffer of another shape or strided
+    /// ([`GridError::Shape`]); no buffer is changed on error.
+    pub fn vjp_into<F: Float>(
+        &self,
+        grid: &ArrayViewD<'_, F>,
+        positions: &ArrayViewD<'_, F>,
+        upstream: &ArrayViewD<'_, F>,
+        out: &mut GridGradientBuffers<'_, F>,
+    ) -> Result<(), GridError> {
+        let (x, g) = self.check_vjp(grid, positions, upstream)?;
+        let GridGradientBuffers {
+            grid: grid_out,
+            positions: positions_out,
+        } = out;
+        // Every buffer is checked before any is written.
+        let grid_out = grid_out
+            .as_mut()
+            .map(|b| buffer("grid gradient buffer", b, &self.shape))
+            .transpose()?;
+        let positions_out = positions_out
+            .as_mut()
+            .map(|b| buffer("position gradient buffer", b, &[x.n, self.dims()]))
+            .transpose()?;
+        self.gradients_flat(&x, &g, grid_out, positions_out);
+        Ok(())
+    }
+
+    /// Checks the backward's inputs; the upstream gradient, flat.
+    fn check_vjp<'a, F: Float>(
+        &self,
+        grid: &'a ArrayViewD<'_, F>,
+        positions: &'a ArrayViewD<'_, F>,
+        upstream: &'a ArrayViewD<'_, F>,
+    ) -> Result<(Checked<'a, F>, Cow<'a, [F]>), GridError> {
         let x = self.check(grid, positions)?;
         let ch = self.channels();
         if upstream.shape() != [x.n, ch] {
@@ -140,10 +230,31 @@ impl GridField {
                 got: format!("{:?}", upstream.shape()),
             });
         }
-        let g = flat(upstream);
+        Ok((x, flat(upstream)))
+    }
+
+    fn gradients_flat<F: Float>(
+        &self,
+        x: &Checked<'_, F>,
+        upstream: &[F],
+        grid_out: Option<&mut [F]>,
+        positions_out: Option<&mut [F]>,
+    ) {
         match self.dims() {
-            2 => self.gradients(&Layout::<2>::new(&self.bbox, self.nodes()), &x, &g, wanted),
-            _ => self.gradients(&Layout::<3>::new(&self.bbox, self.nodes()), &x, &g, wanted),
+            2 => self.gradients(
+                &Layout::<2>::new(&self.bbox, self.nodes()),
+                x,
+                upstream,
+                grid_out,
+                positions_out,
+            ),
+            _ => self.gradients(
+                &Layout::<3>::new(&self.bbox, self.nodes()),
+                x,
+                upstream,
+                grid_out,
+                positions_out,
+            ),
         }
     }
 
@@ -152,25 +263,16 @@ impl GridField {
         layout: &Layout<D>,
         x: &Checked<'_, F>,
         upstream: &[F],
-        wanted: GridWanted,
-    ) -> Result<GridGradients<F>, GridError> {
+        grid_out: Option<&mut [F]>,
+        positions_out: Option<&mut [F]>,
+    ) {
         let ch = self.channels();
-        let grid = if wanted.grid {
-            let mut out = zeroed(x.grid.len());
-            grid_gradient(layout, &x.positions, upstream, ch, &mut out, &self.scratch);
-            Some(array(&self.shape, out)?)
-        } else {
-            None
-        };
-        let positions = if wanted.positions {
-            // position_gradient writes every value.
-            let mut out = scratch(x.positions.len());
-            position_gradient(layout, &x.grid, &x.positions, upstream, ch, &mut out);
-            Some(array(&[x.n, D], out)?)
-        } else {
-            None
-        };
-        Ok(GridGradients { grid, positions })
+        if let Some(out) = grid_out {
+            grid_gradient(layout, &x.positions, upstream, ch, out, &self.scratch);
+        }
+        if let Some(out) = positions_out {
+            position_gradient(layout, &x.grid, &x.positions, upstream, ch, out);
+        }
     }
 }
 

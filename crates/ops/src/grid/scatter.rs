@@ -13,8 +13,6 @@
 //! 2^20 equal terms is off by several percent), in one buffer the size of the grid, rounded
 //! once at the end. Nothing depends on the thread count, so neither does any bit of the result.
 
-use std::any::Any;
-
 use fogray_tape::Float;
 use rayon::prelude::*;
 
@@ -90,11 +88,33 @@ impl Tiles {
     fn count(&self) -> usize {
         self.slabs * self.per_slab
     }
+}
+
+/// The tile of a cell from two tables, one entry per cell layer and per cell row: two loads
+/// where [`Tiles`]' arithmetic takes two integer divisions, the slowest instructions of the
+/// sort.
+struct TileOf {
+    /// The first tile of each cell layer's slab.
+    layer: Vec<u32>,
+    /// Each cell row's tile within its slab.
+    row: Vec<u32>,
+}
+
+impl TileOf {
+    fn new<const D: usize>(layout: &Layout<D>, tiles: Tiles) -> Self {
+        let cells = |a: usize| layout.axes[a].last_cell + 1;
+        TileOf {
+            layer: (0..cells(0))
+                .map(|i| ((i / tiles.thickness) * tiles.per_slab) as u32)
+                .collect(),
+            row: (0..cells(1)).map(|i| (i / tiles.rows) as u32).collect(),
+        }
+    }
 
     /// The tile of the cell with indices `i0` and `i1` along axes 0 and 1.
     #[inline(always)]
-    fn of(&self, i0: usize, i1: usize) -> usize {
-        (i0 / self.thickness) * self.per_slab + i1 / self.rows
+    fn of(&self, i0: usize, i1: usize) -> u32 {
+        self.layer[i0] + self.row[i1]
     }
 }
 
@@ -103,6 +123,7 @@ fn sort_block<F: Float, const D: usize>(
     sorted: &mut Sorted<F>,
     layout: &Layout<D>,
     tiles: Tiles,
+    tile_of: &TileOf,
     positions: &[F],
     upstream: &[F],
     ch: usize,
@@ -119,7 +140,7 @@ fn sort_block<F: Float, const D: usize>(
         }
         layout
             .locate(position::<F, D>(positions, s))
-            .map_or(skip, |c| tiles.of(c.index[0], c.index[1])) as u32
+            .map_or(skip as u32, |c| tile_of.of(c.index[0], c.index[1]))
     }));
     starts.clear();
     starts.resize(skip + 2, 0);
@@ -150,44 +171,39 @@ fn sort_block<F: Float, const D: usize>(
     }
 }
 
-/// Adds `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
-/// (`[n, D]`, flat) into `out` (the grid's shape, flat; zeros on entry), with the working
-/// memory kept in `scratch`.
-// A Vec, not a slice: recognising f64 data by downcasting needs a sized type.
-#[allow(clippy::ptr_arg)]
+/// Writes `dL/dgrid` for upstream gradients `upstream` (`[n, ch]`, flat) at `positions`
+/// (`[n, D]`, flat) into `out` (the grid's shape, flat; every value written), with the
+/// working memory kept in `scratch`.
 pub(crate) fn grid_gradient<F: Float, const D: usize>(
     layout: &Layout<D>,
     positions: &[F],
     upstream: &[F],
     ch: usize,
-    out: &mut Vec<F>,
+    out: &mut [F],
     scratch: &Scratch,
 ) {
     let tiles = Tiles::new(layout, ch);
+    let tile_of = TileOf::new(layout, tiles);
     let mut blocks: Vec<Sorted<F>> = scratch.take_blocks();
     blocks.resize_with(positions.len().div_ceil(BLOCK * D), Sorted::default);
     blocks
         .par_iter_mut()
         .zip(positions.par_chunks(BLOCK * D))
         .zip(upstream.par_chunks(BLOCK * ch))
-        .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, p, g, ch));
-    // f64 data sums in place; f32 data in an f64 buffer rounded once at the end.
-    if let Some(out) = (out as &mut dyn Any).downcast_mut::<Vec<f64>>() {
-        sum_slabs(layout, tiles, &blocks, ch, out);
-    } else {
-        let mut acc = scratch.take_zeros(out.len());
-        sum_slabs(layout, tiles, &blocks, ch, &mut acc);
-        out.par_chunks_mut(1 << 16)
-            .zip(acc.par_chunks_mut(1 << 16))
-            .for_each(|(o, a)| {
-                for (o, a) in o.iter_mut().zip(a) {
-                    *o += F::lit(*a);
-                    // The kept sums must be zeros for the next call.
-                    *a = 0.0;
-                }
-            });
-        scratch.give_zeros(acc);
-    }
+        .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, &tile_of, p, g, ch));
+    // The sums go to kept f64 zeros, are rounded once into `out` (which therefore needs no
+    // zeros of its own: one pass over it, in either precision) and cleared for the next call.
+    let mut acc = scratch.take_zeros(out.len());
+    sum_slabs(layout, tiles, &blocks, ch, &mut acc);
+    out.par_chunks_mut(1 << 16)
+        .zip(acc.par_chunks_mut(1 << 16))
+        .for_each(|(o, a)| {
+            for (o, a) in o.iter_mut().zip(a) {
+                *o = F::lit(*a);
+                *a = 0.0;
+            }
+        });
+    scratch.give_zeros(acc);
     scratch.give_blocks(blocks);
 }
 
@@ -213,12 +229,14 @@ fn sum_slabs<F: Float, const D: usize>(
             if j < tiles.slabs {
                 let task = SlabTask { layout, slab: j, tiles };
                 match ch {
-                    // A constant channel count lets the compiler unroll the channel loop.
-                    1 => task.sum(blocks, dst, 1),
-                    2 => task.sum(blocks, dst, 2),
-                    3 => task.sum(blocks, dst, 3),
-                    4 => task.sum(blocks, dst, 4),
-                    _ => task.sum(blocks, dst, ch),
+                    // A channel group the compiler knows the width of is summed in vector
+                    // lanes.
+                    1 => task.sum::<F, 1>(blocks, dst, 1),
+                    2 => task.sum::<F, 2>(blocks, dst, 2),
+                    3 => task.sum::<F, 3>(blocks, dst, 3),
+                    4 => task.sum::<F, 4>(blocks, dst, 4),
+                    _ if ch % 4 == 0 => task.sum::<F, 4>(blocks, dst, ch),
+                    _ => task.sum::<F, 1>(blocks, dst, ch),
                 }
             }
         });
@@ -234,12 +252,13 @@ struct SlabTask<'a, const D: usize> {
 
 impl<const D: usize> SlabTask<'_, D> {
     /// Adds the slab's terms, tile by tile, to `dst`: the f64 sums from the slab's first node
-    /// layer on.
+    /// layer on; `ch` channels per row in groups of `G` (`G` divides `ch`).
     #[inline(always)]
-    fn sum<F: Float>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
+    fn sum<F: Float, const G: usize>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
         // The slab's first node, as a linear node index.
         let origin = self.slab * self.tiles.thickness * self.layout.strides[0];
         let first = self.slab * self.tiles.per_slab;
+        let corners = &self.layout.corners[..1 << D];
         for tile in first..first + self.tiles.per_slab {
             for block in blocks {
                 let (lo, hi) = (block.starts[tile] as usize, block.starts[tile + 1] as usize);
@@ -250,10 +269,15 @@ impl<const D: usize> SlabTask<'_, D> {
                         continue;
                     };
                     let w = weights(cell.t);
-                    for (k, &corner) in self.layout.corners[..1 << D].iter().enumerate() {
-                        let row = &mut dst[(cell.node - origin + corner) * ch..][..ch];
-                        for (a, &v) in row.iter_mut().zip(g) {
-                            *a += w[k] * v.as_f64();
+                    let rows = &mut dst[(cell.node - origin) * ch..];
+                    for (group, g) in g.chunks_exact(G).enumerate() {
+                        let g: [f64; G] = std::array::from_fn(|c| g[c].as_f64());
+                        for (&wk, &corner) in w.iter().zip(corners) {
+                            let at = corner * ch + group * G;
+                            let row: &mut [f64; G] = (&mut rows[at..at + G]).try_into().expect("G values");
+                            for c in 0..G {
+                                row[c] += wk * g[c];
+                            }
                         }
                     }
                 }
@@ -282,5 +306,22 @@ mod tests {
         let bbox = GridBox::new(&[0.0; 2], &[1.0; 2]).unwrap();
         let t = Tiles::new(&Layout::<2>::new(&bbox, &[9, 4096]), 4);
         assert_eq!((t.thickness, t.slabs, t.rows, t.per_slab), (1, 8, 2047, 3));
+    }
+
+    #[test]
+    fn tile_tables_agree_with_the_division() {
+        let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).unwrap();
+        for (nodes, ch) in [([128, 128, 128], 4), ([9, 6, 5], 3), ([70, 33, 2], 1)] {
+            let layout = Layout::<3>::new(&bbox, &nodes);
+            let tiles = Tiles::new(&layout, ch);
+            let tile_of = TileOf::new(&layout, tiles);
+            for i0 in 0..nodes[0] - 1 {
+                for i1 in 0..nodes[1] - 1 {
+                    let want = (i0 / tiles.thickness) * tiles.per_slab + i1 / tiles.rows;
+                    assert_eq!(tile_of.of(i0, i1) as usize, want, "{nodes:?} cell ({i0}, {i1})");
+                    assert!(want < tiles.count());
+                }
+            }
+        }
     }
 }

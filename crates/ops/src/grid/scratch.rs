@@ -1,7 +1,7 @@
 //! The working memory of the backward into the grid, kept by the field between calls.
 //!
-//! The scatter copies every lookup into tile order and, for f32 data, sums into an f64 buffer
-//! the size of the grid. Fresh buffers that large come from the system as pages to be faulted
+//! The scatter copies every lookup into tile order and sums into an f64 buffer the size of
+//! the grid (in either precision, so that the gradient's own buffer needs no zeros). Fresh buffers that large come from the system as pages to be faulted
 //! in and cleared on every call, which costs more than the sums; kept buffers cost nothing.
 //! A [`GridField`](super::GridField) and its clones share one [`Scratch`] (a tape records a
 //! clone of the field, so a training loop's steps share it), held until the last of them is
