@@ -167,7 +167,7 @@ fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
         sampling: Sampling::Occupancy,
         ..FitConfig::default()
     };
-    assert!(OCCUPANCY_WARMUP < 72 && 72 < OCCUPANCY_WARMUP + 2 * OCCUPANCY_EVERY);
+    const { assert!(OCCUPANCY_WARMUP < 72 && 72 < OCCUPANCY_WARMUP + 2 * OCCUPANCY_EVERY) };
     split_equals_whole::<f32>(occupancy, 100, 72, false, "split-occupancy.safetensors");
     // The grid in the file is the one the fit had, and it is not the fresh grid a file
     // without one would give.
