@@ -39,10 +39,13 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod blocks;
 mod importance;
 #[cfg(test)]
 mod importance_tests;
 mod march;
+#[cfg(test)]
+mod march_skip_tests;
 #[cfg(test)]
 mod march_tests;
 mod occupancy;

@@ -153,11 +153,13 @@ fn bad_densities_are_errors_and_change_nothing() {
 }
 
 fn ball_density(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
-    Ok(Array1::from_iter(
-        p.rows()
-            .into_iter()
-            .map(|q| if q.dot(&q) < 0.3 { 5.0 + q[0] } else { 0.01 }),
-    ))
+    Ok(Array1::from_iter(p.rows().into_iter().map(|q| {
+        if q.dot(&q) < 0.3 {
+            5.0 + q[0]
+        } else {
+            0.01
+        }
+    })))
 }
 
 #[test]
@@ -167,11 +169,15 @@ fn a_restored_state_is_the_grid_it_was_taken_from() {
     for updates in 0..3 {
         let mut grid = OccupancyGrid::new(cube(), 5, config).unwrap();
         for k in 0..updates {
-            grid.update(ball_density, CellPoints::CentreAndRandom { seed: k }).unwrap();
+            grid.update(ball_density, CellPoints::CentreAndRandom { seed: k })
+                .unwrap();
         }
         let state = grid.state();
         let expected_fraction = if updates == 0 { 1.0 } else { grid.occupied_fraction() };
-        assert_eq!(state.occupied.iter().filter(|&&o| o).count() as f64 / 125.0, expected_fraction);
+        assert_eq!(
+            state.occupied.iter().filter(|&&o| o).count() as f64 / 125.0,
+            expected_fraction
+        );
         let mut back = OccupancyGrid::new(cube(), 5, config).unwrap();
         back.update(constant(100.0), CellPoints::Centre).unwrap(); // something to overwrite
         back.restore(&state).unwrap();
@@ -204,7 +210,10 @@ fn restore_rejects_bad_states_and_leaves_the_grid_alone() {
     wrong_shape.occupied = ndarray::Array3::from_elem((4, 4, 3), true);
     assert!(matches!(
         grid.restore(&wrong_shape),
-        Err(SampleError::Shape { what: "occupied cells", .. })
+        Err(SampleError::Shape {
+            what: "occupied cells",
+            ..
+        })
     ));
     for (cell, bad) in [(7usize, -1.0f32), (63, f32::NAN), (0, f32::INFINITY)] {
         let mut s = good.clone();
