@@ -1,6 +1,5 @@
-//! The occupancy marcher: each ray walked cell by cell through the grid (a 3-D DDA), empty
-//! blocks of cells crossed in one step, sampled at a fixed step only over its runs of
-//! occupied cells.
+//! The occupancy marcher: each ray walked cell by cell through the grid (a 3-D DDA), sampled
+//! at a fixed step only over its runs of occupied cells.
 
 use fogray_tape::Float;
 
@@ -27,13 +26,11 @@ impl OccupancyGrid {
     /// Calls `run(a, b)` for each part `[a, b]` of `[lo, hi]` on the ray `o + t d` that lies
     /// in occupied cells, as maximal runs in increasing `t`.
     ///
-    /// The ray is walked cell by cell (a 3-D DDA), except that a block of cells with no
-    /// occupied cell (see [`Blocks`](super::blocks::Blocks)) is crossed in one step: the ray
-    /// leaves the block across the face of its first exit, and the other axes' cell indices
-    /// catch up with the per-axis exits that come before it. Cell boundaries are computed from
-    /// the cell index each time (never accumulated), so long rays do not drift, and with the
-    /// same formula whether a cell is walked or skipped: the runs are those of the walk alone.
-    /// A start index off by one through rounding costs one zero-length step.
+    /// The ray is walked cell by cell (a 3-D DDA). Cell boundaries are computed from the cell
+    /// index each time (never accumulated), so long rays do not drift; a start index off by
+    /// one through rounding costs one zero-length step. The walk is latency-bound: each step
+    /// chooses the axis of the first exit, so that choice is made without branches and the
+    /// crossed axis's next exit is computed one step ahead.
     pub(crate) fn occupied_runs(&self, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64, mut run: impl FnMut(f64, f64)) {
         let r = self.resolution as i64;
         let min = self.bounds.min();
@@ -61,6 +58,9 @@ impl OccupancyGrid {
             }
         };
         let mut t_exit: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a]));
+        // The exit of the next cell along each axis, computed a step ahead: a step's new exit
+        // is then a copy, and the next choice of axis need not wait for the arithmetic.
+        let mut t_after: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a] + dir[a]));
         // The last cell along each axis before the ray leaves the grid (an axis the ray does
         // not move along is never the first exit).
         let last: [i64; 3] = dir.map(|s| if s > 0 { r - 1 } else { 0 });
@@ -68,17 +68,15 @@ impl OccupancyGrid {
         let stride = [r * r, r, 1];
         let step: [i64; 3] = std::array::from_fn(|a| dir[a] * stride[a]);
         let mut linear = idx[0] * stride[0] + idx[1] * stride[1] + idx[2];
-        let block_mask = !((1i64 << super::blocks::BLOCK_SHIFT) - 1);
-        let block_size = 1i64 << super::blocks::BLOCK_SHIFT;
         // The run being grown, handed to `run` once the next one does not touch it.
         let mut pending: Option<(f64, f64)> = None;
         let mut t = lo;
         loop {
+            let axis = first_exit(&t_exit);
+            let leaving = idx[axis] == last[axis];
             if self.is_occupied_linear(linear as usize) {
-                let axis = first_exit(&t_exit);
                 // The last cell before the grid's far face runs to hi: the face's t, rounded
                 // differently from the clip that gave hi, must not leave a sliver.
-                let leaving = idx[axis] == last[axis];
                 let t_end = if leaving { hi } else { t_exit[axis].min(hi) };
                 if t_end > t {
                     match &mut pending {
@@ -91,55 +89,16 @@ impl OccupancyGrid {
                         }
                     }
                 }
-                if leaving || t_exit[axis] >= hi {
-                    break;
-                }
-                t = t.max(t_exit[axis]);
-                idx[axis] += dir[axis];
-                linear += step[axis];
-                // Only the crossed axis has a new exit.
-                t_exit[axis] = exit(axis, idx[axis]);
-            } else if self.blocks.is_empty_at(idx) {
-                // The block's last cell along each axis the way the ray goes, and the ray's
-                // exit from it: the first of those exits is where the ray leaves the block.
-                let far: [i64; 3] = std::array::from_fn(|a| {
-                    let first = idx[a] & block_mask;
-                    if dir[a] > 0 {
-                        (first + block_size - 1).min(r - 1)
-                    } else {
-                        first
-                    }
-                });
-                let far_exit: [f64; 3] = std::array::from_fn(|a| exit(a, far[a]));
-                let axis = first_exit(&far_exit);
-                let t_leave = far_exit[axis];
-                if far[axis] == last[axis] || t_leave >= hi {
-                    break;
-                }
-                // Every other axis crosses the cell faces it reaches before t_leave, exactly
-                // as the walk would (at most to its own far cell, whose exit is not earlier).
-                for b in 0..3 {
-                    if b != axis {
-                        while t_exit[b] < t_leave {
-                            idx[b] += dir[b];
-                            t_exit[b] = exit(b, idx[b]);
-                        }
-                    }
-                }
-                idx[axis] = far[axis] + dir[axis];
-                t_exit[axis] = exit(axis, idx[axis]);
-                t = t.max(t_leave);
-                linear = idx[0] * stride[0] + idx[1] * stride[1] + idx[2];
-            } else {
-                let axis = first_exit(&t_exit);
-                if idx[axis] == last[axis] || t_exit[axis] >= hi {
-                    break;
-                }
-                t = t.max(t_exit[axis]);
-                idx[axis] += dir[axis];
-                linear += step[axis];
-                t_exit[axis] = exit(axis, idx[axis]);
             }
+            if leaving || t_exit[axis] >= hi {
+                break;
+            }
+            t = t.max(t_exit[axis]);
+            idx[axis] += dir[axis];
+            linear += step[axis];
+            // Only the crossed axis has a new exit, computed a step ago.
+            t_exit[axis] = t_after[axis];
+            t_after[axis] = exit(axis, idx[axis] + dir[axis]);
         }
         if let Some((a, b)) = pending {
             run(a, b);

@@ -39,15 +39,14 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-mod blocks;
 mod importance;
 #[cfg(test)]
 mod importance_tests;
 mod march;
 #[cfg(test)]
-mod march_skip_tests;
-#[cfg(test)]
 mod march_tests;
+#[cfg(test)]
+mod march_walk_tests;
 mod occupancy;
 mod occupancy_config;
 #[cfg(test)]

@@ -10,7 +10,6 @@ use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
-use super::blocks::Blocks;
 use super::occupancy_config::{config_error, CellPoints, OccupancyConfig};
 use crate::error::SampleError;
 use crate::rays::Aabb;
@@ -57,8 +56,6 @@ pub struct OccupancyGrid {
     pub(crate) cell: [f64; 3],
     estimate: Vec<f32>,
     bits: Vec<u64>,
-    /// Which blocks of cells hold an occupied cell: kept in step with `bits` by every change.
-    pub(crate) blocks: Blocks,
     config: OccupancyConfig,
 }
 
@@ -83,7 +80,6 @@ impl OccupancyGrid {
             resolution,
             cell: std::array::from_fn(|a| (hi[a] - lo[a]) / resolution as f64),
             estimate: vec![0.0; cells],
-            blocks: Blocks::from_cells(resolution, &bits),
             bits,
             config,
         })
@@ -200,7 +196,6 @@ impl OccupancyGrid {
         for (i, _) in state.occupied.iter().enumerate().filter(|(_, &o)| o) {
             self.bits[i / 64] |= 1 << (i % 64);
         }
-        self.blocks = Blocks::from_cells(self.resolution, &self.bits);
         Ok(())
     }
 
@@ -327,7 +322,6 @@ impl OccupancyGrid {
                 self.bits[i / 64] |= 1 << (i % 64);
             }
         }
-        self.blocks = Blocks::from_cells(self.resolution, &self.bits);
         Ok(())
     }
 }

@@ -1,16 +1,16 @@
-//! The marcher's block skipping against the plain cell-by-cell walk it replaces and against a
-//! dense march, on occupancy patterns made to trip it: isolated occupied cells at block
-//! corners, resolutions that leave thin blocks at the far faces, rays along axes, along block
-//! faces and edges, through block corners, and starting inside the box.
+//! The marcher's walk (branch-free axis choice, exits computed a step ahead, runs handed on
+//! as they close) against the plain walk it replaced, and against a dense march, on
+//! occupancy patterns and rays made to trip a DDA: isolated occupied cells at the corners of
+//! groups of cells, rays along axes, along cell faces and edges, through cell corners, from
+//! corners, and starting inside the box.
 
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::blocks::BLOCK_SHIFT;
 use super::*;
 use crate::rays::Aabb;
 
-/// The marcher before block skipping: every cell walked, runs collected (the reference).
+/// The marcher as it was before this walk, runs collected: the reference.
 fn walked_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<(f64, f64)> {
     let mut runs: Vec<(f64, f64)> = Vec::new();
     let r = g.resolution as i64;
@@ -61,7 +61,7 @@ fn walked_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) ->
     runs
 }
 
-fn skipped_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<(f64, f64)> {
+fn marched_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<(f64, f64)> {
     let mut runs = Vec::new();
     g.occupied_runs(o, d, lo, hi, |a, b| runs.push((a, b)));
     runs
@@ -84,16 +84,17 @@ fn at_cells(r: usize, c: [f64; 3]) -> [f64; 3] {
     c.map(|x| -1.0 + 2.0 * x / r as f64)
 }
 
-/// Rays meant to meet block faces, edges and corners head on, plus random ones (half of
+/// Rays meant to meet cell faces, edges and corners head on, plus random ones (half of
 /// them starting inside the box), as (origin, unit direction).
 fn tricky_rays(r: usize, rng: &mut StdRng) -> Vec<([f64; 3], [f64; 3])> {
-    let b = (1usize << BLOCK_SHIFT) as f64;
+    // Cell faces, edges and corners every `b` cells.
+    let b = 4.0f64;
     let unit = |v: [f64; 3]| {
         let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
         v.map(|x| x / n)
     };
     let mut rays = Vec::new();
-    // Along each axis, both ways, on block edges (lines where two block faces meet), on block
+    // Along each axis, both ways, on cell edges (lines where two cell faces meet), on cell
     // faces, and through cell centres.
     for axis in 0..3 {
         for sign in [1.0, -1.0] {
@@ -110,8 +111,8 @@ fn tricky_rays(r: usize, rng: &mut StdRng) -> Vec<([f64; 3], [f64; 3])> {
             }
         }
     }
-    // Diagonals through block corners: from a block corner, along (+-1, +-1, +-1) and along
-    // directions in a block face plane.
+    // Diagonals through cell corners: from a corner, along (+-1, +-1, +-1) and along
+    // directions in a cell face plane.
     for corner in [[b, b, b], [0.0, 0.0, 0.0], [b, 2.0 * b, b], [r as f64; 3]] {
         let p = at_cells(r, corner.map(|x: f64| x.min(r as f64)));
         for d in [
@@ -143,15 +144,16 @@ fn tricky_rays(r: usize, rng: &mut StdRng) -> Vec<([f64; 3], [f64; 3])> {
     rays
 }
 
-/// Occupancy patterns: single cells at block corners, a few random cells, and a random quarter.
+/// Occupancy patterns: single cells at the corners of groups of 4^3 cells, a few random
+/// cells, a random quarter, and the far corner cell alone.
 fn patterns(r: usize, rng: &mut StdRng) -> Vec<OccupancyGrid> {
-    let b = 1usize << BLOCK_SHIFT;
+    let b = 4;
     let corner = |i: usize| i % b == 0 || i % b == b - 1 || i == r - 1;
     let sparse: Vec<[usize; 3]> = (0..12).map(|_| std::array::from_fn(|_| rng.gen_range(0..r))).collect();
     let quarter: Vec<bool> = (0..r * r * r).map(|_| rng.gen_bool(0.25)).collect();
     let seed = rng.gen::<u64>();
     vec![
-        // Every fourth corner cell of a block, by a hash of its index.
+        // Every fourth corner cell of a group, by a hash of its index.
         grid_with(r, |c| {
             c.iter().all(|&i| corner(i)) && (c[0] * 7 + c[1] * 13 + c[2] * 29 + seed as usize % 5) % 4 == 0
         }),
@@ -163,7 +165,7 @@ fn patterns(r: usize, rng: &mut StdRng) -> Vec<OccupancyGrid> {
 }
 
 #[test]
-fn skipping_empty_blocks_gives_the_runs_of_the_cell_by_cell_walk() {
+fn the_walk_gives_the_runs_of_the_plain_walk_bit_for_bit() {
     let mut rng = StdRng::seed_from_u64(21);
     for r in [1, 3, 5, 8, 9, 14] {
         for g in patterns(r, &mut rng) {
@@ -174,7 +176,7 @@ fn skipping_empty_blocks_gives_the_runs_of_the_cell_by_cell_walk() {
                 // The whole crossing, and a part starting and ending inside the box.
                 for (lo, hi) in [(lo, hi), (lo + 0.3 * (hi - lo), lo + 0.8 * (hi - lo))] {
                     let want = walked_runs(&g, o, d, lo, hi);
-                    let got = skipped_runs(&g, o, d, lo, hi);
+                    let got = marched_runs(&g, o, d, lo, hi);
                     assert_eq!(got, want, "r {r}, ray {o:?} + t {d:?}, t in [{lo}, {hi}]");
                 }
             }
@@ -183,7 +185,7 @@ fn skipping_empty_blocks_gives_the_runs_of_the_cell_by_cell_walk() {
 }
 
 #[test]
-fn skipping_empty_blocks_misses_no_occupied_point_of_a_dense_march() {
+fn the_walk_misses_no_occupied_point_of_a_dense_march() {
     // Independent of the walk: points every 1/40 of a cell along each ray, looked up by
     // position; each one in an occupied cell (away from faces, where rounding decides) lies in
     // a run, and each run's midpoint is in an occupied cell.
@@ -196,7 +198,7 @@ fn skipping_empty_blocks_misses_no_occupied_point_of_a_dense_march() {
             let Some((lo, hi)) = g.bounds.clip_ray(o, d) else {
                 continue;
             };
-            let runs = skipped_runs(&g, o, d, lo, hi);
+            let runs = marched_runs(&g, o, d, lo, hi);
             let at = |t: f64| -> [f64; 3] { std::array::from_fn(|a| o[a] + t * d[a]) };
             for &(a, b) in &runs {
                 assert!(lo <= a && a < b && b <= hi);
@@ -229,73 +231,4 @@ fn skipping_empty_blocks_misses_no_occupied_point_of_a_dense_march() {
         }
     }
     assert!(covered > 1000, "too few occupied points to mean anything: {covered}");
-}
-
-#[test]
-fn blocks_follow_the_cells_through_new_update_and_restore() {
-    // Each block is empty exactly when none of its cells is occupied, counted cell by cell.
-    fn check(g: &OccupancyGrid, when: &str) {
-        let r = g.resolution;
-        let b = 1usize << BLOCK_SHIFT;
-        for bx in 0..r.div_ceil(b) {
-            for by in 0..r.div_ceil(b) {
-                for bz in 0..r.div_ceil(b) {
-                    let mut any = false;
-                    for x in bx * b..((bx + 1) * b).min(r) {
-                        for y in by * b..((by + 1) * b).min(r) {
-                            for z in bz * b..((bz + 1) * b).min(r) {
-                                any |= g.is_occupied([x, y, z]);
-                            }
-                        }
-                    }
-                    let corner = [bx, by, bz].map(|i| (i * b) as i64);
-                    assert_eq!(g.blocks.is_empty_at(corner), !any, "{when}: block {bx} {by} {bz}");
-                }
-            }
-        }
-    }
-    let bounds = Aabb::new([-1.0; 3], [1.0; 3]).unwrap();
-    for r in [1, 6, 9] {
-        let config = OccupancyConfig::density(0.5).unwrap().with_decay(0.0).unwrap();
-        let mut g = OccupancyGrid::new(bounds, r, config).unwrap();
-        check(&g, "new");
-        assert!(!g.blocks.is_empty_at([0; 3]));
-        // A small ball off centre: some blocks occupied, others not.
-        let ball = |p: ndarray::ArrayView2<'_, f64>| {
-            Ok::<_, std::convert::Infallible>(
-                p.rows()
-                    .into_iter()
-                    .map(|q| {
-                        let s = (q[0] - 0.4).powi(2) + (q[1] + 0.3).powi(2) + q[2].powi(2);
-                        if s < 0.2 {
-                            1.0
-                        } else {
-                            0.0
-                        }
-                    })
-                    .collect::<ndarray::Array1<f64>>(),
-            )
-        };
-        g.update(ball, CellPoints::Centre).unwrap();
-        check(&g, "update");
-        let ball_state = g.state();
-        // Emptied by an update, then restored: the blocks come back with the cells.
-        g.update(
-            |p: ndarray::ArrayView2<'_, f64>| Ok::<_, std::convert::Infallible>(ndarray::Array1::zeros(p.nrows())),
-            CellPoints::Centre,
-        )
-        .unwrap();
-        check(&g, "emptied");
-        assert!(g.blocks.is_empty_at([0; 3]));
-        g.restore(&ball_state).unwrap();
-        check(&g, "restore");
-        // A restore from a random state: the same blocks as a grid built from it.
-        let mut rng = StdRng::seed_from_u64(r as u64);
-        let random = OccupancyState {
-            estimate: ndarray::Array3::zeros((r, r, r)),
-            occupied: ndarray::Array3::from_shape_fn((r, r, r), |_| rng.gen_bool(0.05)),
-        };
-        g.restore(&random).unwrap();
-        check(&g, "random restore");
-    }
 }
