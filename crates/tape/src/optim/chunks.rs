@@ -73,7 +73,7 @@ pub(crate) fn first_non_finite<F: Float>(g: &[F]) -> Option<usize> {
     let chunk = if g.len() <= CHUNK {
         usize::from(!any_bad(g)) // 0 if bad, past the end if not
     } else {
-        g.par_chunks(CHUNK).position_first(|c| any_bad(c))?
+        g.par_chunks(CHUNK).position_first(any_bad)?
     };
     let start = chunk * CHUNK;
     g.get(start..)?
