@@ -4,18 +4,34 @@
 use fogray_tape::Float;
 
 use super::occupancy::OccupancyGrid;
-use super::packed::{check_lengths, pack, PackedSamples, Piece};
+use super::packed::{check_lengths, pack, PackedSamples};
 use super::stratified::{Jitter, RayJitter};
 use crate::error::SampleError;
 use crate::rays::{RayBatch, RayIntervals};
 
+/// The axis whose exit comes first (the lowest axis on a tie), chosen without branches: the
+/// choice follows the ray's geometry, which a branch predictor cannot guess.
+#[inline]
+fn first_exit(t_exit: &[f64; 3]) -> usize {
+    let a01 = usize::from(t_exit[1] < t_exit[0]);
+    let t01 = if a01 == 1 { t_exit[1] } else { t_exit[0] };
+    if t_exit[2] < t01 {
+        2
+    } else {
+        a01
+    }
+}
+
 impl OccupancyGrid {
-    /// The parts of `[lo, hi]` on the ray `o + t d` that lie in occupied cells, as maximal
-    /// runs in increasing `t`. Cell boundaries are computed from the cell index each time
-    /// (never accumulated), so long rays do not drift; a start index off by one through
-    /// rounding costs one zero-length step.
-    pub(crate) fn occupied_runs(&self, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64, runs: &mut Vec<Piece>) {
-        runs.clear();
+    /// Calls `run(a, b)` for each part `[a, b]` of `[lo, hi]` on the ray `o + t d` that lies
+    /// in occupied cells, as maximal runs in increasing `t`.
+    ///
+    /// The ray is walked cell by cell (a 3-D DDA). Cell boundaries are computed from the cell
+    /// index each time (never accumulated), so long rays do not drift; a start index off by
+    /// one through rounding costs one zero-length step. The walk is latency-bound: each step
+    /// chooses the axis of the first exit, so that choice is made without branches and the
+    /// crossed axis's next exit is computed one step ahead.
+    pub(crate) fn occupied_runs(&self, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64, mut run: impl FnMut(f64, f64)) {
         let r = self.resolution as i64;
         let min = self.bounds.min();
         let start = self.cell_of(std::array::from_fn(|a| {
@@ -42,30 +58,36 @@ impl OccupancyGrid {
             }
         };
         let mut t_exit: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a]));
+        // The exit of the next cell along each axis, computed a step ahead: a step's new exit
+        // is then a copy, and the next choice of axis need not wait for the arithmetic.
+        let mut t_after: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a] + dir[a]));
+        // The last cell along each axis before the ray leaves the grid (an axis the ray does
+        // not move along is never the first exit).
+        let last: [i64; 3] = dir.map(|s| if s > 0 { r - 1 } else { 0 });
         // The linear cell index, stepped with the cell index (see OccupancyGrid's layout).
         let stride = [r * r, r, 1];
+        let step: [i64; 3] = std::array::from_fn(|a| dir[a] * stride[a]);
         let mut linear = idx[0] * stride[0] + idx[1] * stride[1] + idx[2];
+        // The run being grown, handed to `run` once the next one does not touch it.
+        let mut pending: Option<(f64, f64)> = None;
         let mut t = lo;
         loop {
-            let axis = if t_exit[0] <= t_exit[1] {
-                if t_exit[0] <= t_exit[2] {
-                    0
-                } else {
-                    2
-                }
-            } else if t_exit[1] <= t_exit[2] {
-                1
-            } else {
-                2
-            };
-            // The last cell before the grid's far face runs to hi: the face's t, rounded
-            // differently from the clip that gave hi, must not leave a sliver.
-            let leaving = !(0..r).contains(&(idx[axis] + dir[axis]));
-            let t_end = if leaving { hi } else { t_exit[axis].min(hi) };
-            if t_end > t && self.is_occupied_linear(linear as usize) {
-                match runs.last_mut() {
-                    Some(run) if run.1 == t => run.1 = t_end,
-                    _ => runs.push((t, t_end)),
+            let axis = first_exit(&t_exit);
+            let leaving = idx[axis] == last[axis];
+            if self.is_occupied_linear(linear as usize) {
+                // The last cell before the grid's far face runs to hi: the face's t, rounded
+                // differently from the clip that gave hi, must not leave a sliver.
+                let t_end = if leaving { hi } else { t_exit[axis].min(hi) };
+                if t_end > t {
+                    match &mut pending {
+                        Some(p) if p.1 == t => p.1 = t_end,
+                        _ => {
+                            if let Some((a, b)) = pending {
+                                run(a, b);
+                            }
+                            pending = Some((t, t_end));
+                        }
+                    }
                 }
             }
             if leaving || t_exit[axis] >= hi {
@@ -73,9 +95,13 @@ impl OccupancyGrid {
             }
             t = t.max(t_exit[axis]);
             idx[axis] += dir[axis];
-            linear += dir[axis] * stride[axis];
-            // Only the crossed axis has a new exit.
-            t_exit[axis] = exit(axis, idx[axis]);
+            linear += step[axis];
+            // Only the crossed axis has a new exit, computed a step ago.
+            t_exit[axis] = t_after[axis];
+            t_after[axis] = exit(axis, idx[axis] + dir[axis]);
+        }
+        if let Some((a, b)) = pending {
+            run(a, b);
         }
     }
 
@@ -115,11 +141,7 @@ impl OccupancyGrid {
             let (lo, hi) = (near.max(box_near), far.min(box_far));
             if hi > lo {
                 let mut jitter = RayJitter::for_ray(jitter, r);
-                let mut runs = Vec::with_capacity(8);
-                self.occupied_runs(o, d, lo, hi, &mut runs);
-                for &(a, b) in &runs {
-                    jitter.cut(a, b, lo, step, pieces);
-                }
+                self.occupied_runs(o, d, lo, hi, |a, b| jitter.cut(a, b, lo, step, pieces));
             }
         }))
     }

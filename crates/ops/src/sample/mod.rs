@@ -45,6 +45,8 @@ mod importance_tests;
 mod march;
 #[cfg(test)]
 mod march_tests;
+#[cfg(test)]
+mod march_walk_tests;
 mod occupancy;
 mod occupancy_config;
 #[cfg(test)]

@@ -97,12 +97,10 @@ pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayInterva
     Ok(())
 }
 
-/// One parallel task's share of the output: its rays' sample counts and samples, in order.
-struct Chunk<F> {
+/// One parallel task's share of the pieces: its rays' piece counts and pieces, in order.
+struct Chunk {
     counts: Vec<usize>,
-    positions: Vec<F>,
-    t: Vec<F>,
-    delta: Vec<F>,
+    pieces: Vec<Piece>,
 }
 
 /// Rays per parallel task: enough to amortise the task, few enough to balance two cores.
@@ -111,51 +109,72 @@ const RAYS_PER_TASK: usize = 64;
 /// Runs `pieces_of(r, out)` (which appends ray `r`'s pieces to `out`) for every ray, in
 /// parallel over chunks of rays, and packs the samples in ray order (so the output does not
 /// depend on the number of threads).
+///
+/// The pieces are gathered first and the samples written once, in parallel, straight into
+/// the output arrays: no growing per-task copies of the samples to concatenate.
 pub(crate) fn pack<F: Float>(
     rays: &RayBatch<F>,
     pieces_of: impl Fn(usize, &mut Vec<Piece>) + Sync,
 ) -> PackedSamples<F> {
     let n_rays = rays.len();
-    let chunks: Vec<Chunk<F>> = (0..n_rays.div_ceil(RAYS_PER_TASK))
+    let task_rays = |c: usize| c * RAYS_PER_TASK..((c + 1) * RAYS_PER_TASK).min(n_rays);
+    let chunks: Vec<Chunk> = (0..n_rays.div_ceil(RAYS_PER_TASK))
         .into_par_iter()
         .map(|c| {
             let mut chunk = Chunk {
                 counts: Vec::with_capacity(RAYS_PER_TASK),
-                positions: Vec::new(),
-                t: Vec::new(),
-                delta: Vec::new(),
+                pieces: Vec::new(),
             };
-            let mut pieces = Vec::new();
-            for r in c * RAYS_PER_TASK..((c + 1) * RAYS_PER_TASK).min(n_rays) {
-                pieces.clear();
-                pieces_of(r, &mut pieces);
-                chunk.counts.push(pieces.len());
-                let (o, d) = rays.ray(r);
-                for &(lo, hi) in &pieces {
-                    let mid = 0.5 * (lo + hi);
-                    chunk.positions.extend((0..3).map(|a| F::lit(o[a] + mid * d[a])));
-                    chunk.t.push(F::lit(mid));
-                    chunk.delta.push(F::lit(hi - lo));
-                }
+            for r in task_rays(c) {
+                let before = chunk.pieces.len();
+                pieces_of(r, &mut chunk.pieces);
+                chunk.counts.push(chunk.pieces.len() - before);
             }
             chunk
         })
         .collect();
     let offsets = Offsets::from_lengths(chunks.iter().flat_map(|c| c.counts.iter().copied()));
     let n = offsets.rows();
-    let ray = (0..n_rays)
-        .flat_map(|r| std::iter::repeat_n(r, offsets[r + 1] - offsets[r]))
-        .collect();
-    let concat = |part: fn(&Chunk<F>) -> &Vec<F>, len: usize| {
-        let mut all = Vec::with_capacity(len);
-        chunks.iter().for_each(|c| all.extend_from_slice(part(c)));
-        all
-    };
+    let mut positions = vec![F::zero(); 3 * n];
+    let mut t = vec![F::zero(); n];
+    let mut delta = vec![F::zero(); n];
+    let mut ray = vec![0usize; n];
+    // Each task's share of the outputs, split off in order.
+    let mut shares = Vec::with_capacity(chunks.len());
+    let (mut p_rest, mut t_rest, mut d_rest, mut r_rest) =
+        (&mut positions[..], &mut t[..], &mut delta[..], &mut ray[..]);
+    for chunk in &chunks {
+        let m = chunk.pieces.len();
+        let (p, p_next) = p_rest.split_at_mut(3 * m);
+        let (tt, t_next) = t_rest.split_at_mut(m);
+        let (dd, d_next) = d_rest.split_at_mut(m);
+        let (rr, r_next) = r_rest.split_at_mut(m);
+        shares.push((p, tt, dd, rr));
+        (p_rest, t_rest, d_rest, r_rest) = (p_next, t_next, d_next, r_next);
+    }
+    shares
+        .into_par_iter()
+        .zip(chunks.par_iter().enumerate())
+        .for_each(|((p, tt, dd, rr), (c, chunk))| {
+            let mut k = 0;
+            for (r, &count) in task_rays(c).zip(&chunk.counts) {
+                let (o, d) = rays.ray(r);
+                for &(lo, hi) in &chunk.pieces[k..k + count] {
+                    let mid = 0.5 * (lo + hi);
+                    for a in 0..3 {
+                        p[3 * k + a] = F::lit(o[a] + mid * d[a]);
+                    }
+                    tt[k] = F::lit(mid);
+                    dd[k] = F::lit(hi - lo);
+                    rr[k] = r;
+                    k += 1;
+                }
+            }
+        });
     PackedSamples {
-        positions: Array2::from_shape_vec((n, 3), concat(|c| &c.positions, 3 * n))
-            .expect("three coordinates per sample"),
-        t: Array1::from(concat(|c| &c.t, n)),
-        delta: Array1::from(concat(|c| &c.delta, n)),
+        positions: Array2::from_shape_vec((n, 3), positions).expect("three coordinates per sample"),
+        t: Array1::from(t),
+        delta: Array1::from(delta),
         offsets,
         ray,
     }
