@@ -79,11 +79,15 @@ mod backward;
 mod config;
 mod forward;
 mod gradients;
+mod lanes;
 mod layout;
 
 pub(crate) use layout::validate;
 mod one_pass;
 mod op;
+mod pack_attenuation;
+mod pack_backward;
+mod pack_forward;
 mod rows;
 mod suffix;
 mod tape_order;
