@@ -136,17 +136,9 @@ fn backward_block<'a, F: Float>(
     let mut att = Attenuation::default();
     let mut pack = PackAttenuation::default();
     let mut pack_scratch = PackScratch::default();
-    let mut one_ray = |ray: Ray, o: &mut InputGrads<'a, F>| {
-        // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
-        let (sigma, delta) = (&x.sigma[ray.samples.clone()], &x.delta[ray.samples.clone()]);
-        att.compute(sigma, delta, op.min_transmittance);
-        debug_assert_eq!(saved.stop[ray.index], att.stop(), "the same code gives the same stop");
-        let up = g.of_ray(ray.index, ray.samples.clone(), x.ch);
-        backward_ray(x, want, &ray, &att, up, &mut scratch, o);
-    };
     for unit in block.units(&op.offsets, op.packs) {
         match unit {
-            Unit::Single(ray) => one_ray(ray, &mut o),
+            Unit::Single(ray) => one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o),
             Unit::Pack { first, len } => {
                 let samples = Unit::pack_samples(&first, len);
                 pack.compute(&x.sigma[samples.clone()], &x.delta[samples], len, op.min_transmittance);
@@ -159,12 +151,36 @@ fn backward_block<'a, F: Float>(
                     backward_pack(x, want, &first, len, &pack, &up, &mut pack_scratch, &mut o);
                 } else {
                     for r in first.index..first.index + LANES {
-                        one_ray(block.ray(&op.offsets, r), &mut o);
+                        let ray = block.ray(&op.offsets, r);
+                        one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o);
                     }
                 }
             }
         }
     }
+}
+
+/// The backward of one ray (recomputing its attenuation) into its block's `o`. A function, not
+/// a closure: a closure would not inherit `backward_block`'s target features.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn one_ray<'a, F: Float>(
+    op: &Composite,
+    x: &Flat<'a, F>,
+    saved: &Residuals<F>,
+    g: &Upstream<'a, F>,
+    want: Wanted,
+    ray: Ray,
+    att: &mut Attenuation,
+    scratch: &mut Scratch,
+    o: &mut InputGrads<'a, F>,
+) {
+    // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
+    let (sigma, delta) = (&x.sigma[ray.samples.clone()], &x.delta[ray.samples.clone()]);
+    att.compute(sigma, delta, op.min_transmittance);
+    debug_assert_eq!(saved.stop[ray.index], att.stop(), "the same code gives the same stop");
+    let up = g.of_ray(ray.index, ray.samples.clone(), x.ch);
+    backward_ray(x, want, &ray, att, up, scratch, o);
 }
 
 /// Per-block buffers of the backward, reused ray after ray.

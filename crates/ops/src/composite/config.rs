@@ -84,7 +84,7 @@ impl Composite {
             depth: false,
             weights: false,
             transmittance: false,
-            packs: true,
+            packs: false,
         }
     }
 
@@ -125,11 +125,13 @@ impl Composite {
     }
 
     /// Whether rays of equal length are composited several at a time, one per vector lane
-    /// (on by default): consecutive rays of the same non-zero length are taken eight at a
-    /// time, so that the running sums of eight rays advance together instead of one ray's
-    /// at a time; other rays go one at a time. Every value is bitwise the same either way
-    /// (each lane does the one-ray code's operations in its order); turning it off is for
-    /// measuring what it gains.
+    /// (off by default): consecutive rays of the same non-zero length are taken eight at a
+    /// time, so that the running sums of eight rays (optical depth, the back-to-front chain)
+    /// advance together instead of one ray's at a time; other rays go one at a time. Every
+    /// value is bitwise the same either way (each lane does the one-ray code's operations in
+    /// its order). Off by default because on AVX2 it was measured slower than one ray at a
+    /// time (`docs/performance.md`): the sequential sums are a small share of the op, and the
+    /// transposes into and out of the lanes cost more than they save.
     pub fn pack_rays(mut self, on: bool) -> Self {
         self.packs = on;
         self

@@ -12,7 +12,7 @@ use super::config::Composite;
 use super::lanes::{Unit, LANES};
 use super::layout::{blocks, take_front, Block, Flat, Ray};
 use super::pack_attenuation::PackAttenuation;
-use super::pack_forward::forward_pack;
+use super::pack_forward::{forward_pack, ForwardScratch};
 use super::rows::weighted_column_sums;
 
 /// What the composite's forward keeps for its backward: the stop index of each ray (its
@@ -107,6 +107,7 @@ fn forward_block<'a, F: Float>(
     let mut acc = vec![0.0f64; x.ch];
     let mut att = Attenuation::default();
     let mut pack = PackAttenuation::default();
+    let mut pack_forward = ForwardScratch::default();
     let mut valid = true;
     for unit in block.units(&op.offsets, op.packs) {
         match unit {
@@ -116,7 +117,7 @@ fn forward_block<'a, F: Float>(
                 valid &= result.valid;
             }
             Unit::Pack { first, len } => {
-                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut o);
+                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut pack_forward, &mut o);
                 stop[first.in_block..first.in_block + LANES].copy_from_slice(&stops);
                 valid &= ok;
             }

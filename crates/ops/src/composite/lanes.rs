@@ -32,6 +32,26 @@ pub(crate) fn zip_with(a: Lanes, b: Lanes, f: impl Fn(f64, f64) -> f64) -> Lanes
     std::array::from_fn(|l| f(a[l], b[l]))
 }
 
+/// `out[k][l] = x[l * len + k]`: [`LANES`] rays of `len` values each, ray-major, into lanes.
+#[inline(always)]
+pub(crate) fn to_lanes(x: &[f64], len: usize, out: &mut [Lanes]) {
+    for (l, ray) in x.chunks_exact(len).enumerate() {
+        for (o, &v) in out.iter_mut().zip(ray) {
+            o[l] = v;
+        }
+    }
+}
+
+/// `out[l * len + k] = x[k][l]` for `k < len`: lanes back into [`LANES`] rays, ray-major.
+#[inline(always)]
+pub(crate) fn from_lanes(x: &[Lanes], len: usize, out: &mut [f64]) {
+    for (l, ray) in out.chunks_exact_mut(len).enumerate() {
+        for (o, v) in ray.iter_mut().zip(x) {
+            *o = v[l];
+        }
+    }
+}
+
 /// What a block's loop takes next: a pack of [`LANES`] consecutive rays of one length, or a
 /// single ray (ragged neighbours, an empty ray, the block's tail, or packs turned off).
 pub(crate) enum Unit {

@@ -15,7 +15,7 @@ use super::lanes::{Unit, LANES};
 use super::layout::{blocks, Block, Flat};
 use super::pack_attenuation::PackAttenuation;
 use super::pack_backward::{backward_pack, PackScratch};
-use super::pack_forward::forward_pack;
+use super::pack_forward::{forward_pack, ForwardScratch};
 
 /// `upstream(ray, colour, d_colour)` writes `dL/dC` of a ray from its colour as written to the
 /// outputs.
@@ -60,6 +60,7 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
     let mut att = Attenuation::default();
     let mut scratch = Scratch::default();
     let mut pack = PackAttenuation::default();
+    let mut pack_forward = ForwardScratch::default();
     let mut pack_scratch = PackScratch::default();
     let mut valid = true;
     for unit in block.units(&op.offsets, op.packs) {
@@ -72,7 +73,7 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
                 backward_ray(x, want, &ray, &att, only_color(d_color), &mut scratch, &mut g);
             }
             Unit::Pack { first, len } => {
-                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut o);
+                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut pack_forward, &mut o);
                 valid &= ok;
                 for (l, d) in d_color.chunks_exact_mut(ch).enumerate() {
                     color_upstream(upstream, first.index + l, first.in_block + l, &o, d);

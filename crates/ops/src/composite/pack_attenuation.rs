@@ -109,7 +109,10 @@ impl PackAttenuation {
             start = end;
         }
         self.depth[len] = running;
-        self.trans[len] = running.map(|d| if single { exp_neg::<true>(d) } else { exp_neg::<false>(d) });
+        // A loop, not a closure, so that the exponential is compiled with the caller's features.
+        for (t, &d) in self.trans[len].iter_mut().zip(&running) {
+            *t = if single { exp_neg::<true>(d) } else { exp_neg::<false>(d) };
+        }
     }
 
     /// Each lane's stop: the first sample whose transmittance is below the threshold, or `len`.

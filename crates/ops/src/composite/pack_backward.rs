@@ -6,7 +6,8 @@
 use fogray_tape::Float;
 
 use super::backward::{InputGrads, RayUpstream, Wanted};
-use super::lanes::{splat, zip_with, Lanes, Unit, LANES};
+use super::lanes::{from_lanes, splat, to_lanes, zip_with, Lanes, Unit, LANES};
+use super::rows::{add_row_dots, outer_product};
 use super::layout::{Flat, Ray};
 use super::pack_attenuation::PackAttenuation;
 
@@ -15,6 +16,10 @@ use super::pack_attenuation::PackAttenuation;
 pub(crate) struct PackScratch {
     value: Vec<Lanes>,
     d_tau: Vec<Lanes>,
+    /// Ray-major values of the pack (`2 LANES len`: the values, then dL/dtau and the weights).
+    per_ray: Vec<f64>,
+    /// Each ray's upstream colour gradient in f64, `[LANES][ch]`.
+    g_color_per_ray: Vec<f64>,
 }
 
 /// The per-ray `suffix::adds_minus_hides` in every lane: `out[k] = T_{k+1} (v_k - R_{k+1})`
@@ -26,7 +31,7 @@ fn adds_minus_hides(trans: &[Lanes], alpha: &[Lanes], value: &[Lanes], mut behin
     let mul = |a: Lanes, b: Lanes| zip_with(a, b, |a, b| a * b);
     let sub = |a: Lanes, b: Lanes| zip_with(a, b, |a, b| a - b);
     let fma = |a: Lanes, b: Lanes, c: Lanes| -> Lanes { std::array::from_fn(|l| a[l].mul_add(b[l], c[l])) };
-    let one_minus = |a: Lanes| a.map(|a| 1.0 - a);
+    let one_minus = |a: Lanes| zip_with(splat(1.0), a, |one, a| one - a);
     let mut k = len;
     while k >= 4 {
         let (a, b, c, d) = (k - 4, k - 3, k - 2, k - 1);
@@ -100,37 +105,39 @@ pub(crate) fn backward_pack<F: Float>(
         }
     }
 
-    let PackScratch { value, d_tau } = scratch;
-    value.clear();
-    value.resize(stop, std::array::from_fn(|l| g[l].opacity));
-    if let Some(t) = &x.t {
-        let t = &t[samples.clone()];
-        let g_depth: Lanes = std::array::from_fn(|l| g[l].depth);
-        for (k, v) in value.iter_mut().enumerate() {
-            for l in 0..LANES {
-                v[l] += g_depth[l] * f(t[l * len + k]);
+    let PackScratch {
+        value,
+        d_tau,
+        per_ray,
+        g_color_per_ray,
+    } = scratch;
+    // What each sample is worth (element-wise), per ray by the per-ray code, then into lanes.
+    g_color_per_ray.clear();
+    for gl in g.iter() {
+        g_color_per_ray.extend(gl.color.into_iter().flatten().map(|&v| f(v)));
+    }
+    per_ray.resize(2 * LANES * len, 0.0);
+    for l in 0..LANES {
+        let v = &mut per_ray[l * stop..(l + 1) * stop];
+        let ray = samples.start + l * len..samples.start + (l + 1) * len;
+        v.fill(g[l].opacity);
+        if let Some(t) = &x.t {
+            for (v, &t) in v.iter_mut().zip(&t[ray.clone()]) {
+                *v += g[l].depth * f(t);
             }
+        }
+        if let Some(gw) = g[l].weights {
+            for (v, &gw) in v.iter_mut().zip(gw) {
+                *v += f(gw);
+            }
+        }
+        if has_color {
+            add_row_dots(&x.color[ray.start * ch..], &g_color_per_ray[l * ch..(l + 1) * ch], v);
         }
     }
-    if g[0].weights.is_some() {
-        for (k, v) in value.iter_mut().enumerate() {
-            for l in 0..LANES {
-                v[l] += g[l].weights.map_or(0.0, |gw| f(gw[k]));
-            }
-        }
-    }
-    if has_color {
-        let color = &x.color[samples.start * ch..samples.end * ch];
-        for (k, v) in value.iter_mut().enumerate() {
-            // As `rows::add_row_dots`: the dot from 0, channel after channel, then added.
-            let mut s = splat(0.0);
-            for (c, gc) in g_color.iter().enumerate() {
-                for l in 0..LANES {
-                    s[l] += gc[l] * f(color[(l * len + k) * ch + c]);
-                }
-            }
-            *v = zip_with(*v, s, |v, s| v + s);
-        }
+    value.resize(stop, splat(0.0));
+    if stop > 0 {
+        to_lanes(&per_ray[..LANES * stop], stop, value);
     }
 
     // R starts at the background's value, summed as the per-ray code sums it.
@@ -152,14 +159,19 @@ pub(crate) fn backward_pack<F: Float>(
         }
     }
 
-    // Per lane, samples `local + l len ..` up to its stop, zero behind it.
+    // Back to rays: dL/dtau and the weights, ray-major, each ray `stop` long.
     let lane = |l: usize| local + l * len..local + l * len + stop;
     let skipped = |l: usize| local + l * len + stop..local + (l + 1) * len;
+    let (d_tau_per_ray, weights_per_ray) = per_ray.split_at_mut(LANES * stop);
+    if stop > 0 {
+        from_lanes(d_tau, stop, d_tau_per_ray);
+    }
     if want.sigma {
         let delta = &x.delta[samples.clone()];
         for l in 0..LANES {
-            for (k, out) in o.sigma[lane(l)].iter_mut().enumerate() {
-                *out = F::lit(f(delta[l * len + k]) * d_tau[k][l]);
+            let (d_tau, delta) = (&d_tau_per_ray[l * stop..(l + 1) * stop], &delta[l * len..]);
+            for ((out, &d), &dt) in o.sigma[lane(l)].iter_mut().zip(delta).zip(d_tau) {
+                *out = F::lit(f(d) * dt);
             }
             o.sigma[skipped(l)].fill(F::zero());
         }
@@ -167,30 +179,32 @@ pub(crate) fn backward_pack<F: Float>(
     if want.delta {
         let sigma = &x.sigma[samples.clone()];
         for l in 0..LANES {
-            for (k, out) in o.delta[lane(l)].iter_mut().enumerate() {
-                *out = F::lit(f(sigma[l * len + k]) * d_tau[k][l]);
+            let (d_tau, sigma) = (&d_tau_per_ray[l * stop..(l + 1) * stop], &sigma[l * len..]);
+            for ((out, &s), &dt) in o.delta[lane(l)].iter_mut().zip(sigma).zip(d_tau) {
+                *out = F::lit(f(s) * dt);
             }
             o.delta[skipped(l)].fill(F::zero());
         }
     }
-    if want.color {
-        for l in 0..LANES {
-            let rows = &mut o.color[lane(l).start * ch..lane(l).end * ch];
-            for (k, row) in rows.chunks_exact_mut(ch).enumerate() {
-                for (c, out) in row.iter_mut().enumerate() {
-                    *out = F::lit(weights[k][l] * g_color[c][l]);
-                }
-            }
-            o.color[skipped(l).start * ch..skipped(l).end * ch].fill(F::zero());
+    if want.color || want.t {
+        let weights_per_ray = &mut weights_per_ray[..LANES * stop];
+        if stop > 0 {
+            from_lanes(&weights[..stop], stop, weights_per_ray);
         }
-    }
-    if want.t {
         for l in 0..LANES {
-            let g_depth = g[l].depth;
-            for (k, out) in o.t[lane(l)].iter_mut().enumerate() {
-                *out = F::lit(weights[k][l] * g_depth);
+            let w = &weights_per_ray[l * stop..(l + 1) * stop];
+            if want.color {
+                let gc = &g_color_per_ray[l * ch..(l + 1) * ch];
+                outer_product(w, gc, &mut o.color[lane(l).start * ch..lane(l).end * ch]);
+                o.color[skipped(l).start * ch..skipped(l).end * ch].fill(F::zero());
             }
-            o.t[skipped(l)].fill(F::zero());
+            if want.t {
+                let g_depth = g[l].depth;
+                for (out, &w) in o.t[lane(l)].iter_mut().zip(w) {
+                    *out = F::lit(w * g_depth);
+                }
+                o.t[skipped(l)].fill(F::zero());
+            }
         }
     }
 }

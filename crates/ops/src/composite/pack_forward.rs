@@ -1,14 +1,25 @@
 //! The forward of a pack of rays ([`super::lanes`]): `forward_ray`'s compositing in every lane,
-//! each lane summing its own ray in the per-ray order (bitwise the per-ray values).
+//! each lane summing its own ray in the per-ray order (bitwise the per-ray values): the
+//! attenuation across the lanes, the colour and depth sums by the per-ray code on each ray.
 
 use fogray_tape::Float;
 
 use super::attenuation::valid_steps;
 use super::config::Composite;
 use super::forward::{all_finite, Outputs};
-use super::lanes::{splat, zip_with, Lanes, Unit, LANES};
+use super::lanes::{from_lanes, Lanes, Unit, LANES};
 use super::layout::{Flat, Ray};
 use super::pack_attenuation::PackAttenuation;
+use super::rows::weighted_column_sums;
+
+/// Per-block buffers of the pack forward.
+#[derive(Debug, Default)]
+pub(crate) struct ForwardScratch {
+    /// The pack's weights, ray-major.
+    weights: Vec<f64>,
+    /// One ray's colour.
+    acc: Vec<f64>,
+}
 
 /// Composites the pack of [`LANES`] rays of `len` samples starting at `first` into its block's
 /// outputs `o`, leaving its attenuation in `att`; returns each lane's stop and whether every
@@ -20,6 +31,7 @@ pub(crate) fn forward_pack<F: Float>(
     first: &Ray,
     len: usize,
     att: &mut PackAttenuation,
+    scratch: &mut ForwardScratch,
     o: &mut Outputs<'_, F>,
 ) -> ([usize; LANES], bool) {
     let ch = x.ch;
@@ -30,42 +42,30 @@ pub(crate) fn forward_pack<F: Float>(
     // The pack's rays are contiguous: one check over all of them.
     let valid = valid_steps(sigma, delta) & all_finite(color) & t.is_none_or(all_finite);
     att.compute(sigma, delta, len, op.min_transmittance);
+    scratch.weights.resize(LANES * len, 0.0);
+    scratch.acc.resize(ch, 0.0);
     let stop = att.stop();
     let t_end: Lanes = std::array::from_fn(|l| att.transmittance()[stop[l]][l]);
-    let mut acc = vec![splat(0.0); ch];
-    match ch {
-        1 => column_sums::<F, 1>(color, len, att.weights(), stop, &mut acc),
-        2 => column_sums::<F, 2>(color, len, att.weights(), stop, &mut acc),
-        3 => column_sums::<F, 3>(color, len, att.weights(), stop, &mut acc),
-        4 => column_sums::<F, 4>(color, len, att.weights(), stop, &mut acc),
-        _ => column_sums::<F, 0>(color, len, att.weights(), stop, &mut acc),
-    }
+    // The colour and depth sums per ray, ray-major, by the per-ray code itself.
+    from_lanes(att.weights(), len, &mut scratch.weights);
     let j = first.in_block;
-    for (c, a) in acc.iter_mut().enumerate() {
-        for l in 0..LANES {
-            let bg = x.background_of(first.index + l).get(c).map(|b| b.as_f64());
-            if let Some(bg) = bg {
-                a[l] += t_end[l] * bg;
-            }
-            o.color[(j + l) * ch + c] = F::lit(a[l]);
-        }
-    }
     let opacity = att.opacity::<F>();
     for l in 0..LANES {
-        o.opacity[j + l] = F::lit(opacity[l]);
-    }
-    if let Some(t) = t {
-        let mut depth = splat(0.0);
-        for (k, w) in att.weights().iter().enumerate() {
-            let tk: Lanes = std::array::from_fn(|l| t[l * len + k].as_f64());
-            for l in 0..LANES {
-                // As the per-ray fold: a product and a sum, no fused multiply-add.
-                depth[l] = if k < stop[l] { depth[l] + w[l] * tk[l] } else { depth[l] };
-            }
+        let w = &scratch.weights[l * len..l * len + stop[l]];
+        let acc = &mut scratch.acc[..ch];
+        acc.fill(0.0);
+        weighted_column_sums(&color[l * len * ch..], w, acc);
+        for (a, &bg) in acc.iter_mut().zip(x.background_of(first.index + l)) {
+            *a += t_end[l] * bg.as_f64();
         }
-        if op.depth {
-            for l in 0..LANES {
-                o.depth[j + l] = F::lit(depth[l]);
+        for (out, &a) in o.color[(j + l) * ch..(j + l + 1) * ch].iter_mut().zip(acc.iter()) {
+            *out = F::lit(a);
+        }
+        o.opacity[j + l] = F::lit(opacity[l]);
+        if let Some(t) = t {
+            let depth = w.iter().zip(&t[l * len..]).fold(0.0, |d, (&w, &t)| d + w * t.as_f64());
+            if op.depth {
+                o.depth[j + l] = F::lit(depth);
             }
         }
     }
@@ -87,34 +87,4 @@ pub(crate) fn forward_pack<F: Float>(
         }
     }
     (stop, valid)
-}
-
-/// `acc[c] = 0 + sum_{k < stop} w_k color_k[c]` in every lane, with `rows::weighted_column_sums`'
-/// order: sample k into partial sum `k % 4` by a fused multiply-add, the partials added pairwise.
-/// `CH` is the channel count, or 0 for "the run-time count".
-#[inline(always)]
-fn column_sums<F: Float, const CH: usize>(
-    color: &[F],
-    len: usize,
-    w: &[Lanes],
-    stop: [usize; LANES],
-    acc: &mut [Lanes],
-) {
-    let ch = if CH == 0 { acc.len() } else { CH };
-    // Lanes that run to their end (the usual case) need no per-sample test.
-    let whole = stop.iter().all(|&s| s == len);
-    for c in 0..ch {
-        let mut part = [splat(0.0); 4];
-        for (k, wk) in w.iter().enumerate() {
-            let value: Lanes = std::array::from_fn(|l| color[(l * len + k) * ch + c].as_f64());
-            let p = &mut part[k % 4];
-            *p = if whole {
-                std::array::from_fn(|l| wk[l].mul_add(value[l], p[l]))
-            } else {
-                std::array::from_fn(|l| if k < stop[l] { wk[l].mul_add(value[l], p[l]) } else { p[l] })
-            };
-        }
-        let add = |a: Lanes, b: Lanes| zip_with(a, b, |a, b| a + b);
-        acc[c] = add(acc[c], add(add(part[0], part[1]), add(part[2], part[3])));
-    }
 }
