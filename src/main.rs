@@ -304,8 +304,7 @@ fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> 
     let bandwidth = cli::bench::bandwidths(quick)?;
     let results = cli::bench::run(&workloads, quick, &Allocator, &bandwidth, &mut log)?;
     let tape = cli::tape_cost::run(quick)?;
-    let tables =
-        cli::bench::bandwidth_table(&bandwidth) + &cli::bench::table(&results) + &cli::tape_cost::table(&tape);
+    let tables = cli::bench::bandwidth_table(&bandwidth) + &cli::bench::table(&results) + &cli::tape_cost::table(&tape);
     publish.write(
         "composite",
         "The composite: samples per second and errors",

@@ -403,7 +403,10 @@ fn bench_reports_speed_beside_error_and_memory() {
             assert_eq!(b["triad_bytes_per_sec"].as_f64(), Some(triad));
             let rate = r["samples_per_sec_one_pass"].as_f64().unwrap();
             let want = rate * (9 * value) as f64 / triad;
-            assert!((b["fraction_one_pass"].as_f64().unwrap() / want - 1.0).abs() < 1e-12, "{r}");
+            assert!(
+                (b["fraction_one_pass"].as_f64().unwrap() / want - 1.0).abs() < 1e-12,
+                "{r}"
+            );
         }
         // Accuracy is asserted, never speed: the fused op in f32 stays within 1e-5 element-wise.
         if r["method"] == "fused" {

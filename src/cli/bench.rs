@@ -389,6 +389,7 @@ pub fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R +
 }
 
 /// Runs every measurement of one workload in precision F.
+#[allow(clippy::too_many_arguments)]
 fn measure<F: Float>(
     d: &Data,
     samples: usize,
@@ -420,7 +421,13 @@ fn measure<F: Float>(
         let value_bytes = std::mem::size_of::<F>();
         let memory_bound = one_pass.and_then(|one_pass| {
             let bw = bandwidth.iter().find(|b| b.threads == threads)?;
-            Some(MemoryBound::of(bw, value_bytes, n / both.median, n / reused, n / one_pass))
+            Some(MemoryBound::of(
+                bw,
+                value_bytes,
+                n / both.median,
+                n / reused,
+                n / one_pass,
+            ))
         });
         let m = Measurement {
             method,
@@ -549,7 +556,8 @@ fn percent(fraction: Option<f64>) -> String {
 /// The machine's bandwidth as the bench measured it, one line per thread count, and what the
 /// `bound` columns mean.
 pub fn bandwidth_table(bandwidth: &[Bandwidth]) -> String {
-    let mut s = String::from("memory bound (STREAM triad, best run; `bound` = bytes moved per second over the triad's):\n");
+    let mut s =
+        String::from("memory bound (STREAM triad, best run; `bound` = bytes moved per second over the triad's):\n");
     for b in bandwidth {
         s += &format!("  {} thread(s): {:.1} GB/s\n", b.threads, b.bytes_per_sec / 1e9);
     }

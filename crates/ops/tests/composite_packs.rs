@@ -99,7 +99,11 @@ fn everything<F: Float>(op: &Composite, c: &Case<F>, background: Background) -> 
     let (outs, res) = op.evaluate(&inputs).unwrap();
     all.push(("colour".to_string(), bits(&outs.color)));
     all.push(("opacity".to_string(), bits(&outs.opacity)));
-    for (name, o) in [("depth", &outs.depth), ("weights", &outs.weights), ("T", &outs.transmittance)] {
+    for (name, o) in [
+        ("depth", &outs.depth),
+        ("weights", &outs.weights),
+        ("T", &outs.transmittance),
+    ] {
         all.push((name.to_string(), bits(o.as_ref().unwrap())));
     }
     let upstream = CompositeUpstream {
@@ -241,7 +245,11 @@ fn packed_rays_match_the_closed_form_of_two_uniform_slabs() {
         let half = (0.5 + r as f64 * 0.25) * 0.05 * (len / 2) as f64;
         let (ea, eb) = ((-half).exp(), (-half).exp());
         let want = (1.0 - ea) * 0.9 + ea * (1.0 - eb) * 0.2 + ea * eb * 0.6;
-        assert!((outs.color[[r, 0]] - want).abs() < 1e-14, "ray {r}: {} vs {want}", outs.color[[r, 0]]);
+        assert!(
+            (outs.color[[r, 0]] - want).abs() < 1e-14,
+            "ray {r}: {} vs {want}",
+            outs.color[[r, 0]]
+        );
         assert!((outs.opacity[r] - (1.0 - ea * eb)).abs() < 1e-14);
     }
 }

@@ -56,7 +56,10 @@ pub(crate) fn from_lanes(x: &[Lanes], len: usize, out: &mut [f64]) {
 /// single ray (ragged neighbours, an empty ray, the block's tail, or packs turned off).
 pub(crate) enum Unit {
     /// Rays `first.index..first.index + LANES`, each of `len > 0` samples, contiguous.
-    Pack { first: Ray, len: usize },
+    Pack {
+        first: Ray,
+        len: usize,
+    },
     Single(Ray),
 }
 
@@ -120,7 +123,10 @@ mod tests {
                             assert_eq!(offsets[q + 1] - offsets[q], len);
                             seen.push(q);
                         }
-                        assert_eq!(Unit::pack_samples(&first, len), offsets[first.index]..offsets[first.index + LANES]);
+                        assert_eq!(
+                            Unit::pack_samples(&first, len),
+                            offsets[first.index]..offsets[first.index + LANES]
+                        );
                     }
                     Unit::Single(ray) => seen.push(ray.index),
                 }

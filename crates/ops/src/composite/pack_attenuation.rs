@@ -77,8 +77,14 @@ impl PackAttenuation {
             let end = (start + chunk).min(len);
             let part = start..end;
             running = exclusive_prefix_sums(&self.tau[part.clone()], &mut self.depth[part.clone()], running);
-            let (depth, trans) = (self.depth[part.clone()].as_flattened(), self.trans[part.clone()].as_flattened_mut());
-            let (tau, alpha) = (self.tau[part.clone()].as_flattened(), self.alpha[part.clone()].as_flattened_mut());
+            let (depth, trans) = (
+                self.depth[part.clone()].as_flattened(),
+                self.trans[part.clone()].as_flattened_mut(),
+            );
+            let (tau, alpha) = (
+                self.tau[part.clone()].as_flattened(),
+                self.alpha[part.clone()].as_flattened_mut(),
+            );
             if single {
                 exp_neg_slice::<true>(depth, trans);
                 one_minus_exp_neg_slice::<true>(tau, alpha);
@@ -111,7 +117,11 @@ impl PackAttenuation {
         self.depth[len] = running;
         // A loop, not a closure, so that the exponential is compiled with the caller's features.
         for (t, &d) in self.trans[len].iter_mut().zip(&running) {
-            *t = if single { exp_neg::<true>(d) } else { exp_neg::<false>(d) };
+            *t = if single {
+                exp_neg::<true>(d)
+            } else {
+                exp_neg::<false>(d)
+            };
         }
     }
 
@@ -160,7 +170,9 @@ mod tests {
         let sigma: Vec<F> = (0..LANES * len)
             .map(|i| F::lit(((i * 37) % 23) as f64 * 0.21 + if i % 11 == 0 { 1e-9 } else { 0.0 }))
             .collect();
-        let delta: Vec<F> = (0..LANES * len).map(|i| F::lit(0.03 + (i % 5) as f64 * 0.011)).collect();
+        let delta: Vec<F> = (0..LANES * len)
+            .map(|i| F::lit(0.03 + (i % 5) as f64 * 0.011))
+            .collect();
         let mut pack = PackAttenuation::default();
         pack.compute(&sigma, &delta, len, min_transmittance);
         let mut ray = Attenuation::default();
@@ -170,13 +182,20 @@ mod tests {
             let stop = ray.stop();
             assert_eq!(pack.stop()[l], stop, "len {len} lane {l}");
             for k in 0..=stop {
-                assert_eq!(pack.transmittance()[k][l].to_bits(), ray.transmittance()[k].to_bits(), "T_{k}");
+                assert_eq!(
+                    pack.transmittance()[k][l].to_bits(),
+                    ray.transmittance()[k].to_bits(),
+                    "T_{k}"
+                );
             }
             for k in 0..stop {
                 assert_eq!(pack.alpha()[k][l].to_bits(), ray.alpha()[k].to_bits(), "alpha_{k}");
                 assert_eq!(pack.weights()[k][l].to_bits(), ray.weights()[k].to_bits(), "w_{k}");
             }
-            assert_eq!(pack.opacity::<F>()[l].to_bits(), ray.opacity_before::<F>(stop).to_bits());
+            assert_eq!(
+                pack.opacity::<F>()[l].to_bits(),
+                ray.opacity_before::<F>(stop).to_bits()
+            );
         }
     }
 

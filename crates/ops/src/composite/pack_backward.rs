@@ -7,9 +7,9 @@ use fogray_tape::Float;
 
 use super::backward::{InputGrads, RayUpstream, Wanted};
 use super::lanes::{from_lanes, splat, to_lanes, zip_with, Lanes, Unit, LANES};
-use super::rows::{add_row_dots, outer_product};
 use super::layout::{Flat, Ray};
 use super::pack_attenuation::PackAttenuation;
+use super::rows::{add_row_dots, outer_product};
 
 /// Per-block buffers of the pack backward, reused pack after pack.
 #[derive(Default)]
@@ -98,9 +98,9 @@ pub(crate) fn backward_pack<F: Float>(
     let has_color = g[0].color.is_some();
 
     if want.background {
-        for c in 0..ch {
+        for (c, gc) in g_color.iter().enumerate() {
             for l in 0..LANES {
-                o.background[(j + l) * ch + c] = F::lit(t_end[l] * g_color[c][l]);
+                o.background[(j + l) * ch + c] = F::lit(t_end[l] * gc[l]);
             }
         }
     }

@@ -71,17 +71,21 @@ pub(crate) fn forward_pack<F: Float>(
     }
     let local = first.local.start;
     if op.transmittance {
-        for l in 0..LANES {
+        for (l, &stop) in stop.iter().enumerate() {
             for k in 0..len {
-                let v = if k < stop[l] { att.transmittance()[k][l] } else { t_end[l] };
+                let v = if k < stop { att.transmittance()[k][l] } else { t_end[l] };
                 o.transmittance[local + l * len + k] = F::lit(v);
             }
         }
     }
     if op.weights {
-        for l in 0..LANES {
+        for (l, &stop) in stop.iter().enumerate() {
             for k in 0..len {
-                let v = if k < stop[l] { F::lit(att.weights()[k][l]) } else { F::zero() };
+                let v = if k < stop {
+                    F::lit(att.weights()[k][l])
+                } else {
+                    F::zero()
+                };
                 o.weights[local + l * len + k] = v;
             }
         }
