@@ -2,7 +2,8 @@
 //! (gradients for sigma and colour), on the workloads of `fogray bench`.
 //!
 //! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
-//! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them; `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
+//! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them, each
+//! also `-packed` (rays eight at a time across the vector lanes, `Composite::pack_rays`); `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
 //! each time, its buffer pool reused). `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
 //! selects. `fogray bench` gives the same speeds beside each method's error and memory.
 
@@ -104,10 +105,10 @@ const SIGMA_AND_COLOR: CompositeWanted = CompositeWanted {
     t: false,
 };
 
-fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
+fn fused_into<F: Float>(op: &Composite, x: &Inputs<F>, b: &mut Buffers<F>) {
     let views = x.views();
-    let res = x.op.evaluate_into(&views, &mut b.outputs()).unwrap();
-    x.op.vjp_into(
+    let res = op.evaluate_into(&views, &mut b.outputs()).unwrap();
+    op.vjp_into(
         &views,
         &res,
         &CompositeUpstream::color(x.grad.view()),
@@ -117,11 +118,11 @@ fn fused_into<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
 }
 
 /// [`fused_into`] in one pass per ray, each ray's upstream gradient handed over by the callback.
-fn fused_one_pass<F: Float>(x: &Inputs<F>, b: &mut Buffers<F>) {
+fn fused_one_pass<F: Float>(op: &Composite, x: &Inputs<F>, b: &mut Buffers<F>) {
     let views = x.views();
     let upstream = x.grad.as_slice().unwrap();
     let (mut outputs, mut grads) = b.outputs_and_gradients();
-    x.op.evaluate_vjp_into(
+    op.evaluate_vjp_into(
         &views,
         |r, _, d: &mut [F]| d.copy_from_slice(&upstream[r * d.len()..(r + 1) * d.len()]),
         &mut outputs,
@@ -168,12 +169,16 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
             grad_sigma: ArrayD::zeros(vec![n]),
             grad_color: ArrayD::zeros(vec![n, 3]),
         };
-        group.bench_with_input(BenchmarkId::new("fused-into", &id), &x, |b, x| {
-            b.iter(|| fused_into(x, &mut buffers))
-        });
-        group.bench_with_input(BenchmarkId::new("fused-one-pass", &id), &x, |b, x| {
-            b.iter(|| fused_one_pass(x, &mut buffers))
-        });
+        // `-packed`: rays eight at a time across the vector lanes (`Composite::pack_rays`).
+        let packed = x.op.clone().pack_rays(true);
+        for (suffix, op) in [("", &x.op), ("-packed", &packed)] {
+            group.bench_with_input(BenchmarkId::new(format!("fused-into{suffix}"), &id), &x, |b, x| {
+                b.iter(|| fused_into(op, x, &mut buffers))
+            });
+            group.bench_with_input(BenchmarkId::new(format!("fused-one-pass{suffix}"), &id), &x, |b, x| {
+                b.iter(|| fused_one_pass(op, x, &mut buffers))
+            });
+        }
         for (name, naive) in [("taped", false), ("taped-naive", true)] {
             group.bench_with_input(BenchmarkId::new(name, &id), &x, |b, x| {
                 b.iter(|| taped(x, naive, &mut Tape::new()))

@@ -109,7 +109,10 @@ enum Command {
     /// workloads 4096x64, 65536x64, 16384x256 and 1024x4096 (RGB; sigma ~ U[0,5], total
     /// optical depth ~5), each beside its error against an independent compensated f64
     /// reference on the same rays and its peak extra memory; then the tape's own cost per
-    /// recorded op and per byte.
+    /// recorded op and per byte. A short STREAM triad first measures the bytes per second the
+    /// machine streams (1 thread and all); each fused row shows its two-call (`reused`) and
+    /// one-pass speeds as the fraction of that bound they reach for the bytes they must move
+    /// per sample.
     ///
     /// With --op grid: lookups per second of the fused trilinear grid field (1 thread and all)
     /// and of its taped twin (1 thread, a quarter of the lookups), forward + backward into the
@@ -124,7 +127,8 @@ enum Command {
         /// runs (and at least 0.3 s of them) after a warm-up run.
         #[arg(long)]
         quick: bool,
-        /// Print {"results": [...], "tape_overhead": [...]} as JSON.
+        /// Print {"bandwidth": [...], "results": [...], "tape_overhead": [...]} as JSON
+        /// (composite; the grid field prints {"results": [...]}).
         #[arg(long)]
         json: bool,
         /// Only this workload, as RxS (rays x samples per ray) for the composite, or N (an N^3 x 4
@@ -297,9 +301,10 @@ fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> 
             );
         }
     };
-    let results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
+    let bandwidth = cli::bench::bandwidths(quick)?;
+    let results = cli::bench::run(&workloads, quick, &Allocator, &bandwidth, &mut log)?;
     let tape = cli::tape_cost::run(quick)?;
-    let tables = cli::bench::table(&results) + &cli::tape_cost::table(&tape);
+    let tables = cli::bench::bandwidth_table(&bandwidth) + &cli::bench::table(&results) + &cli::tape_cost::table(&tape);
     publish.write(
         "composite",
         "The composite: samples per second and errors",
@@ -308,10 +313,10 @@ fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> 
     )?;
     if json {
         Ok(serde_json::to_string_pretty(
-            &serde_json::json!({ "results": results, "tape_overhead": tape }),
+            &serde_json::json!({ "bandwidth": bandwidth, "results": results, "tape_overhead": tape }),
         )?)
     } else {
-        Ok(cli::bench::table(&results) + &cli::tape_cost::table(&tape))
+        Ok(tables)
     }
 }
 

@@ -382,8 +382,32 @@ fn bench_reports_speed_beside_error_and_memory() {
             assert!(r[field].is_number(), "{field} in {r}");
         }
         assert_eq!((r["rays"].as_u64(), r["samples"].as_u64()), (Some(64), Some(32)));
-        // Only the fused op has a one-pass path.
+        // Only the fused op has a one-pass path, and a fraction of the memory bound.
         assert_eq!(r["samples_per_sec_one_pass"].is_number(), r["method"] == "fused", "{r}");
+        assert_eq!(r["memory_bound"].is_object(), r["method"] == "fused", "{r}");
+        if r["method"] == "fused" {
+            let b = &r["memory_bound"];
+            // Bytes per sample by hand: sigma, delta and RGB read (twice through two calls),
+            // dL/dsigma and dL/dcolour written.
+            let value = if r["precision"] == "f32" { 4 } else { 8 };
+            assert_eq!(b["bytes_per_sample_two_calls"].as_u64(), Some(14 * value), "{r}");
+            assert_eq!(b["bytes_per_sample_one_pass"].as_u64(), Some(9 * value), "{r}");
+            let triad = json["bandwidth"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .find(|t| t["threads"] == r["threads"])
+                .unwrap()["bytes_per_sec"]
+                .as_f64()
+                .unwrap();
+            assert_eq!(b["triad_bytes_per_sec"].as_f64(), Some(triad));
+            let rate = r["samples_per_sec_one_pass"].as_f64().unwrap();
+            let want = rate * (9 * value) as f64 / triad;
+            assert!(
+                (b["fraction_one_pass"].as_f64().unwrap() / want - 1.0).abs() < 1e-12,
+                "{r}"
+            );
+        }
         // Accuracy is asserted, never speed: the fused op in f32 stays within 1e-5 element-wise.
         if r["method"] == "fused" {
             let tol = if r["precision"] == "f32" { 1e-5 } else { 1e-12 };

@@ -14,6 +14,7 @@ use ndarray::{Array1, Array2, ArrayD, ArrayViewD};
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
+use super::bandwidth::{fraction_of_bound, fused_bytes_per_sample, Bandwidth, FusedPath};
 use super::error::CliError;
 use super::reference::{errors, reference, Rays};
 
@@ -64,6 +65,41 @@ pub struct Measurement {
     pub err_grad_sigma_norm: f64,
     /// Peak bytes allocated during forward and backward, beyond the inputs.
     pub peak_extra_bytes: usize,
+    /// Fused only: the speeds against the machine's memory bound on the row's threads.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub memory_bound: Option<MemoryBound>,
+}
+
+/// A fused row's speeds as fractions of what the machine can stream (see [`super::bandwidth`]).
+#[derive(Debug, Clone, Serialize)]
+pub struct MemoryBound {
+    /// The triad's bytes per second on the row's thread count.
+    pub triad_bytes_per_sec: f64,
+    /// Bytes the two calls must move per sample (inputs read twice, gradients written).
+    pub bytes_per_sample_two_calls: usize,
+    /// Bytes one pass must move per sample (inputs read once, gradients written).
+    pub bytes_per_sample_one_pass: usize,
+    /// `samples_per_sec` (the allocating two calls) times their bytes, over the triad's.
+    pub fraction: f64,
+    /// The same for `samples_per_sec_reused`.
+    pub fraction_reused: f64,
+    /// The same for `samples_per_sec_one_pass`, at one pass's bytes.
+    pub fraction_one_pass: f64,
+}
+
+impl MemoryBound {
+    fn of(bw: &Bandwidth, value_bytes: usize, both: f64, reused: f64, one_pass: f64) -> Self {
+        let two = fused_bytes_per_sample(value_bytes, CHANNELS, FusedPath::TwoCalls);
+        let one = fused_bytes_per_sample(value_bytes, CHANNELS, FusedPath::OnePass);
+        MemoryBound {
+            triad_bytes_per_sec: bw.bytes_per_sec,
+            bytes_per_sample_two_calls: two,
+            bytes_per_sample_one_pass: one,
+            fraction: fraction_of_bound(both, two, bw),
+            fraction_reused: fraction_of_bound(reused, two, bw),
+            fraction_one_pass: fraction_of_bound(one_pass, one, bw),
+        }
+    }
 }
 
 /// Random packed rays as the anchors measure them: sigma ~ U[0, 5], delta = 2 / samples
@@ -353,12 +389,14 @@ pub fn within<R: Send>(pool: Option<&rayon::ThreadPool>, f: impl FnOnce() -> R +
 }
 
 /// Runs every measurement of one workload in precision F.
+#[allow(clippy::too_many_arguments)]
 fn measure<F: Float>(
     d: &Data,
     samples: usize,
     reps: usize,
     mem: &dyn Memory,
     refs: &super::reference::Reference,
+    bandwidth: &[Bandwidth],
     out: &mut Vec<Measurement>,
     log: &mut dyn FnMut(&Measurement),
 ) -> Result<(), CliError> {
@@ -380,6 +418,17 @@ fn measure<F: Float>(
             &refs.color.iter().map(|c| c.abs()).collect::<Vec<_>>(),
         );
         let (err_grad_sigma, err_grad_sigma_norm) = errors(&o.grad_sigma, &refs.grad_sigma, &refs.grad_scale);
+        let value_bytes = std::mem::size_of::<F>();
+        let memory_bound = one_pass.and_then(|one_pass| {
+            let bw = bandwidth.iter().find(|b| b.threads == threads)?;
+            Some(MemoryBound::of(
+                bw,
+                value_bytes,
+                n / both.median,
+                n / reused,
+                n / one_pass,
+            ))
+        });
         let m = Measurement {
             method,
             precision: F::NAME,
@@ -396,6 +445,7 @@ fn measure<F: Float>(
             err_color_norm,
             err_grad_sigma_norm,
             peak_extra_bytes: o.peak_extra,
+            memory_bound,
         };
         log(&m);
         out.push(m);
@@ -444,11 +494,25 @@ fn measure<F: Float>(
     Ok(())
 }
 
-/// Runs the bench over `workloads`; `log` sees each measurement as it is made.
+/// The triad on 1 thread and on all (see [`super::bandwidth::triad`]), once per bench run.
+pub fn bandwidths(quick: bool) -> Result<Vec<Bandwidth>, CliError> {
+    // A pass takes milliseconds: even --quick keeps the best of several.
+    let runs = if quick { 5 } else { 20 };
+    let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
+    let mut out = vec![super::bandwidth::triad(Some(&one), runs)?];
+    if rayon::current_num_threads() > 1 {
+        out.push(super::bandwidth::triad(None, runs)?);
+    }
+    Ok(out)
+}
+
+/// Runs the bench over `workloads`; `log` sees each measurement as it is made; `bandwidth`
+/// (from [`bandwidths`]) gives each fused row its fraction of the memory bound.
 pub fn run(
     workloads: &[(usize, usize)],
     quick: bool,
     mem: &dyn Memory,
+    bandwidth: &[Bandwidth],
     log: &mut dyn FnMut(&Measurement),
 ) -> Result<Vec<Measurement>, CliError> {
     let reps = if quick { 1 } else { 5 };
@@ -464,8 +528,8 @@ pub fn run(
             background: &d.background,
             grad_color: &d.grad_color,
         });
-        measure::<f32>(&d, samples, reps, mem, &refs, &mut out, log)?;
-        measure::<f64>(&d, samples, reps, mem, &refs, &mut out, log)?;
+        measure::<f32>(&d, samples, reps, mem, &refs, bandwidth, &mut out, log)?;
+        measure::<f64>(&d, samples, reps, mem, &refs, bandwidth, &mut out, log)?;
     }
     Ok(out)
 }
@@ -484,10 +548,32 @@ pub fn parse_workload(s: &str) -> Result<(usize, usize), CliError> {
     Ok((parse(r)?, parse(n)?))
 }
 
+/// A fraction as a whole percentage, or `-` when there is none.
+fn percent(fraction: Option<f64>) -> String {
+    fraction.map_or("-".into(), |f| format!("{:.0}%", f * 100.0))
+}
+
+/// The machine's bandwidth as the bench measured it, one line per thread count, and what the
+/// `bound` columns mean.
+pub fn bandwidth_table(bandwidth: &[Bandwidth]) -> String {
+    let mut s =
+        String::from("memory bound (STREAM triad, best run; `bound` = bytes moved per second over the triad's):\n");
+    for b in bandwidth {
+        s += &format!("  {} thread(s): {:.1} GB/s\n", b.threads, b.bytes_per_sec / 1e9);
+    }
+    s + &format!(
+        "  bytes per sample (RGB): two calls {} (f32) / {} (f64), one pass {} / {}\n\n",
+        fused_bytes_per_sample(4, CHANNELS, FusedPath::TwoCalls),
+        fused_bytes_per_sample(8, CHANNELS, FusedPath::TwoCalls),
+        fused_bytes_per_sample(4, CHANNELS, FusedPath::OnePass),
+        fused_bytes_per_sample(8, CHANNELS, FusedPath::OnePass)
+    )
+}
+
 /// The text report: one line per measurement, then the fused/taped ratios.
 pub fn table(results: &[Measurement]) -> String {
     let mut s = format!(
-        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
+        "{:<12} {:<4} {:>3} {:>12} {:>10} {:>7} {:>10} {:>6} {:>10} {:>6} {:>10} {:>10} {:>10} {:>10} {:>10}\n",
         "method",
         "prec",
         "thr",
@@ -495,7 +581,9 @@ pub fn table(results: &[Measurement]) -> String {
         "Ms/s f+b",
         "spread",
         "reused",
+        "bound",
         "1-pass",
+        "bound",
         "Ms/s fwd",
         "err C",
         "err dC/ds",
@@ -504,7 +592,7 @@ pub fn table(results: &[Measurement]) -> String {
     );
     for m in results {
         s += &format!(
-            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10.1} {:>10} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
+            "{:<12} {:<4} {:>3} {:>12} {:>10.1} {:>6.0}% {:>10.1} {:>6} {:>10} {:>6} {:>10.1} {:>10.1e} {:>10.1e} {:>10.1e} {:>10.1}\n",
             m.method,
             m.precision,
             m.threads,
@@ -512,8 +600,10 @@ pub fn table(results: &[Measurement]) -> String {
             m.samples_per_sec / 1e6,
             m.samples_per_sec_spread * 100.0,
             m.samples_per_sec_reused / 1e6,
+            percent(m.memory_bound.as_ref().map(|b| b.fraction_reused)),
             m.samples_per_sec_one_pass
                 .map_or("-".into(), |r| format!("{:.1}", r / 1e6)),
+            percent(m.memory_bound.as_ref().map(|b| b.fraction_one_pass)),
             m.samples_per_sec_forward / 1e6,
             m.err_color,
             m.err_grad_sigma,

@@ -1,5 +1,6 @@
 //! The `fogray` command line.
 
+pub mod bandwidth;
 pub mod bench;
 pub mod composite;
 pub mod error;

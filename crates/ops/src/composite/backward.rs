@@ -8,7 +8,10 @@ use rayon::prelude::*;
 use super::attenuation::Attenuation;
 use super::config::Composite;
 use super::forward::Residuals;
+use super::lanes::{Unit, LANES};
 use super::layout::{blocks, take_front, Block, Flat, Ray};
+use super::pack_attenuation::PackAttenuation;
+use super::pack_backward::{backward_pack, PackScratch};
 use super::rows::{add_row_dots, outer_product};
 use super::suffix::adds_minus_hides;
 
@@ -29,7 +32,7 @@ pub(crate) struct Upstream<'a, F> {
 impl<F: Float> Upstream<'_, F> {
     /// Ray `r`'s share (`samples` are its global sample indices).
     #[inline(always)]
-    fn of_ray(&self, r: usize, samples: std::ops::Range<usize>, ch: usize) -> RayUpstream<'_, F> {
+    pub(crate) fn of_ray(&self, r: usize, samples: std::ops::Range<usize>, ch: usize) -> RayUpstream<'_, F> {
         RayUpstream {
             color: self.color.map(|g| &g[r * ch..(r + 1) * ch]),
             opacity: self.opacity.map_or(0.0, |v| v[r].as_f64()),
@@ -131,14 +134,53 @@ fn backward_block<'a, F: Float>(
 ) {
     let mut scratch = Scratch::default();
     let mut att = Attenuation::default();
-    for ray in block.each_ray(&op.offsets) {
-        // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
-        let (sigma, delta) = (&x.sigma[ray.samples.clone()], &x.delta[ray.samples.clone()]);
-        att.compute(sigma, delta, op.min_transmittance);
-        debug_assert_eq!(saved.stop[ray.index], att.stop(), "the same code gives the same stop");
-        let up = g.of_ray(ray.index, ray.samples.clone(), x.ch);
-        backward_ray(x, want, &ray, &att, up, &mut scratch, &mut o);
+    let mut pack = PackAttenuation::default();
+    let mut pack_scratch = PackScratch::default();
+    for unit in block.units(&op.offsets, op.packs) {
+        match unit {
+            Unit::Single(ray) => one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o),
+            Unit::Pack { first, len } => {
+                let samples = Unit::pack_samples(&first, len);
+                pack.compute(&x.sigma[samples.clone()], &x.delta[samples], len, op.min_transmittance);
+                let stops = pack.stop();
+                if stops.iter().all(|&s| s == stops[0]) {
+                    let up = std::array::from_fn(|l| {
+                        let ray = block.ray(&op.offsets, first.index + l);
+                        g.of_ray(ray.index, ray.samples, x.ch)
+                    });
+                    backward_pack(x, want, &first, len, &pack, &up, &mut pack_scratch, &mut o);
+                } else {
+                    for r in first.index..first.index + LANES {
+                        let ray = block.ray(&op.offsets, r);
+                        one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o);
+                    }
+                }
+            }
+        }
     }
+}
+
+/// The backward of one ray (recomputing its attenuation) into its block's `o`. A function, not
+/// a closure: a closure would not inherit `backward_block`'s target features.
+#[inline(always)]
+#[allow(clippy::too_many_arguments)]
+fn one_ray<'a, F: Float>(
+    op: &Composite,
+    x: &Flat<'a, F>,
+    saved: &Residuals<F>,
+    g: &Upstream<'a, F>,
+    want: Wanted,
+    ray: Ray,
+    att: &mut Attenuation,
+    scratch: &mut Scratch,
+    o: &mut InputGrads<'a, F>,
+) {
+    // The forward's T_k and alpha_k, recomputed by the same code: bitwise the same values.
+    let (sigma, delta) = (&x.sigma[ray.samples.clone()], &x.delta[ray.samples.clone()]);
+    att.compute(sigma, delta, op.min_transmittance);
+    debug_assert_eq!(saved.stop[ray.index], att.stop(), "the same code gives the same stop");
+    let up = g.of_ray(ray.index, ray.samples.clone(), x.ch);
+    backward_ray(x, want, &ray, att, up, scratch, o);
 }
 
 /// Per-block buffers of the backward, reused ray after ray.

@@ -9,7 +9,10 @@ use rayon::prelude::*;
 
 use super::attenuation::{valid_steps, Attenuation};
 use super::config::Composite;
+use super::lanes::{Unit, LANES};
 use super::layout::{blocks, take_front, Block, Flat, Ray};
+use super::pack_attenuation::PackAttenuation;
+use super::pack_forward::{forward_pack, ForwardScratch};
 use super::rows::weighted_column_sums;
 
 /// What the composite's forward keeps for its backward: the stop index of each ray (its
@@ -103,11 +106,22 @@ fn forward_block<'a, F: Float>(
 ) -> bool {
     let mut acc = vec![0.0f64; x.ch];
     let mut att = Attenuation::default();
+    let mut pack = PackAttenuation::default();
+    let mut pack_forward = ForwardScratch::default();
     let mut valid = true;
-    for ray in block.each_ray(&op.offsets) {
-        let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
-        stop[ray.in_block] = result.stop;
-        valid &= result.valid;
+    for unit in block.units(&op.offsets, op.packs) {
+        match unit {
+            Unit::Single(ray) => {
+                let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
+                stop[ray.in_block] = result.stop;
+                valid &= result.valid;
+            }
+            Unit::Pack { first, len } => {
+                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut pack_forward, &mut o);
+                stop[first.in_block..first.in_block + LANES].copy_from_slice(&stops);
+                valid &= ok;
+            }
+        }
     }
     valid
 }
@@ -164,7 +178,7 @@ pub(crate) struct RayIn<'a, F> {
 
 /// Whether no value is NaN or infinite, without a branch per value (so that it vectorises).
 #[inline(always)]
-fn all_finite<F: Float>(v: &[F]) -> bool {
+pub(crate) fn all_finite<F: Float>(v: &[F]) -> bool {
     let max = F::max_value();
     v.iter().fold(true, |ok, &x| ok & (x.abs() <= max))
 }

@@ -170,15 +170,14 @@ pub(crate) struct Block {
 }
 
 impl Block {
-    /// The block's rays in order, each placed in the op (`offsets` as [`Composite`]'s) and in
-    /// the block.
-    pub(crate) fn each_ray<'a>(&'a self, offsets: &'a [usize]) -> impl Iterator<Item = Ray> + 'a {
-        self.rays.clone().enumerate().map(move |(j, r)| Ray {
+    /// Ray `r` (one of the block's) placed in the op and in the block.
+    pub(crate) fn ray(&self, offsets: &[usize], r: usize) -> Ray {
+        Ray {
             index: r,
             samples: offsets[r]..offsets[r + 1],
             local: offsets[r] - self.samples.start..offsets[r + 1] - self.samples.start,
-            in_block: j,
-        })
+            in_block: r - self.rays.start,
+        }
     }
 }
 

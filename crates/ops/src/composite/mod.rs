@@ -61,6 +61,9 @@
 //! - The colour loops are compiled for 1 to 4 channels with the count a constant and sum in
 //!   four interleaved chains; the one sequential chain of the backward carries one fused
 //!   multiply-add per four samples.
+//! - With [`Composite::pack_rays`], equal-length neighbours go eight at a time across the
+//!   vector lanes (`lanes`), every value bitwise the per-ray one; off by default, as it was
+//!   slower on AVX2 (`docs/performance.md`).
 //! - [`Composite::evaluate_into`] and [`Composite::vjp_into`] write into buffers the caller
 //!   keeps: fresh output pages, which the kernel clears, are a quarter of the time of
 //!   [`Composite::evaluate`] + [`Composite::vjp`] on large batches.
@@ -79,11 +82,15 @@ mod backward;
 mod config;
 mod forward;
 mod gradients;
+mod lanes;
 mod layout;
 
 pub(crate) use layout::validate;
 mod one_pass;
 mod op;
+mod pack_attenuation;
+mod pack_backward;
+mod pack_forward;
 mod rows;
 mod suffix;
 mod tape_order;

@@ -11,7 +11,11 @@ use super::attenuation::Attenuation;
 use super::backward::{backward_ray, InputGrads, RayUpstream, Scratch, Wanted};
 use super::config::Composite;
 use super::forward::{composite_ray_into, Outputs};
+use super::lanes::{Unit, LANES};
 use super::layout::{blocks, Block, Flat};
+use super::pack_attenuation::PackAttenuation;
+use super::pack_backward::{backward_pack, PackScratch};
+use super::pack_forward::{forward_pack, ForwardScratch};
 
 /// `upstream(ray, colour, d_colour)` writes `dL/dC` of a ray from its colour as written to the
 /// outputs.
@@ -52,24 +56,66 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
 ) -> bool {
     let ch = x.ch;
     let mut acc = vec![0.0f64; ch];
-    let mut d_color = vec![F::zero(); ch];
+    let mut d_color = vec![F::zero(); ch * LANES];
     let mut att = Attenuation::default();
     let mut scratch = Scratch::default();
+    let mut pack = PackAttenuation::default();
+    let mut pack_forward = ForwardScratch::default();
+    let mut pack_scratch = PackScratch::default();
     let mut valid = true;
-    for ray in block.each_ray(&op.offsets) {
-        let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
-        valid &= result.valid;
-        d_color.fill(F::zero());
-        let j = ray.in_block;
-        upstream(ray.index, &o.color[j * ch..(j + 1) * ch], &mut d_color);
-        let up = RayUpstream {
-            color: Some(&d_color),
-            opacity: 0.0,
-            depth: 0.0,
-            weights: None,
-            transmittance: None,
-        };
-        backward_ray(x, want, &ray, &att, up, &mut scratch, &mut g);
+    for unit in block.units(&op.offsets, op.packs) {
+        match unit {
+            Unit::Single(ray) => {
+                let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
+                valid &= result.valid;
+                let d_color = &mut d_color[..ch];
+                color_upstream(upstream, ray.index, ray.in_block, &o, d_color);
+                backward_ray(x, want, &ray, &att, only_color(d_color), &mut scratch, &mut g);
+            }
+            Unit::Pack { first, len } => {
+                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut pack_forward, &mut o);
+                valid &= ok;
+                for (l, d) in d_color.chunks_exact_mut(ch).enumerate() {
+                    color_upstream(upstream, first.index + l, first.in_block + l, &o, d);
+                }
+                if stops.iter().all(|&s| s == stops[0]) {
+                    let up = std::array::from_fn(|l| only_color(&d_color[l * ch..(l + 1) * ch]));
+                    backward_pack(x, want, &first, len, &pack, &up, &mut pack_scratch, &mut g);
+                } else {
+                    // Lanes that stop apart count their groups of four from different samples:
+                    // ray by ray, the attenuation recomputed (bitwise the same).
+                    for (l, d) in d_color.chunks_exact(ch).enumerate() {
+                        let ray = block.ray(&op.offsets, first.index + l);
+                        att.compute(
+                            &x.sigma[ray.samples.clone()],
+                            &x.delta[ray.samples.clone()],
+                            op.min_transmittance,
+                        );
+                        backward_ray(x, want, &ray, &att, only_color(d), &mut scratch, &mut g);
+                    }
+                }
+            }
+        }
     }
     valid
+}
+
+/// `dL/dC` of ray `r` (the block's `j`-th) into `d`, from its colour as written to `o`.
+#[inline(always)]
+fn color_upstream<F: Float, U: ColorLoss<F>>(upstream: &U, r: usize, j: usize, o: &Outputs<'_, F>, d: &mut [F]) {
+    let ch = d.len();
+    d.fill(F::zero());
+    upstream(r, &o.color[j * ch..(j + 1) * ch], d);
+}
+
+/// A ray's upstream gradients when only its colour has one.
+#[inline(always)]
+fn only_color<F>(d_color: &[F]) -> RayUpstream<'_, F> {
+    RayUpstream {
+        color: Some(d_color),
+        opacity: 0.0,
+        depth: 0.0,
+        weights: None,
+        transmittance: None,
+    }
 }
