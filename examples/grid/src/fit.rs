@@ -164,7 +164,7 @@ impl Default for FitConfig {
             shift: -4.0,
             evaluations: 20,
             grow: true,
-            smoothness: 3e-4,
+            smoothness: 1.5e-4,
         }
     }
 }

@@ -162,7 +162,7 @@ struct FitArgs {
     lr_final: f64,
     /// Weight of the total-variation prior on the raw grid (the mean squared difference of
     /// neighbouring nodes) added to the loss; 0 for none.
-    #[arg(long, default_value_t = 3e-4)]
+    #[arg(long, default_value_t = 1.5e-4)]
     tv: f64,
     /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
     /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).
