@@ -309,33 +309,51 @@ struct TensorData {
     bytes: Vec<u8>,
 }
 
-#[test]
-fn bad_files_are_refused_with_a_typed_error() {
-    let data = data();
+/// A 2-step fit of a 4^3 grid with `sampling`, saved to the temporary file `name`.
+fn small_saved_fit(sampling: Sampling, name: &str) -> PathBuf {
     let config = FitConfig {
         grid: 4,
         batch: 64,
         budget: Budget::Steps(2),
-        sampling: Sampling::Uniform,
+        sampling,
         grow: false,
         ..FitConfig::default()
     };
-    let result = run::<f32>(&data, &config, None, None);
-    let good = temp("good.safetensors");
-    save(&good, &result.model, &result.training, &saved::<f32>(config)).unwrap();
-    load::<f32>(&good).unwrap();
+    let result = run::<f32>(&data(), &config, None, None);
+    let file = temp(name);
+    save(&file, &result.model, &result.training, &saved::<f32>(config)).unwrap();
+    file
+}
 
-    let format = |e: CheckpointError, what: &str| match e {
+/// `e` is a format error whose message holds `what`.
+fn assert_format(e: CheckpointError, what: &str) {
+    match e {
         CheckpointError::Format { message, .. } => assert!(message.contains(what), "{message} / {what}"),
         other => panic!("{other:?} for {what}"),
-    };
+    }
+}
+
+/// Each edit of `good`, written to `bad`, is refused with a format error whose message holds
+/// the case's text.
+fn each_edit_is_refused(good: &Path, bad: &Path, cases: Vec<(&str, Box<Edit>)>) {
+    for (what, edit) in cases {
+        rewrite(good, bad, edit);
+        assert_format(load::<f32>(bad).unwrap_err(), what);
+    }
+}
+
+#[test]
+fn bad_files_are_refused_with_a_typed_error() {
+    let good = small_saved_fit(Sampling::Uniform, "good.safetensors");
+    load::<f32>(&good).unwrap();
+
     assert!(matches!(
         load::<f32>(Path::new("/nonexistent/model.safetensors")),
         Err(CheckpointError::Read { .. })
     ));
     let junk = temp("junk.safetensors");
     std::fs::write(&junk, b"not a model at all").unwrap();
-    format(load::<f32>(&junk).unwrap_err(), "not a safetensors file");
+    assert_format(load::<f32>(&junk).unwrap_err(), "not a safetensors file");
     let truncated = temp("truncated.safetensors");
     let bytes = std::fs::read(&good).unwrap();
     std::fs::write(&truncated, &bytes[..bytes.len() - 8]).unwrap();
@@ -399,26 +417,12 @@ fn bad_files_are_refused_with_a_typed_error() {
             }),
         ),
     ];
-    for (what, edit) in cases {
-        rewrite(&good, &bad, edit);
-        format(load::<f32>(&bad).unwrap_err(), what);
-    }
+    each_edit_is_refused(&good, &bad, cases);
 }
 
 #[test]
 fn bad_occupancy_tensors_are_refused_with_a_typed_error() {
-    let data = data();
-    let config = FitConfig {
-        grid: 4,
-        batch: 64,
-        budget: Budget::Steps(2),
-        sampling: Sampling::Occupancy,
-        grow: false,
-        ..FitConfig::default()
-    };
-    let result = run::<f32>(&data, &config, None, None);
-    let good = temp("good-occupancy.safetensors");
-    save(&good, &result.model, &result.training, &saved::<f32>(config)).unwrap();
+    let good = small_saved_fit(Sampling::Occupancy, "good-occupancy.safetensors");
     // Before its first refresh every cell of the grid is occupied, and so after loading.
     let state = load::<f32>(&good).unwrap().start.training.occupancy.unwrap();
     assert!(state.occupied.iter().all(|&o| o) && state.occupied.shape() == [3, 3, 3]);
@@ -447,13 +451,7 @@ fn bad_occupancy_tensors_are_refused_with_a_typed_error() {
             }),
         ),
     ];
-    for (what, edit) in cases {
-        rewrite(&good, &bad, edit);
-        match load::<f32>(&bad).unwrap_err() {
-            CheckpointError::Format { message, .. } => assert!(message.contains(what), "{message} / {what}"),
-            other => panic!("{other:?} for {what}"),
-        }
-    }
+    each_edit_is_refused(&good, &bad, cases);
     // Without both tensors (a file from before grids were saved) there is no state to restore.
     rewrite(&good, &bad, |t, _| t.retain(|(n, _)| !n.starts_with("occupancy.")));
     assert_eq!(load::<f32>(&bad).unwrap().start.training.occupancy, None);

@@ -24,27 +24,17 @@ const TINY: [&str; 10] = [
     "128",
 ];
 
-#[test]
-fn a_saved_occupancy_model_renders_bitwise_as_the_fit() {
-    // 80 steps: the occupancy grid is refreshed at steps 64 and 80, so it is no longer the
-    // fresh all-occupied grid; `render` uses the saved one.
-    let dir = temp_dir("render-occupancy");
+/// Fits with `flags` (and --json), saving the model and the final renders in `dir`, then
+/// renders the saved model's test views with `render --json`: the model file, the fit's
+/// renders and the render's output.
+fn fit_then_render(
+    dir: &std::path::Path,
+    flags: &[&str],
+) -> (std::path::PathBuf, serde_json::Value, serde_json::Value) {
     let (model, renders) = (dir.join("m.safetensors"), dir.join("renders.json"));
     let (model_s, renders_s) = (model.to_str().unwrap(), renders.to_str().unwrap());
-    ok(&[
-        &["fit"],
-        &TINY[..],
-        &[
-            "--steps",
-            "80",
-            "--json",
-            "--save-model",
-            model_s,
-            "--save-renders",
-            renders_s,
-        ],
-    ]
-    .concat());
+    let saving = ["--json", "--save-model", model_s, "--save-renders", renders_s];
+    ok(&[&["fit"], &TINY[..], flags, &saving[..]].concat());
     let out_dir = dir.join("pngs");
     let rendered = ok(&[
         "render",
@@ -54,8 +44,16 @@ fn a_saved_occupancy_model_renders_bitwise_as_the_fit() {
         "--out",
         out_dir.to_str().unwrap(),
     ]);
-    let fit: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&renders).unwrap()).unwrap();
-    let render: serde_json::Value = serde_json::from_str(&rendered).unwrap();
+    let fit = serde_json::from_str(&std::fs::read_to_string(&renders).unwrap()).unwrap();
+    (model, fit, serde_json::from_str(&rendered).unwrap())
+}
+
+#[test]
+fn a_saved_occupancy_model_renders_bitwise_as_the_fit() {
+    // 80 steps: the occupancy grid is refreshed at steps 64 and 80, so it is no longer the
+    // fresh all-occupied grid; `render` uses the saved one.
+    let dir = temp_dir("render-occupancy");
+    let (_, fit, render) = fit_then_render(&dir, &["--steps", "80"]);
     assert_eq!(render["images"], fit["images"]);
     let _ = std::fs::remove_dir_all(&dir);
 }
@@ -63,34 +61,10 @@ fn a_saved_occupancy_model_renders_bitwise_as_the_fit() {
 #[test]
 fn saved_models_render_as_the_fit_and_resume() {
     let dir = temp_dir("render");
-    let (model, renders) = (dir.join("m.safetensors"), dir.join("renders.json"));
-    let (model_s, renders_s) = (model.to_str().unwrap(), renders.to_str().unwrap());
     // Uniform sampling: its renders need nothing but the saved grid.
-    let fit_args = [
-        &TINY[..],
-        &[
-            "--steps",
-            "6",
-            "--sampling",
-            "uniform",
-            "--json",
-            "--save-model",
-            model_s,
-        ],
-    ]
-    .concat();
-    ok(&[&["fit"], &fit_args[..], &["--save-renders", renders_s]].concat());
+    let (model, fit, render) = fit_then_render(&dir, &["--steps", "6", "--sampling", "uniform"]);
+    let model_s = model.to_str().unwrap();
     let out_dir = dir.join("pngs");
-    let rendered = ok(&[
-        "render",
-        "--model",
-        model_s,
-        "--json",
-        "--out",
-        out_dir.to_str().unwrap(),
-    ]);
-    let fit: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&renders).unwrap()).unwrap();
-    let render: serde_json::Value = serde_json::from_str(&rendered).unwrap();
     // Test views 2 and 7 by default, read back from JSON as the same f64s.
     assert_eq!(render["views"], serde_json::json!([2, 7]));
     assert_eq!(render["images"], fit["images"]);
