@@ -243,6 +243,10 @@ struct ReportArgs {
     /// Seed of the batches (the same for every configuration).
     #[arg(long, default_value_t = 0)]
     seed: u64,
+    /// Test evaluations of each run, evenly spaced over the budget (excluded from its clock):
+    /// the PSNR at a time and the time to a PSNR are read between two of them.
+    #[arg(long, default_value_t = 60)]
+    evaluations: usize,
     /// Configurations to run, in order, comma-separated: METHOD-SAMPLING[-PRECISION] with
     /// METHOD fused|taped, SAMPLING uniform|occupancy, PRECISION f32 (default)|f64.
     #[arg(
@@ -277,6 +281,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
             batch: args.batch,
             budget,
             seed: args.seed,
+            evaluations: args.evaluations,
             ..FitConfig::default()
         },
         configs,
@@ -323,6 +328,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
         budget,
         batch: args.batch,
         problem: &problem,
+        evaluations: args.evaluations,
     };
     let md = write_report(&args.out, &runs, &data, &scene, &setup)?;
     for r in &runs {

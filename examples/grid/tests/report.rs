@@ -92,10 +92,12 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
         budget: config.budget,
         batch: config.batch,
         problem: "A tiny problem.",
+        evaluations: config.evaluations,
     };
     let md = write_report(&dir, &runs, &data, &scene, &setup).unwrap();
     let text = std::fs::read_to_string(&md).unwrap();
     assert!(text.contains("`cargo run --release -p fogray-grid -- report --steps 70`"));
+    assert!(text.contains("(5 per run, evenly spaced"), "{text}");
     for row in ["| fused-uniform |", "| taped-occupancy |", "| uniform |", "| fused |"] {
         assert!(text.contains(row), "{row} missing from\n{text}");
     }

@@ -7,7 +7,7 @@
 //! expensive differentiable pass runs only where the ray still sees something.
 
 use fogray_tape::{Float, Offsets};
-use ndarray::{Array1, ArrayView1, Axis};
+use ndarray::{Array1, Array2, ArrayView1};
 
 use super::packed::PackedSamples;
 use crate::error::SampleError;
@@ -73,7 +73,8 @@ impl<F: Float> PackedSamples<F> {
             lengths.push(kept.len() - before);
         }
         Ok(PackedSamples {
-            positions: self.positions.select(Axis(0), &kept),
+            // A direct copy: ndarray's `select` concatenates one view per kept row.
+            positions: Array2::from_shape_fn((kept.len(), 3), |(i, c)| self.positions[[kept[i], c]]),
             t: Array1::from_iter(kept.iter().map(|&k| self.t[k])),
             delta: Array1::from_iter(kept.iter().map(|&k| self.delta[k])),
             offsets: Offsets::from_lengths(lengths),

@@ -132,6 +132,8 @@ pub struct ReportContext<'a> {
     pub batch: usize,
     /// A sentence on the problem (grid, views, image size).
     pub problem: &'a str,
+    /// Test evaluations each run makes over its budget (besides the one at the start).
+    pub evaluations: usize,
     /// Markdown for the pictures section (images and captions), or empty.
     pub pictures: &'a str,
 }
@@ -177,10 +179,13 @@ pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, Rep
             num(Some(row.occupied_fraction), 3)
         );
     }
-    md += "\nThe PSNR at a time is interpolated linearly between the two test evaluations around it \
-           (about 20 per run); `-` where the run stopped before that time. Samples per ray are the \
-           mean over all training steps; the occupied fraction is the occupancy grid's at the end \
-           (1 with uniform sampling).\n\n";
+    md += &format!(
+        "\nThe PSNR at a time is interpolated linearly between the two test evaluations around it \
+         ({} per run, evenly spaced over the budget); `-` where the run stopped before that time. \
+         Samples per ray are the mean over all training steps; the occupied fraction is the \
+         occupancy grid's at the end (1 with uniform sampling).\n\n",
+        ctx.evaluations
+    );
     let fvt = fused_vs_taped_rows(runs)?;
     if !fvt.is_empty() {
         md += "## Fused against taped: time to the same PSNR\n\n";

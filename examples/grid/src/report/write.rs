@@ -37,6 +37,8 @@ pub struct ReportSetup<'a> {
     pub batch: usize,
     /// One sentence on the problem.
     pub problem: &'a str,
+    /// Test evaluations each run made over its budget.
+    pub evaluations: usize,
 }
 
 #[derive(Serialize)]
@@ -190,6 +192,7 @@ pub fn write_report(
         budget: setup.budget,
         batch: setup.batch,
         problem: setup.problem,
+        evaluations: setup.evaluations,
         pictures: &pictures,
     };
     let md_path = dir.join("report.md");
