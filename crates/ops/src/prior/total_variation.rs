@@ -113,26 +113,28 @@ impl TotalVariation {
             return 0.0;
         }
         let [nx, ny, nz, nc] = dims.n;
-        let [sx, sy, sz] = dims.strides();
+        let [sx, sy, _] = dims.strides();
+        // Row by row (the contiguous run of a node's z and channels): the differences along x
+        // and y pair a row with the same row of the next slab or the next row, those along z
+        // pair a row with itself shifted by one node; each a loop the compiler vectorises.
         let slabs: Vec<f64> = (0..nx)
             .into_par_iter()
             .map(|i| {
-                let mut sum = 0.0f64;
+                let mut lanes = [0.0f64; LANES];
                 for j in 0..ny {
-                    for k in 0..nz {
-                        let base = i * sx + j * sy + k * sz;
-                        for c in base..base + nc {
-                            let v = g[c].as_f64();
-                            for (has, step) in [(i + 1 < nx, sx), (j + 1 < ny, sy), (k + 1 < nz, sz)] {
-                                if has {
-                                    let d = g[c + step].as_f64() - v;
-                                    sum += d * d;
-                                }
-                            }
-                        }
+                    let base = i * sx + j * sy;
+                    let row = &g[base..base + sy];
+                    if i + 1 < nx {
+                        add_squared_differences(&mut lanes, row, &g[base + sx..base + sx + sy]);
+                    }
+                    if j + 1 < ny {
+                        add_squared_differences(&mut lanes, row, &g[base + sy..base + 2 * sy]);
+                    }
+                    if nz > 1 {
+                        add_squared_differences(&mut lanes, &row[..sy - nc], &row[nc..]);
                     }
                 }
-                sum
+                lanes.iter().sum::<f64>()
             })
             .collect();
         self.weight * slabs.iter().sum::<f64>() / dims.terms as f64
@@ -171,35 +173,38 @@ impl TotalVariation {
 
     fn gradient_flat<F: Float>(&self, g: &[F], dims: Dims, scale: f64, out: &mut [F]) {
         let [nx, ny, nz, nc] = dims.n;
-        let [sx, sy, sz] = dims.strides();
+        let [sx, sy, _] = dims.strides();
         if dims.terms == 0 || sx == 0 {
             out.iter_mut().for_each(|o| *o = F::zero());
             return;
         }
         let factor = scale * 2.0 * self.weight / dims.terms as f64;
+        // Row by row as in `value_flat`; each node's neighbours are added in the order
+        // x+, x-, y+, y-, z+, z-, whatever the row's position in the grid.
         out.par_chunks_mut(sx).enumerate().for_each(|(i, slab)| {
+            let mut acc = vec![0.0f64; sy];
             for j in 0..ny {
-                for k in 0..nz {
-                    let local = j * sy + k * sz;
-                    let base = i * sx + local;
-                    for c in 0..nc {
-                        let at = base + c;
-                        let v = g[at].as_f64();
-                        let mut acc = 0.0;
-                        for (has, n) in [
-                            (i + 1 < nx, at + sx),
-                            (i > 0, at.wrapping_sub(sx)),
-                            (j + 1 < ny, at + sy),
-                            (j > 0, at.wrapping_sub(sy)),
-                            (k + 1 < nz, at + sz),
-                            (k > 0, at.wrapping_sub(sz)),
-                        ] {
-                            if has {
-                                acc += v - g[n].as_f64();
-                            }
-                        }
-                        slab[local + c] = F::lit(factor * acc);
-                    }
+                let base = i * sx + j * sy;
+                let row = &g[base..base + sy];
+                acc.fill(0.0);
+                if i + 1 < nx {
+                    add_differences(&mut acc, row, &g[base + sx..base + sx + sy]);
+                }
+                if i > 0 {
+                    add_differences(&mut acc, row, &g[base - sx..base - sx + sy]);
+                }
+                if j + 1 < ny {
+                    add_differences(&mut acc, row, &g[base + sy..base + 2 * sy]);
+                }
+                if j > 0 {
+                    add_differences(&mut acc, row, &g[base - sy..base]);
+                }
+                if nz > 1 {
+                    add_differences(&mut acc[..sy - nc], &row[..sy - nc], &row[nc..]);
+                    add_differences(&mut acc[nc..], &row[nc..], &row[..sy - nc]);
+                }
+                for (o, a) in slab[j * sy..(j + 1) * sy].iter_mut().zip(&acc) {
+                    *o = F::lit(factor * a);
                 }
             }
         });
@@ -211,6 +216,33 @@ impl TotalVariation {
     /// Errors: a grid of another rank (a [`TapeError`] naming the op), a stale handle.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, grid: Var) -> Result<Var, TapeError> {
         Ok(tape.apply(*self, &[grid])?[0])
+    }
+}
+
+/// Independent f64 sums of the value's squares: one running sum would chain every addition
+/// on the one before.
+const LANES: usize = 8;
+
+/// `lanes[t % LANES] += (b[t] - a[t])^2` in f64, for `a` and `b` of one length.
+fn add_squared_differences<F: Float>(lanes: &mut [f64; LANES], a: &[F], b: &[F]) {
+    let (a_chunks, b_chunks) = (a.chunks_exact(LANES), b.chunks_exact(LANES));
+    let (a_rest, b_rest) = (a_chunks.remainder(), b_chunks.remainder());
+    for (ca, cb) in a_chunks.zip(b_chunks) {
+        for l in 0..LANES {
+            let d = cb[l].as_f64() - ca[l].as_f64();
+            lanes[l] += d * d;
+        }
+    }
+    for (l, (x, y)) in a_rest.iter().zip(b_rest).enumerate() {
+        let d = y.as_f64() - x.as_f64();
+        lanes[l] += d * d;
+    }
+}
+
+/// `acc[t] += v[t] - n[t]` in f64, for slices of one length.
+fn add_differences<F: Float>(acc: &mut [f64], v: &[F], n: &[F]) {
+    for ((a, x), y) in acc.iter_mut().zip(v).zip(n) {
+        *a += x.as_f64() - y.as_f64();
     }
 }
 
