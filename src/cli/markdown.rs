@@ -62,15 +62,16 @@ pub fn grid_headline(results: &[GridMeasurement], stamp: &Stamp) -> String {
         return String::new();
     };
     let mut s = format!(
-        "Grid field, {grid}^3 x 4, random lookups, forward + backward into the grid (M lookups/s; errors against a plain f64 loop):\n\n| method | precision | threads | M lookups/s | forward alone | error of output | error of dL/dgrid |\n|---|---|---|---|---|---|---|\n"
+        "Grid field, {grid}^3 x 4, random lookups, forward + backward into the grid (M lookups/s; errors against a plain f64 loop):\n\n| method | precision | threads | M lookups/s | buffers reused | forward alone | error of output | error of dL/dgrid |\n|---|---|---|---|---|---|---|---|\n"
     );
     for m in results.iter().filter(|m| m.grid == grid) {
         s += &format!(
-            "| {} | {} | {} | {:.2} | {:.2} | {:.1e} | {:.1e} |\n",
+            "| {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1e} | {:.1e} |\n",
             m.method,
             m.precision,
             m.threads,
             m.lookups_per_sec / 1e6,
+            m.lookups_per_sec_reused / 1e6,
             m.lookups_per_sec_forward / 1e6,
             m.err_output,
             m.err_grad_grid
