@@ -122,24 +122,46 @@ enum Command {
     },
 }
 
+/// The grid, the budget, the batch and the seed: what `fit` trains with, and `report` gives
+/// every configuration.
+#[derive(Args)]
+struct TrainingArgs {
+    /// Nodes per axis of the grid.
+    #[arg(long, default_value_t = 64)]
+    grid: usize,
+    /// Training seconds (evaluations excluded; for `report`, of each configuration); 60 unless
+    /// --steps is given.
+    #[arg(long, conflicts_with = "steps", allow_negative_numbers = true)]
+    seconds: Option<f64>,
+    /// Training steps (for `report`, of each configuration) instead of seconds.
+    #[arg(long)]
+    steps: Option<usize>,
+    /// Training rays per step.
+    #[arg(long, default_value_t = 8192)]
+    batch: usize,
+    /// Seed of the batches (for `report`, the same for every configuration).
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+}
+
+impl TrainingArgs {
+    /// --steps if given, else --seconds (60 if absent).
+    fn budget(&self) -> Budget {
+        match (self.steps, self.seconds) {
+            (Some(n), _) => Budget::Steps(n),
+            (None, s) => Budget::Seconds(s.unwrap_or(60.0)),
+        }
+    }
+}
+
 #[derive(Args)]
 struct FitArgs {
     #[command(flatten)]
     scene: SceneArg,
     #[command(flatten)]
     ring: RingArgs,
-    /// Nodes per axis of the grid.
-    #[arg(long, default_value_t = 64)]
-    grid: usize,
-    /// Training seconds (evaluations excluded); 60 unless --steps is given.
-    #[arg(long, conflicts_with = "steps", allow_negative_numbers = true)]
-    seconds: Option<f64>,
-    /// Training steps.
-    #[arg(long)]
-    steps: Option<usize>,
-    /// Training rays per step.
-    #[arg(long, default_value_t = 8192)]
-    batch: usize,
+    #[command(flatten)]
+    training: TrainingArgs,
     /// Fused ops or their taped twins.
     #[arg(long, value_enum, default_value = "fused")]
     method: MethodArg,
@@ -150,9 +172,6 @@ struct FitArgs {
     /// occupied (test views are then rendered with it too).
     #[arg(long, value_enum, default_value = "occupancy")]
     sampling: SamplingArg,
-    /// Seed of the batches.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
     /// Adam's learning rate, until 60 % of the budget.
     #[arg(long, default_value_t = 0.2)]
     lr: f64,
@@ -228,21 +247,8 @@ struct ReportArgs {
     scene: SceneArg,
     #[command(flatten)]
     ring: RingArgs,
-    /// Nodes per axis of the grid.
-    #[arg(long, default_value_t = 64)]
-    grid: usize,
-    /// Training seconds of each configuration (evaluations excluded); 60 unless --steps is given.
-    #[arg(long, conflicts_with = "steps", allow_negative_numbers = true)]
-    seconds: Option<f64>,
-    /// Training steps of each configuration instead of seconds.
-    #[arg(long)]
-    steps: Option<usize>,
-    /// Training rays per step.
-    #[arg(long, default_value_t = 8192)]
-    batch: usize,
-    /// Seed of the batches (the same for every configuration).
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
+    #[command(flatten)]
+    training: TrainingArgs,
     /// Test evaluations of each run, evenly spaced over the budget (excluded from its clock):
     /// the PSNR at a time and the time to a PSNR are read between two of them.
     #[arg(long, default_value_t = 60)]
@@ -271,16 +277,13 @@ fn run_report(args: ReportArgs) -> Result<()> {
         .map(|c| c.parse::<RunConfig>())
         .collect::<Result<Vec<_>, _>>()?;
     let (scene, ring) = (args.scene.load()?, args.ring.ring()?);
-    let budget = match (args.steps, args.seconds) {
-        (Some(n), _) => Budget::Steps(n),
-        (None, s) => Budget::Seconds(s.unwrap_or(60.0)),
-    };
+    let budget = args.training.budget();
     let options = ReportOptions {
         fit: FitConfig {
-            grid: args.grid,
-            batch: args.batch,
+            grid: args.training.grid,
+            batch: args.training.batch,
             budget,
-            seed: args.seed,
+            seed: args.training.seed,
             evaluations: args.evaluations,
             ..FitConfig::default()
         },
@@ -311,7 +314,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
     bar.finish_and_clear();
     let problem = format!(
         "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",
-        g = args.grid,
+        g = args.training.grid,
         v = args.ring.views,
         s = args.ring.size,
         scene = match &args.scene.scene {
@@ -319,14 +322,14 @@ fn run_report(args: ReportArgs) -> Result<()> {
             None => "the built-in scene".into(),
         },
         t = data.test.len(),
-        b = args.batch,
-        seed = args.seed,
+        b = args.training.batch,
+        seed = args.training.seed,
     );
     let setup = ReportSetup {
         stamp: &stamp,
         reproduce: &reproduce,
         budget,
-        batch: args.batch,
+        batch: args.training.batch,
         problem: &problem,
         evaluations: args.evaluations,
     };
@@ -451,12 +454,9 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
 /// The settings the flags ask for.
 fn flag_config(args: &FitArgs) -> FitConfig {
     FitConfig {
-        grid: args.grid,
-        batch: args.batch,
-        budget: match (args.steps, args.seconds) {
-            (Some(n), _) => Budget::Steps(n),
-            (None, s) => Budget::Seconds(s.unwrap_or(60.0)),
-        },
+        grid: args.training.grid,
+        batch: args.training.batch,
+        budget: args.training.budget(),
         method: match args.method {
             MethodArg::Fused => Method::Fused,
             MethodArg::Taped => Method::Taped,
@@ -465,7 +465,7 @@ fn flag_config(args: &FitArgs) -> FitConfig {
             SamplingArg::Uniform => Sampling::Uniform,
             SamplingArg::Occupancy => Sampling::Occupancy,
         },
-        seed: args.seed,
+        seed: args.training.seed,
         lr: args.lr,
         lr_final: args.lr_final,
         grow: !args.no_grow,
