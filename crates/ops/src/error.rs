@@ -258,45 +258,29 @@ pub enum PriorError {
     },
 }
 
-impl From<PriorError> for TapeError {
-    fn from(e: PriorError) -> Self {
-        TapeError::from_op("total_variation", OpError::typed(e))
-    }
+/// Each op's error as the tape's, naming the op it came from.
+macro_rules! tape_error_from {
+    ($($error:ty => $op:literal),* $(,)?) => {
+        $(impl From<$error> for TapeError {
+            fn from(e: $error) -> Self {
+                TapeError::from_op($op, OpError::typed(e))
+            }
+        })*
+    };
 }
 
-impl From<FieldError> for TapeError {
-    fn from(e: FieldError) -> Self {
-        TapeError::from_op("density_color", OpError::typed(e))
-    }
-}
-
-impl From<GridError> for TapeError {
-    fn from(e: GridError) -> Self {
-        TapeError::from_op("grid_field", OpError::typed(e))
-    }
-}
-
-impl From<GeometryError> for TapeError {
-    fn from(e: GeometryError) -> Self {
-        TapeError::from_op("rays", OpError::typed(e))
-    }
-}
-
-impl From<SampleError> for TapeError {
-    fn from(e: SampleError) -> Self {
-        TapeError::from_op("sample", OpError::typed(e))
-    }
+tape_error_from! {
+    PriorError => "total_variation",
+    FieldError => "density_color",
+    GridError => "grid_field",
+    GeometryError => "rays",
+    SampleError => "sample",
+    CompositeError => "composite",
 }
 
 impl From<CompositeError> for OpError {
     fn from(e: CompositeError) -> Self {
         OpError::typed(e)
-    }
-}
-
-impl From<CompositeError> for TapeError {
-    fn from(e: CompositeError) -> Self {
-        TapeError::from_op("composite", e.into())
     }
 }
 
