@@ -4,15 +4,19 @@
 use fogray_tape::Float;
 
 use super::occupancy::OccupancyGrid;
-use super::packed::{check_lengths, pack, PackedSamples};
+use super::march_lanes::{RaySpan, SpanRuns};
+use super::packed::{check_lengths, pack, pack_chunks, PackedSamples};
 use super::stratified::{Jitter, RayJitter};
 use crate::error::SampleError;
 use crate::rays::{RayBatch, RayIntervals};
 
+/// Rays walked at once by the marcher.
+const LANES: usize = 4;
+
 /// The axis whose exit comes first (the lowest axis on a tie), chosen without branches: the
 /// choice follows the ray's geometry, which a branch predictor cannot guess.
 #[inline]
-fn first_exit(t_exit: &[f64; 3]) -> usize {
+pub(super) fn first_exit(t_exit: &[f64; 3]) -> usize {
     let a01 = usize::from(t_exit[1] < t_exit[0]);
     let t01 = if a01 == 1 { t_exit[1] } else { t_exit[0] };
     if t_exit[2] < t01 {
@@ -132,17 +136,60 @@ impl OccupancyGrid {
                 rule: "must be finite and positive",
             });
         }
-        Ok(pack(rays, |r, pieces| {
+        Ok(self.march_walked::<LANES, F>(rays, intervals, step, jitter))
+    }
+
+    /// `march` after its checks, walking `K` rays at a time (`K = 0`: one ray at a time with
+    /// `occupied_runs`).
+    #[doc(hidden)]
+    pub fn march_walked<const K: usize, F: Float>(
+        &self,
+        rays: &RayBatch<F>,
+        intervals: &RayIntervals,
+        step: f64,
+        jitter: Jitter,
+    ) -> PackedSamples<F> {
+        // The part of ray r to walk, if any.
+        let span_of = |r: usize| -> Option<RaySpan> {
             let (o, d) = rays.ray(r);
             let (Some((near, far)), Some((box_near, box_far))) = (intervals.segment(r), self.bounds.clip_ray(o, d))
             else {
-                return;
+                return None;
             };
             let (lo, hi) = (near.max(box_near), far.min(box_far));
-            if hi > lo {
-                let mut jitter = RayJitter::for_ray(jitter, r);
-                self.occupied_runs(o, d, lo, hi, |a, b| jitter.cut(a, b, lo, step, pieces));
+            (hi > lo).then_some(RaySpan { o, d, lo, hi })
+        };
+        if K == 0 {
+            return pack(rays, |r, pieces| {
+                if let Some(RaySpan { o, d, lo, hi }) = span_of(r) {
+                    let mut jitter = RayJitter::for_ray(jitter, r);
+                    self.occupied_runs(o, d, lo, hi, |a, b| jitter.cut(a, b, lo, step, pieces));
+                }
+            });
+        }
+        pack_chunks(rays, |chunk, counts, pieces| {
+            let (mut spans, mut span_rays) = (Vec::with_capacity(chunk.len()), Vec::with_capacity(chunk.len()));
+            for r in chunk.clone() {
+                if let Some(span) = span_of(r) {
+                    spans.push(span);
+                    span_rays.push(r);
+                }
             }
-        }))
+            let mut runs = SpanRuns::default();
+            self.occupied_runs_of_spans::<K>(&spans, &mut runs);
+            let mut next = 0;
+            for r in chunk {
+                let before = pieces.len();
+                if span_rays.get(next) == Some(&r) {
+                    let mut jitter = RayJitter::for_ray(jitter, r);
+                    let lo = spans[next].lo;
+                    for &(a, b) in runs.of(next) {
+                        jitter.cut(a, b, lo, step, pieces);
+                    }
+                    next += 1;
+                }
+                counts.push(pieces.len() - before);
+            }
+        })
     }
 }

@@ -43,6 +43,9 @@ mod importance;
 #[cfg(test)]
 mod importance_tests;
 mod march;
+mod march_lanes;
+#[cfg(test)]
+mod march_lanes_tests;
 #[cfg(test)]
 mod march_tests;
 #[cfg(test)]
