@@ -4,7 +4,6 @@
 //! leaves hands its slot to the next ray. Each ray's runs are the same, bit for bit and in the
 //! same order, as [`OccupancyGrid::occupied_runs`] gives for it alone.
 
-use super::march::first_exit;
 use super::occupancy::OccupancyGrid;
 
 /// The part `[lo, hi]` of the ray `o + t d` to walk.
@@ -52,13 +51,17 @@ impl SpanRuns {
     }
 }
 
-/// The state of `K` rays being walked, one slot (lane) each, as arrays over the lanes.
+/// The state of `K` rays being walked, one slot (lane) each, as arrays over the lanes. Every
+/// lane steps every round, without a branch on its ray's geometry or occupancy: choices are
+/// selects, and a lane with no ray left sits still on cell 0 with nothing to hand on.
 struct Lanes<const K: usize> {
     /// The span each lane walks, `None` once no span is left for it.
     span: [Option<usize>; K],
     o: [[f64; K]; 3],
     inv: [[f64; K]; 3],
     dir: [[i64; K]; 3],
+    /// 1 along an axis the ray moves up, else 0: the far face of a cell it leaves.
+    up: [[i64; K]; 3],
     idx: [[i64; K]; 3],
     last: [[i64; K]; 3],
     step: [[i64; K]; 3],
@@ -67,20 +70,29 @@ struct Lanes<const K: usize> {
     t_after: [[f64; K]; 3],
     t: [f64; K],
     hi: [f64; K],
-    /// The run being grown, if any.
-    pending: [Option<(f64, f64)>; K],
+    /// The run being grown: whether there is one, and its ends.
+    pending: [bool; K],
+    run_lo: [f64; K],
+    run_hi: [f64; K],
+    /// The lanes whose ray left in the last round.
+    done: [bool; K],
 }
 
-impl OccupancyGrid {
-    /// The runs of every span, as [`OccupancyGrid::occupied_runs`] gives them one span at a
-    /// time, walked `K` spans at a time. `out` is reused (its buffers keep their capacity).
-    pub(crate) fn occupied_runs_of_spans<const K: usize>(&self, spans: &[RaySpan], out: &mut SpanRuns) {
-        out.closed.clear();
-        let mut lanes = Lanes::<K> {
+/// `a` where `c`, else `b`, by bits (a select, never a branch).
+#[inline(always)]
+fn pick(c: bool, a: f64, b: f64) -> f64 {
+    let m = u64::from(c).wrapping_neg();
+    f64::from_bits((a.to_bits() & m) | (b.to_bits() & !m))
+}
+
+impl<const K: usize> Lanes<K> {
+    fn new() -> Self {
+        let mut lanes = Lanes {
             span: [None; K],
             o: [[0.0; K]; 3],
             inv: [[0.0; K]; 3],
             dir: [[0; K]; 3],
+            up: [[0; K]; 3],
             idx: [[0; K]; 3],
             last: [[0; K]; 3],
             step: [[0; K]; 3],
@@ -89,30 +101,75 @@ impl OccupancyGrid {
             t_after: [[0.0; K]; 3],
             t: [0.0; K],
             hi: [0.0; K],
-            pending: [None; K],
+            pending: [false; K],
+            run_lo: [0.0; K],
+            run_hi: [0.0; K],
+            done: [false; K],
         };
+        for k in 0..K {
+            lanes.idle(k);
+        }
+        lanes
+    }
+
+    /// Parks lane `k`: it stays on cell 0 (exits at infinity, no step), and no cell it sees
+    /// ends after its `t` (hi is minus infinity), so it never grows or hands on a run.
+    fn idle(&mut self, k: usize) {
+        self.span[k] = None;
+        for a in 0..3 {
+            self.dir[a][k] = 0;
+            self.up[a][k] = 0;
+            self.step[a][k] = 0;
+            self.t_exit[a][k] = f64::INFINITY;
+            self.t_after[a][k] = f64::INFINITY;
+        }
+        self.linear[k] = 0;
+        self.t[k] = 0.0;
+        self.hi[k] = f64::NEG_INFINITY;
+        self.pending[k] = false;
+    }
+}
+
+impl OccupancyGrid {
+    /// The runs of every span, as [`OccupancyGrid::occupied_runs`] gives them one span at a
+    /// time, walked `K` spans at a time. `out` is reused (its buffers keep their capacity).
+    pub(crate) fn occupied_runs_of_spans<const K: usize>(&self, spans: &[RaySpan], out: &mut SpanRuns) {
+        let mut lanes = Lanes::<K>::new();
         let mut next = 0;
         for k in 0..K {
             next = self.start_lane(&mut lanes, k, spans, next);
         }
+        // Closed runs are written unconditionally at `n` and kept by moving `n` on; the
+        // buffer has room for every lane to close one run each round.
+        let closed = &mut out.closed;
+        closed.clear();
+        let mut n = 0;
         while lanes.span.iter().any(Option::is_some) {
-            for k in 0..K {
-                let Some(s) = lanes.span[k] else { continue };
-                if self.step_lane(&mut lanes, k, s, &mut out.closed) {
-                    if let Some((a, b)) = lanes.pending[k] {
-                        out.closed.push((s, a, b));
+            if closed.len() < n + K {
+                closed.resize(2 * closed.len() + K, (0, 0.0, 0.0));
+            }
+            n += self.step_lanes(&mut lanes, &mut closed[n..n + K]);
+            if lanes.done.iter().any(|&d| d) {
+                for k in 0..K {
+                    if let (true, Some(s)) = (lanes.done[k], lanes.span[k]) {
+                        if lanes.pending[k] {
+                            closed.resize(closed.len().max(n + 1), (0, 0.0, 0.0));
+                            closed[n] = (s, lanes.run_lo[k], lanes.run_hi[k]);
+                            n += 1;
+                        }
+                        next = self.start_lane(&mut lanes, k, spans, next);
                     }
-                    next = self.start_lane(&mut lanes, k, spans, next);
                 }
             }
         }
+        closed.truncate(n);
         out.sort(spans.len());
     }
 
     /// Puts the first span from `next` on whose start lies in the grid in lane `k` (spans
-    /// that start outside have no run); returns the span after it.
+    /// that start outside have no run), or parks the lane; returns the span after it.
     fn start_lane<const K: usize>(&self, lanes: &mut Lanes<K>, k: usize, spans: &[RaySpan], mut next: usize) -> usize {
-        lanes.span[k] = None;
+        lanes.idle(k);
         let min = self.bounds.min();
         let r = self.resolution as i64;
         while let Some(span) = spans.get(next) {
@@ -142,6 +199,7 @@ impl OccupancyGrid {
                 lanes.o[a][k] = o[a];
                 lanes.inv[a][k] = inv;
                 lanes.dir[a][k] = s;
+                lanes.up[a][k] = i64::from(s > 0);
                 lanes.idx[a][k] = i;
                 lanes.last[a][k] = if s > 0 { r - 1 } else { 0 };
                 lanes.step[a][k] = s * stride[a];
@@ -151,56 +209,56 @@ impl OccupancyGrid {
             lanes.linear[k] = start[0] as i64 * stride[0] + start[1] as i64 * stride[1] + start[2] as i64;
             lanes.t[k] = lo;
             lanes.hi[k] = span.hi;
-            lanes.pending[k] = None;
             lanes.span[k] = Some(next - 1);
             break;
         }
         next
     }
 
-    /// One step of lane `k` (walking span `s`), as one pass of `occupied_runs`' loop; returns
-    /// whether the ray is done (its pending run not yet handed on).
+    /// One round: every lane takes one pass of `occupied_runs`' loop, with selects for its
+    /// branches. The runs the lanes close are written to the start of `closed` (`K` slots), in
+    /// lane order; returns how many. A lane whose ray leaves is marked done (its pending run
+    /// not yet handed on).
     #[inline(always)]
-    fn step_lane<const K: usize>(
-        &self,
-        lanes: &mut Lanes<K>,
-        k: usize,
-        s: usize,
-        closed: &mut Vec<(usize, f64, f64)>,
-    ) -> bool {
-        let t_exit = [lanes.t_exit[0][k], lanes.t_exit[1][k], lanes.t_exit[2][k]];
-        let axis = first_exit(&t_exit);
-        let leaving = lanes.idx[axis][k] == lanes.last[axis][k];
-        let (t, hi) = (lanes.t[k], lanes.hi[k]);
-        if self.is_occupied_linear(lanes.linear[k] as usize) {
-            let t_end = if leaving { hi } else { t_exit[axis].min(hi) };
-            if t_end > t {
-                match &mut lanes.pending[k] {
-                    Some(p) if p.1 == t => p.1 = t_end,
-                    pending => {
-                        if let Some((a, b)) = *pending {
-                            closed.push((s, a, b));
-                        }
-                        *pending = Some((t, t_end));
-                    }
-                }
+    fn step_lanes<const K: usize>(&self, lanes: &mut Lanes<K>, closed: &mut [(usize, f64, f64)]) -> usize {
+        let min = self.bounds.min();
+        let mut kept = 0;
+        for k in 0..K {
+            let te = [lanes.t_exit[0][k], lanes.t_exit[1][k], lanes.t_exit[2][k]];
+            // first_exit's choice, as one flag per axis.
+            let a01 = te[1] < te[0];
+            let t01 = pick(a01, te[1], te[0]);
+            let on2 = te[2] < t01;
+            let on = [!on2 & !a01, !on2 & a01, on2];
+            let t_exit = pick(on2, te[2], t01);
+            let leaving = (0..3).any(|a| on[a] & (lanes.idx[a][k] == lanes.last[a][k]));
+            let (t, hi) = (lanes.t[k], lanes.hi[k]);
+            let occupied = self.is_occupied_linear(lanes.linear[k] as usize);
+            let t_end = pick(leaving, hi, t_exit.min(hi));
+            let grows = occupied & (t_end > t);
+            let extends = grows & lanes.pending[k] & (lanes.run_hi[k] == t);
+            let opens = grows & !extends;
+            let closes = opens & lanes.pending[k];
+            closed[kept] = (lanes.span[k].unwrap_or(0), lanes.run_lo[k], lanes.run_hi[k]);
+            kept += usize::from(closes);
+            lanes.run_lo[k] = pick(opens, t, lanes.run_lo[k]);
+            lanes.run_hi[k] = pick(grows, t_end, lanes.run_hi[k]);
+            lanes.pending[k] |= grows;
+            lanes.done[k] = leaving | (t_exit >= hi);
+            lanes.t[k] = t.max(t_exit);
+            for a in 0..3 {
+                let moved = i64::from(on[a]);
+                let i = lanes.idx[a][k] + moved * lanes.dir[a][k];
+                lanes.idx[a][k] = i;
+                lanes.linear[k] += moved * lanes.step[a][k];
+                // The exit after the next, as occupied_runs' exit (an axis the ray does not
+                // move along is never crossed, and its value never chosen).
+                let after = (min[a] + (i + lanes.dir[a][k] + lanes.up[a][k]) as f64 * self.cell[a] - lanes.o[a][k])
+                    * lanes.inv[a][k];
+                lanes.t_exit[a][k] = pick(on[a], lanes.t_after[a][k], te[a]);
+                lanes.t_after[a][k] = pick(on[a], after, lanes.t_after[a][k]);
             }
         }
-        if leaving || t_exit[axis] >= hi {
-            return true;
-        }
-        lanes.t[k] = t.max(t_exit[axis]);
-        let i = lanes.idx[axis][k] + lanes.dir[axis][k];
-        lanes.idx[axis][k] = i;
-        lanes.linear[k] += lanes.step[axis][k];
-        lanes.t_exit[axis][k] = lanes.t_after[axis][k];
-        // A crossed axis is one the ray moves along (dir != 0): the same product as
-        // occupied_runs' exit.
-        let up = i64::from(lanes.dir[axis][k] > 0);
-        let min = self.bounds.min();
-        lanes.t_after[axis][k] = (min[axis] + (i + lanes.dir[axis][k] + up) as f64 * self.cell[axis]
-            - lanes.o[axis][k])
-            * lanes.inv[axis][k];
-        false
+        kept
     }
 }
