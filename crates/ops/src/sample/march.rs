@@ -16,7 +16,7 @@ const LANES: usize = 4;
 /// The axis whose exit comes first (the lowest axis on a tie), chosen without branches: the
 /// choice follows the ray's geometry, which a branch predictor cannot guess.
 #[inline]
-fn first_exit(t_exit: &[f64; 3]) -> usize {
+pub(super) fn first_exit(t_exit: &[f64; 3]) -> usize {
     let a01 = usize::from(t_exit[1] < t_exit[0]);
     let t01 = if a01 == 1 { t_exit[1] } else { t_exit[0] };
     if t_exit[2] < t01 {

@@ -4,6 +4,7 @@
 //! leaves hands its slot to the next ray. Each ray's runs are the same, bit for bit and in the
 //! same order, as [`OccupancyGrid::occupied_runs`] gives for it alone.
 
+use super::march::first_exit;
 use super::occupancy::OccupancyGrid;
 
 /// The part `[lo, hi]` of the ray `o + t d` to walk.
@@ -225,13 +226,9 @@ impl OccupancyGrid {
         let mut kept = 0;
         for k in 0..K {
             let te = [lanes.t_exit[0][k], lanes.t_exit[1][k], lanes.t_exit[2][k]];
-            // first_exit's choice, as one flag per axis.
-            let a01 = te[1] < te[0];
-            let t01 = pick(a01, te[1], te[0]);
-            let on2 = te[2] < t01;
-            let on = [!on2 & !a01, !on2 & a01, on2];
-            let t_exit = pick(on2, te[2], t01);
-            let leaving = (0..3).any(|a| on[a] & (lanes.idx[a][k] == lanes.last[a][k]));
+            let axis = first_exit(&te);
+            let t_exit = te[axis];
+            let leaving = lanes.idx[axis][k] == lanes.last[axis][k];
             let (t, hi) = (lanes.t[k], lanes.hi[k]);
             let occupied = self.is_occupied_linear(lanes.linear[k] as usize);
             let t_end = pick(leaving, hi, t_exit.min(hi));
@@ -246,18 +243,16 @@ impl OccupancyGrid {
             lanes.pending[k] |= grows;
             lanes.done[k] = leaving | (t_exit >= hi);
             lanes.t[k] = t.max(t_exit);
-            for a in 0..3 {
-                let moved = i64::from(on[a]);
-                let i = lanes.idx[a][k] + moved * lanes.dir[a][k];
-                lanes.idx[a][k] = i;
-                lanes.linear[k] += moved * lanes.step[a][k];
-                // The exit after the next, as occupied_runs' exit (an axis the ray does not
-                // move along is never crossed, and its value never chosen).
-                let after = (min[a] + (i + lanes.dir[a][k] + lanes.up[a][k]) as f64 * self.cell[a] - lanes.o[a][k])
-                    * lanes.inv[a][k];
-                lanes.t_exit[a][k] = pick(on[a], lanes.t_after[a][k], te[a]);
-                lanes.t_after[a][k] = pick(on[a], after, lanes.t_after[a][k]);
-            }
+            let i = lanes.idx[axis][k] + lanes.dir[axis][k];
+            lanes.idx[axis][k] = i;
+            lanes.linear[k] += lanes.step[axis][k];
+            lanes.t_exit[axis][k] = lanes.t_after[axis][k];
+            // The exit after the next, as occupied_runs' exit: a crossed axis is one the ray
+            // moves along, or the ray is done and the value never used.
+            lanes.t_after[axis][k] = (min[axis]
+                + (i + lanes.dir[axis][k] + lanes.up[axis][k]) as f64 * self.cell[axis]
+                - lanes.o[axis][k])
+                * lanes.inv[axis][k];
         }
         kept
     }
