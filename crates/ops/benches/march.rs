@@ -117,22 +117,6 @@ fn march(c: &mut Criterion) {
         });
     }
     group.finish();
-    // The walk alone: one ray at a time (0) against several in lockstep, on the scene grid.
-    let mut group = c.benchmark_group("march-walk");
-    group.throughput(Throughput::Elements(RAYS as u64));
-    let g = &cases[0].1;
-    for round in 0..2 {
-        group.bench_function(format!("{CELLS}^3-scene-1ray-{round}"), |b| {
-            b.iter(|| g.march_walked::<0, f32>(black_box(&rays), &clip, STEP, Jitter::None))
-        });
-        group.bench_function(format!("{CELLS}^3-scene-4rays-{round}"), |b| {
-            b.iter(|| g.march_walked::<4, f32>(black_box(&rays), &clip, STEP, Jitter::None))
-        });
-        group.bench_function(format!("{CELLS}^3-scene-8rays-{round}"), |b| {
-            b.iter(|| g.march_walked::<8, f32>(black_box(&rays), &clip, STEP, Jitter::None))
-        });
-    }
-    group.finish();
 }
 
 criterion_group!(benches, march);

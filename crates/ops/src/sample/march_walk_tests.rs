@@ -7,6 +7,7 @@
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
+use super::march::ExitTables;
 use super::*;
 use crate::rays::Aabb;
 
@@ -63,7 +64,7 @@ fn walked_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) ->
 
 fn marched_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<(f64, f64)> {
     let mut runs = Vec::new();
-    g.occupied_runs(o, d, lo, hi, |a, b| runs.push((a, b)));
+    g.occupied_runs(o, d, lo, hi, &mut ExitTables::default(), |a, b| runs.push((a, b)));
     runs
 }
 

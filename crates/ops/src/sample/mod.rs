@@ -43,13 +43,12 @@ mod importance;
 #[cfg(test)]
 mod importance_tests;
 mod march;
-mod march_lanes;
-#[cfg(test)]
-mod march_lanes_tests;
 #[cfg(test)]
 mod march_tests;
 #[cfg(test)]
 mod march_walk_tests;
+#[cfg(test)]
+mod march_table_tests;
 mod occupancy;
 mod occupancy_config;
 #[cfg(test)]
