@@ -7,7 +7,6 @@
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
-use super::march::ExitTables;
 use super::*;
 use crate::rays::Aabb;
 
@@ -64,12 +63,12 @@ fn walked_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) ->
 
 fn marched_runs(g: &OccupancyGrid, o: [f64; 3], d: [f64; 3], lo: f64, hi: f64) -> Vec<(f64, f64)> {
     let mut runs = Vec::new();
-    g.occupied_runs(o, d, lo, hi, &mut ExitTables::default(), |a, b| runs.push((a, b)));
+    g.occupied_runs(o, d, lo, hi, |a, b| runs.push((a, b)));
     runs
 }
 
 /// A grid over [-1, 1]^3 whose occupied cells are exactly `occupied` (by a restore).
-pub(super) fn grid_with(r: usize, occupied: impl Fn([usize; 3]) -> bool) -> OccupancyGrid {
+fn grid_with(r: usize, occupied: impl Fn([usize; 3]) -> bool) -> OccupancyGrid {
     let bounds = Aabb::new([-1.0; 3], [1.0; 3]).unwrap();
     let mut g = OccupancyGrid::new(bounds, r, OccupancyConfig::density(0.5).unwrap()).unwrap();
     let state = OccupancyState {
@@ -87,7 +86,7 @@ fn at_cells(r: usize, c: [f64; 3]) -> [f64; 3] {
 
 /// Rays meant to meet cell faces, edges and corners head on, plus random ones (half of
 /// them starting inside the box), as (origin, unit direction).
-pub(super) fn tricky_rays(r: usize, rng: &mut StdRng) -> Vec<([f64; 3], [f64; 3])> {
+fn tricky_rays(r: usize, rng: &mut StdRng) -> Vec<([f64; 3], [f64; 3])> {
     // Cell faces, edges and corners every `b` cells.
     let b = 4.0f64;
     let unit = |v: [f64; 3]| {
@@ -147,7 +146,7 @@ pub(super) fn tricky_rays(r: usize, rng: &mut StdRng) -> Vec<([f64; 3], [f64; 3]
 
 /// Occupancy patterns: single cells at the corners of groups of 4^3 cells, a few random
 /// cells, a random quarter, and the far corner cell alone.
-pub(super) fn patterns(r: usize, rng: &mut StdRng) -> Vec<OccupancyGrid> {
+fn patterns(r: usize, rng: &mut StdRng) -> Vec<OccupancyGrid> {
     let b = 4;
     let corner = |i: usize| i % b == 0 || i % b == b - 1 || i == r - 1;
     let sparse: Vec<[usize; 3]> = (0..12).map(|_| std::array::from_fn(|_| rng.gen_range(0..r))).collect();

@@ -47,8 +47,6 @@ mod march;
 mod march_tests;
 #[cfg(test)]
 mod march_walk_tests;
-#[cfg(test)]
-mod march_table_tests;
 mod occupancy;
 mod occupancy_config;
 #[cfg(test)]

@@ -116,22 +116,6 @@ pub(crate) fn pack<F: Float>(
     rays: &RayBatch<F>,
     pieces_of: impl Fn(usize, &mut Vec<Piece>) + Sync,
 ) -> PackedSamples<F> {
-    pack_chunks(rays, |chunk, counts, pieces| {
-        for r in chunk {
-            let before = pieces.len();
-            pieces_of(r, pieces);
-            counts.push(pieces.len() - before);
-        }
-    })
-}
-
-/// [`pack`] with the pieces of a task's rays made together: `pieces_of_rays(rays, counts,
-/// pieces)` appends, for each ray of the range in order, its number of pieces to `counts` and
-/// its pieces to `pieces`.
-pub(crate) fn pack_chunks<F: Float>(
-    rays: &RayBatch<F>,
-    pieces_of_rays: impl Fn(std::ops::Range<usize>, &mut Vec<usize>, &mut Vec<Piece>) + Sync,
-) -> PackedSamples<F> {
     let n_rays = rays.len();
     let task_rays = |c: usize| c * RAYS_PER_TASK..((c + 1) * RAYS_PER_TASK).min(n_rays);
     let chunks: Vec<Chunk> = (0..n_rays.div_ceil(RAYS_PER_TASK))
@@ -141,8 +125,11 @@ pub(crate) fn pack_chunks<F: Float>(
                 counts: Vec::with_capacity(RAYS_PER_TASK),
                 pieces: Vec::new(),
             };
-            pieces_of_rays(task_rays(c), &mut chunk.counts, &mut chunk.pieces);
-            debug_assert_eq!(chunk.counts.len(), task_rays(c).len(), "one count per ray");
+            for r in task_rays(c) {
+                let before = chunk.pieces.len();
+                pieces_of(r, &mut chunk.pieces);
+                chunk.counts.push(chunk.pieces.len() - before);
+            }
             chunk
         })
         .collect();
