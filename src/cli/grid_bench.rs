@@ -209,8 +209,7 @@ fn fused_step_into<F: Float>(field: &GridField, x: &Typed<F>, b: &mut Buffers<F>
 /// after use (a training loop's steady state).
 fn taped_step_reused<F: Float>(field: &GridField, x: &Typed<F>, tape: &mut Tape<F>) -> Result<(), CliError> {
     tape.clear();
-    let grid = tape.param(x.grid.clone());
-    let positions = tape.constant(x.positions.clone());
+    let (grid, positions) = put_inputs(tape, x);
     let out = twin::lookup(tape, field, grid, positions)?;
     let g = tape.backward_with(out, x.upstream.clone())?;
     black_box(g.get(grid));
@@ -222,9 +221,13 @@ fn taped_step_reused<F: Float>(field: &GridField, x: &Typed<F>, tape: &mut Tape<
 /// run that is not the op, timed separately and subtracted.
 fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, fogray_tape::Var, fogray_tape::Var) {
     let mut tape = Tape::new();
-    let grid = tape.param(x.grid.clone());
-    let positions = tape.constant(x.positions.clone());
+    let (grid, positions) = put_inputs(&mut tape, x);
     (tape, grid, positions)
+}
+
+/// The grid as a param and the positions as a constant on `tape`.
+fn put_inputs<F: Float>(tape: &mut Tape<F>, x: &Typed<F>) -> (fogray_tape::Var, fogray_tape::Var) {
+    (tape.param(x.grid.clone()), tape.constant(x.positions.clone()))
 }
 
 fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, CliError> {

@@ -8,51 +8,25 @@
 //!
 //! `cargo bench -p fogray-ops --bench march -- --warm-up-time 1 --measurement-time 3`
 
+mod common;
+use common::{cameras, picks, RAYS};
+
 use std::convert::Infallible;
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use fogray_ops::rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch};
+use fogray_ops::rays::{rays_for_camera_pixels, Aabb, RayBatch};
 use fogray_ops::sample::{CellPoints, Jitter, OccupancyConfig, OccupancyGrid};
 use ndarray::{Array1, ArrayView2};
-use rand::{Rng, SeedableRng};
 
-const RAYS: usize = 8192;
 const CELLS: usize = 63;
 const STEP: f64 = 1.0 / 63.0; // half a cell of 63 over [-1, 1]
 const MARGIN: f64 = 0.05;
 
-/// 32 eyes spread over the sphere of radius 3 (a Fibonacci lattice), as the grid example's ring.
-fn cameras() -> Vec<PinholeCamera> {
-    let k = Intrinsics::from_vertical_fov(64, 64, 40f64.to_radians()).unwrap();
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..32)
-        .map(|i| {
-            let z = 1.0 - (i as f64 + 0.5) / 16.0;
-            let rho = (1.0 - z * z).sqrt();
-            let turn = golden * i as f64;
-            let eye = [3.0 * rho * turn.cos(), 3.0 * rho * turn.sin(), 3.0 * z];
-            let up = if z.abs() > 0.9 {
-                [0.0, 1.0, 0.0]
-            } else {
-                [0.0, 0.0, 1.0]
-            };
-            PinholeCamera::look_at(k, eye, [0.0; 3], up).unwrap()
-        })
-        .collect()
-}
-
 /// 8192 random (camera, pixel) rays, as one training batch.
 fn batch() -> RayBatch<f32> {
     let cams = cameras();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
-    let picks: Vec<CameraPixel> = (0..RAYS)
-        .map(|_| CameraPixel {
-            camera: rng.gen_range(0..cams.len()),
-            pixel: rng.gen_range(0..64 * 64),
-        })
-        .collect();
-    rays_for_camera_pixels(&cams, &picks).unwrap()
+    rays_for_camera_pixels(&cams, &picks(&cams, 1)).unwrap()
 }
 
 /// 1 inside the default scene's primitives grown by `MARGIN`, 0 elsewhere.

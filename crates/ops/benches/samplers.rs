@@ -5,54 +5,22 @@
 //!
 //! `cargo bench -p fogray-ops --bench samplers -- --warm-up-time 1 --measurement-time 3`
 
+mod common;
+use common::{cameras, picks, RAYS};
+
 use std::convert::Infallible;
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use fogray_ops::rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};
+use fogray_ops::rays::{rays_for_camera_pixels, Aabb, RayBatch, RayIntervals};
 use fogray_ops::sample::{
     CellPoints, Importance, Jitter, OccupancyConfig, OccupancyGrid, Spacing, Stratified, Uniform,
 };
 use fogray_ops::{Background, Composite, CompositeArrays};
 use ndarray::{Array1, Array2, ArrayView2};
-use rand::{Rng, SeedableRng};
 
-const RAYS: usize = 8192;
 const STEP: f64 = 1.0 / 64.0; // half a voxel of a 64^3 grid over [-1, 1]^3
 const RADIUS: f64 = 0.45;
-
-/// 32 eyes spread over the sphere of radius 3 (a Fibonacci lattice).
-fn cameras() -> Vec<PinholeCamera> {
-    let k = Intrinsics::from_vertical_fov(64, 64, 40f64.to_radians()).unwrap();
-    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-    (0..32)
-        .map(|i| {
-            let z = 1.0 - (i as f64 + 0.5) / 16.0;
-            let rho = (1.0 - z * z).sqrt();
-            let eye = [
-                3.0 * rho * (golden * i as f64).cos(),
-                3.0 * rho * (golden * i as f64).sin(),
-                3.0 * z,
-            ];
-            let up = if z.abs() > 0.9 {
-                [0.0, 1.0, 0.0]
-            } else {
-                [0.0, 0.0, 1.0]
-            };
-            PinholeCamera::look_at(k, eye, [0.0; 3], up).unwrap()
-        })
-        .collect()
-}
-
-fn batch(cams: &[PinholeCamera], seed: u64) -> Vec<CameraPixel> {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    (0..RAYS)
-        .map(|_| CameraPixel {
-            camera: rng.gen_range(0..cams.len()),
-            pixel: rng.gen_range(0..64 * 64),
-        })
-        .collect()
-}
 
 fn ball(p: ArrayView2<'_, f32>) -> Result<Array1<f32>, Infallible> {
     let r2 = (RADIUS * RADIUS) as f32;
@@ -170,7 +138,7 @@ fn report_random_updates(rays: &RayBatch<f32>, clip: &RayIntervals, uniform_per_
 
 fn samplers(c: &mut Criterion) {
     let cams = cameras();
-    let rays = rays_for_camera_pixels::<f32>(&cams, &batch(&cams, 1)).unwrap();
+    let rays = rays_for_camera_pixels::<f32>(&cams, &picks(&cams, 1)).unwrap();
     let bounds = Aabb::new([-1.0; 3], [1.0; 3]).unwrap();
     let clip = bounds.clip(&rays);
     report(&rays, &clip);
@@ -180,7 +148,7 @@ fn samplers(c: &mut Criterion) {
     let mut g = c.benchmark_group("samplers");
     g.throughput(Throughput::Elements(RAYS as u64));
     g.bench_function("rays-8192", |b| {
-        b.iter(|| rays_for_camera_pixels::<f32>(&cams, black_box(&batch(&cams, 2))).unwrap())
+        b.iter(|| rays_for_camera_pixels::<f32>(&cams, black_box(&picks(&cams, 2))).unwrap())
     });
     g.bench_function("clip", |b| b.iter(|| bounds.clip(black_box(&rays))));
     let uniform = Uniform::new(Spacing::Step(STEP)).unwrap();
