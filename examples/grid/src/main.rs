@@ -261,12 +261,19 @@ struct ReportArgs {
         default_value = "fused-uniform,taped-uniform,fused-occupancy,taped-occupancy"
     )]
     configs: Vec<String>,
+    /// An outside pipeline's run of the same scene, cameras and test views, measured on the same
+    /// machine, to compare with: JSON {"name": .., "note": .., "log": [{"seconds": .., "test_psnr": ..}, ..]}
+    /// (note optional). Its curve joins a log-scaled plot, and each configuration's time to the
+    /// anchor's final PSNR is set against the anchor's.
+    #[arg(long, value_name = "FILE")]
+    anchor: Option<PathBuf>,
     /// Directory for the report (created if missing).
     #[arg(long, default_value = "reports/grid")]
     out: PathBuf,
 }
 
 fn run_report(args: ReportArgs) -> Result<()> {
+    use fogray_grid::report::anchor::Anchor;
     use fogray_grid::report::configuration::RunConfig;
     use fogray_grid::report::run::{run_configs, ReportOptions};
     use fogray_grid::report::write::{write_report, ReportSetup};
@@ -277,6 +284,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
         .map(|c| c.parse::<RunConfig>())
         .collect::<Result<Vec<_>, _>>()?;
     let (scene, ring) = (args.scene.load()?, args.ring.ring()?);
+    let anchor = args.anchor.as_deref().map(Anchor::read).transpose()?;
     let budget = args.training.budget();
     let options = ReportOptions {
         fit: FitConfig {
@@ -332,6 +340,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
         batch: args.training.batch,
         problem: &problem,
         evaluations: args.evaluations,
+        anchor: anchor.as_ref(),
     };
     let md = write_report(&args.out, &runs, &data, &scene, &setup)?;
     for r in &runs {

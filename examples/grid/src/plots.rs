@@ -18,6 +18,8 @@
 
 use std::path::{Path, PathBuf};
 
+use plotters::coord::ranged1d::ValueFormatter;
+use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -39,6 +41,9 @@ const COLORS: [RGBColor; 6] = [
 pub enum XAxis {
     /// Training seconds (evaluations excluded).
     Seconds,
+    /// Training seconds on a log scale (for runs of very different lengths; the evaluations at
+    /// 0 s are left out).
+    LogSeconds,
     /// Training steps.
     Steps,
 }
@@ -46,9 +51,14 @@ pub enum XAxis {
 impl XAxis {
     fn of(self, e: &LogEntry) -> f64 {
         match self {
-            XAxis::Seconds => e.seconds,
+            XAxis::Seconds | XAxis::LogSeconds => e.seconds,
             XAxis::Steps => e.step as f64,
         }
+    }
+
+    /// Whether the point can be drawn on this axis.
+    fn shows(self, e: &LogEntry) -> bool {
+        e.test_psnr.is_finite() && (self != XAxis::LogSeconds || e.seconds > 0.0)
     }
 }
 
@@ -61,23 +71,20 @@ pub struct Curve<'a> {
     pub log: &'a [LogEntry],
 }
 
+type DrawResult = Result<(), String>;
+
 fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     curves: &[Curve<'_>],
     x: XAxis,
     dashed: &[usize],
-) -> Result<(), String>
+) -> DrawResult
 where
     DB::ErrorType: 'static,
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let points = || {
-        curves
-            .iter()
-            .flat_map(|c| c.log.iter())
-            .filter(|e| e.test_psnr.is_finite())
-    };
+    let points = || curves.iter().flat_map(|c| c.log.iter()).filter(|e| x.shows(e));
     let t_max = points().map(|e| x.of(e)).fold(0.0, f64::max).max(1e-3) * 1.05;
     let lo = points().map(|e| e.test_psnr).fold(f64::INFINITY, f64::min);
     let hi = points().map(|e| e.test_psnr).fold(f64::NEG_INFINITY, f64::max);
@@ -86,23 +93,52 @@ where
     } else {
         (0.0, 1.0)
     };
-    let mut chart = ChartBuilder::on(root)
+    let mut builder = ChartBuilder::on(root);
+    builder
         .caption(
             match x {
-                XAxis::Seconds => "test PSNR against training time",
+                XAxis::Seconds | XAxis::LogSeconds => "test PSNR against training time",
                 XAxis::Steps => "test PSNR against training steps",
             },
             (FONT, 20),
         )
         .margin(12)
         .x_label_area_size(40)
-        .y_label_area_size(56)
-        .build_cartesian_2d(0.0..t_max, lo..hi)
-        .map_err(err)?;
+        .y_label_area_size(56);
+    if x == XAxis::LogSeconds {
+        // From the decade below the first evaluation after 0 s.
+        let t_min = points()
+            .map(|e| e.seconds)
+            .fold(f64::INFINITY, f64::min)
+            .min(t_max / 10.0);
+        let t_min = 10f64.powf(t_min.log10().floor());
+        let chart = builder
+            .build_cartesian_2d((t_min..t_max).log_scale(), lo..hi)
+            .map_err(err)?;
+        draw_curves(chart, curves, x, dashed)
+    } else {
+        let chart = builder.build_cartesian_2d(0.0..t_max, lo..hi).map_err(err)?;
+        draw_curves(chart, curves, x, dashed)
+    }
+}
+
+fn draw_curves<'a, DB, X>(
+    mut chart: ChartContext<'a, DB, Cartesian2d<X, RangedCoordf64>>,
+    curves: &[Curve<'_>],
+    x: XAxis,
+    dashed: &[usize],
+) -> DrawResult
+where
+    DB: DrawingBackend + 'a,
+    DB::ErrorType: 'static,
+    X: Ranged<ValueType = f64> + ValueFormatter<f64>,
+{
+    let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     chart
         .configure_mesh()
         .x_desc(match x {
             XAxis::Seconds => "training seconds (evaluations excluded)",
+            XAxis::LogSeconds => "training seconds (evaluations excluded), log scale",
             XAxis::Steps => "training steps",
         })
         .y_desc("test PSNR (dB)")
@@ -111,11 +147,7 @@ where
         .map_err(err)?;
     for (k, c) in curves.iter().enumerate() {
         let color = COLORS[k % COLORS.len()];
-        let line = c
-            .log
-            .iter()
-            .filter(|e| e.test_psnr.is_finite())
-            .map(|e| (x.of(e), e.test_psnr));
+        let line = c.log.iter().filter(|e| x.shows(e)).map(|e| (x.of(e), e.test_psnr));
         let drawn = if dashed.contains(&k) {
             chart.draw_series(DashedLineSeries::new(line, 8, 5, color.stroke_width(2)))
         } else {

@@ -3,7 +3,8 @@
 //! on test PSNR against training time, with pictures of the best configuration's model.
 //!
 //! - [`reach`]: a log read as a curve (PSNR at a time, time to a PSNR);
-//! - [`compare`]: fused against taped, occupancy against uniform;
+//! - [`anchor`]: an outside pipeline's log, set beside the configurations;
+//! - [`compare`]: fused against taped, occupancy against uniform, each against the anchor;
 //! - [`configuration`]: the configurations and their names;
 //! - [`run`]: running the fits; [`markdown`] and [`write`]: the report's files.
 //!
@@ -26,6 +27,7 @@ use thiserror::Error;
 use crate::fit::FitError;
 use crate::images::ImageError;
 
+pub mod anchor;
 pub mod compare;
 pub mod configuration;
 pub mod markdown;

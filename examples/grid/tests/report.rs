@@ -4,6 +4,7 @@
 use fogray_grid::dataset::Dataset;
 use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
 use fogray_grid::photographs::photographs;
+use fogray_grid::report::anchor::{Anchor, AnchorPoint};
 use fogray_grid::report::configuration::DEFAULT_CONFIGS;
 use fogray_grid::report::markdown::fused_vs_taped_rows;
 use fogray_grid::report::run::{run_configs, ReportOptions};
@@ -93,6 +94,7 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
         batch: config.batch,
         problem: "A tiny problem.",
         evaluations: config.evaluations,
+        anchor: None,
     };
     let md = write_report(&dir, &runs, &data, &scene, &setup).unwrap();
     let text = std::fs::read_to_string(&md).unwrap();
@@ -120,6 +122,42 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     assert_eq!(configs[1]["log"].as_array().unwrap().len(), runs[1].log.len());
     assert_eq!(configs[1]["final_test_psnr"].as_f64().unwrap(), runs[1].final_test_psnr);
     assert_eq!(json["fused_vs_taped"].as_array().unwrap().len(), 2);
+    assert!(json.get("anchor").is_none() && !text.contains("outside pipeline"));
+    assert!(!dir.join("psnr-vs-seconds-log.png").exists());
+
+    // An anchor that is the taped-uniform run slowed down ten times over: that run reaches the
+    // anchor's final PSNR at a tenth of the anchor's time, and the report says so.
+    let slowed: Vec<AnchorPoint> = runs[1]
+        .log
+        .iter()
+        .map(|e| AnchorPoint {
+            seconds: 10.0 * e.seconds,
+            test_psnr: e.test_psnr,
+            step: Some(e.step),
+        })
+        .collect();
+    let anchor = Anchor {
+        name: "slow twin".into(),
+        note: Some("Measured nowhere.".into()),
+        log: slowed,
+    };
+    let with_anchor = ReportSetup {
+        anchor: Some(&anchor),
+        ..setup
+    };
+    let md = write_report(&dir, &runs, &data, &scene, &with_anchor).unwrap();
+    let text = std::fs::read_to_string(&md).unwrap();
+    assert!(text.contains("## Against an outside pipeline: slow twin") && text.contains("Measured nowhere."));
+    assert!(dir.join("psnr-vs-seconds-log.png").exists() && dir.join("psnr-vs-seconds-log.svg").exists());
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    let against = json["anchor"]["against"].as_array().unwrap();
+    assert_eq!(json["anchor"]["name"], "slow twin");
+    assert_eq!(against.len(), 4);
+    assert_eq!(against[1]["name"], "taped-uniform");
+    assert_eq!(against[1]["target_psnr"].as_f64().unwrap(), runs[1].final_test_psnr);
+    let speedup = against[1]["speedup"].as_f64().unwrap();
+    assert!((speedup - 10.0).abs() < 1e-9, "{speedup}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -73,7 +73,11 @@ fn bad_report_input_exits_2_with_one_line() {
     let dir = std::env::temp_dir().join(format!("fogray-grid-report-bad-{}", std::process::id()));
     let out = dir.to_str().unwrap();
     let tiny = ["--size", "4", "--steps", "2", "--out", out];
+    let empty_anchor = std::env::temp_dir().join(format!("fogray-grid-empty-anchor-{}.json", std::process::id()));
+    std::fs::write(&empty_anchor, r#"{"name": "nothing", "log": []}"#).unwrap();
     for extra in [
+        &["--anchor", empty_anchor.to_str().unwrap()][..],
+        &["--anchor", "/nonexistent/anchor.json"][..],
         &["--configs", "fused-dense"][..],
         &["--configs", "fused-uniform,fused-uniform"][..],
         &["--configs", "fused-uniform-f16"][..],
@@ -91,4 +95,5 @@ fn bad_report_input_exits_2_with_one_line() {
     }
     assert!(!dir.join("report.md").exists());
     let _ = std::fs::remove_dir_all(&dir);
+    let _ = std::fs::remove_file(&empty_anchor);
 }

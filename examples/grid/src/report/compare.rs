@@ -93,3 +93,33 @@ pub fn occupancy_vs_uniform(
         speedup: ratio(u.seconds, o.seconds),
     })
 }
+
+/// A configuration against an outside pipeline (an [`Anchor`](super::anchor::Anchor)) at the
+/// test PSNR the anchor ends at.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct AgainstAnchor {
+    /// The anchor's final test PSNR (dB).
+    pub target_psnr: f64,
+    /// Where the anchor first reached it.
+    pub anchor: Reach,
+    /// Where the configuration first reached it; `None` if it never did.
+    pub run: Option<Reach>,
+    /// Anchor seconds over the configuration's seconds to the target; `None` if the
+    /// configuration never reached it or was there at 0 s.
+    pub speedup: Option<f64>,
+}
+
+/// How much sooner `run` reached the final test PSNR of `anchor` (see [`AgainstAnchor`]).
+///
+/// Errors: [`ReportError::Log`] for a log that is empty, not in time order, or has a NaN PSNR.
+pub fn against_anchor(run: &[LogEntry], anchor: &[LogEntry]) -> Result<AgainstAnchor, ReportError> {
+    let target = final_psnr(anchor)?;
+    let a = reach(anchor, target)?.ok_or_else(|| ReportError::Log("the anchor misses its own final PSNR".into()))?;
+    let r = reach(run, target)?;
+    Ok(AgainstAnchor {
+        target_psnr: target,
+        anchor: a,
+        run: r,
+        speedup: r.and_then(|r| ratio(a.seconds, r.seconds)),
+    })
+}

@@ -5,7 +5,10 @@ use fogray::stamp::Stamp;
 
 use crate::fit::Budget;
 
-use super::compare::{fused_vs_taped, occupancy_vs_uniform, FusedVsTaped, OccupancyVsUniform};
+use super::anchor::Anchor;
+use super::compare::{
+    against_anchor, fused_vs_taped, occupancy_vs_uniform, AgainstAnchor, FusedVsTaped, OccupancyVsUniform,
+};
 use super::reach::psnr_at;
 use super::run::ConfigRun;
 use super::ReportError;
@@ -103,6 +106,15 @@ pub fn occupancy_vs_uniform_rows(
     Ok(rows)
 }
 
+/// Every configuration against the anchor, at the anchor's final test PSNR. Errors: as
+/// [`config_rows`].
+pub fn anchor_rows(runs: &[ConfigRun], anchor: &Anchor) -> Result<Vec<(String, AgainstAnchor)>, ReportError> {
+    let entries = anchor.entries();
+    runs.iter()
+        .map(|r| Ok((r.name.clone(), against_anchor(&r.log, &entries)?)))
+        .collect()
+}
+
 fn shared(name: &str, precision: &str) -> String {
     if precision == "f32" {
         name.to_string()
@@ -134,8 +146,40 @@ pub struct ReportContext<'a> {
     pub problem: &'a str,
     /// Test evaluations each run makes over its budget (besides the one at the start).
     pub evaluations: usize,
+    /// An outside pipeline's run to compare with, if given.
+    pub anchor: Option<&'a Anchor>,
     /// Markdown for the pictures section (images and captions), or empty.
     pub pictures: &'a str,
+}
+
+fn anchor_section(runs: &[ConfigRun], anchor: &Anchor) -> Result<String, ReportError> {
+    let rows = anchor_rows(runs, anchor)?;
+    let Some((_, first)) = rows.first() else {
+        return Ok(String::new());
+    };
+    let mut md = format!("## Against an outside pipeline: {}\n\n", anchor.name);
+    if let Some(note) = &anchor.note {
+        md += &format!("{note}\n\n");
+    }
+    md += "![test PSNR against training seconds, log scale, with the outside pipeline](psnr-vs-seconds-log.png)\n\n";
+    md += &format!(
+        "The outside pipeline ends at {} dB after {} s of training, first reaching it at {} s.\n\n",
+        num(Some(first.target_psnr), 2),
+        num(anchor.log.last().map(|p| p.seconds), 1),
+        num(Some(first.anchor.seconds), 1)
+    );
+    md += "| configuration | s to reach the outside pipeline's final PSNR | speed-up |\n|---|---|---|\n";
+    for (name, c) in &rows {
+        md += &format!(
+            "| {name} | {} | {} |\n",
+            num(c.run.map(|r| r.seconds), 2),
+            c.speedup.map_or("-".into(), |x| format!("{x:.1} x"))
+        );
+    }
+    md += "\nThe seconds are read as in the tables above (the first crossing, interpolated between \
+           evaluations); `-` where a configuration never reached it. Both runs' seconds are \
+           training seconds, evaluations excluded; the outside pipeline's come from its own log.\n\n";
+    Ok(md)
 }
 
 /// The whole of `report.md`. Errors: as [`config_rows`].
@@ -222,6 +266,9 @@ pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, Rep
         }
         md += "\nSamples per ray: the training samples drawn until the run first reached the target \
                PSNR, over the rays of those steps (both interpolated between evaluations).\n\n";
+    }
+    if let Some(anchor) = ctx.anchor {
+        md += &anchor_section(runs, anchor)?;
     }
     md += ctx.pictures;
     Ok(md)

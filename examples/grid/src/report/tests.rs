@@ -2,7 +2,8 @@
 
 use approx::assert_relative_eq;
 
-use super::compare::{fused_vs_taped, occupancy_vs_uniform};
+use super::anchor::Anchor;
+use super::compare::{against_anchor, fused_vs_taped, occupancy_vs_uniform};
 use super::configuration::{Precision, RunConfig, DEFAULT_CONFIGS};
 use super::markdown::{checkpoints, config_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows};
 use super::reach::{psnr_at, reach};
@@ -223,4 +224,50 @@ fn configuration_names_read_back() {
     ] {
         assert!(matches!(bad.parse::<RunConfig>(), Err(ReportError::Config(_))), "{bad}");
     }
+}
+
+#[test]
+fn anchors_that_are_not_curves_are_refused() {
+    for bad in [
+        "not json",
+        r#"{"log": [{"seconds": 0, "test_psnr": 1}]}"#,
+        r#"{"name": " ", "log": [{"seconds": 0, "test_psnr": 1}]}"#,
+        r#"{"name": "a", "log": []}"#,
+        r#"{"name": "a", "log": [{"seconds": -1, "test_psnr": 1}]}"#,
+        r#"{"name": "a", "log": [{"seconds": 2, "test_psnr": 1}, {"seconds": 1, "test_psnr": 2}]}"#,
+        r#"{"name": "a", "log": [{"seconds": 1, "test_psnr": null}]}"#,
+        r#"{"name": "a", "log": [{"seconds": 1, "test_psnr": 3, "step": 5}, {"seconds": 2, "test_psnr": 4, "step": 4}]}"#,
+    ] {
+        assert!(matches!(Anchor::from_json(bad), Err(ReportError::Config(_))), "{bad}");
+    }
+    // A fit's JSON with a name is an anchor: other fields are ignored.
+    let fit_json = r#"{"name": "f", "log": [{"step": 0, "seconds": 0.0, "train_loss": null, "test_psnr": 9.5, "samples": 0}], "final_test_psnr": 9.5}"#;
+    let anchor = Anchor::from_json(fit_json).unwrap();
+    assert_eq!((anchor.final_psnr(), anchor.log[0].step), (9.5, Some(0)));
+}
+
+#[test]
+fn against_an_anchor_at_the_anchors_final_psnr() {
+    // The anchor passes its final 19 dB on the way up (at 90 s) and ends there at 200 s.
+    let anchor = [
+        entry(0, 0.0, 10.0, 0),
+        entry(0, 100.0, 20.0, 0),
+        entry(0, 200.0, 19.0, 0),
+    ];
+    // This run reaches 19 dB at 1 + (19 - 14) / (22 - 14) = 1.625 s.
+    let fast = [
+        entry(0, 0.0, 10.0, 0),
+        entry(5, 1.0, 14.0, 50),
+        entry(10, 2.0, 22.0, 100),
+    ];
+    let c = against_anchor(&fast, &anchor).unwrap();
+    assert_eq!(c.target_psnr, 19.0);
+    assert_relative_eq!(c.anchor.seconds, 90.0, max_relative = 1e-12);
+    assert_relative_eq!(c.run.unwrap().seconds, 1.625, max_relative = 1e-12);
+    assert_relative_eq!(c.speedup.unwrap(), 90.0 / 1.625, max_relative = 1e-12);
+    // A run that never gets there has no time and no speed-up.
+    let slow = [entry(0, 0.0, 10.0, 0), entry(5, 1.0, 15.0, 50)];
+    let c = against_anchor(&slow, &anchor).unwrap();
+    assert_eq!((c.run, c.speedup), (None, None));
+    assert!(matches!(against_anchor(&[], &anchor), Err(ReportError::Log(_))));
 }

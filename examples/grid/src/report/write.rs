@@ -13,8 +13,9 @@ use crate::plots::{psnr_curves_against, Curve, XAxis};
 use crate::scene::Scene;
 use crate::slices::{scene_density_planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
 
-use super::compare::{FusedVsTaped, OccupancyVsUniform};
-use super::markdown::{fused_vs_taped_rows, occupancy_vs_uniform_rows, report, ReportContext};
+use super::anchor::Anchor;
+use super::compare::{AgainstAnchor, FusedVsTaped, OccupancyVsUniform};
+use super::markdown::{anchor_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows, report, ReportContext};
 use super::run::{best, ConfigRun};
 use super::ReportError;
 
@@ -39,6 +40,15 @@ pub struct ReportSetup<'a> {
     pub problem: &'a str,
     /// Test evaluations each run made over its budget.
     pub evaluations: usize,
+    /// An outside pipeline's run to set beside the configurations, if given.
+    pub anchor: Option<&'a Anchor>,
+}
+
+#[derive(Serialize)]
+struct AnchorJson<'a> {
+    #[serde(flatten)]
+    anchor: &'a Anchor,
+    against: Vec<Named<AgainstAnchor>>,
 }
 
 #[derive(Serialize)]
@@ -51,6 +61,8 @@ struct ReportJson<'a> {
     configurations: &'a [ConfigRun],
     fused_vs_taped: Vec<Named<FusedVsTaped>>,
     occupancy_vs_uniform: Vec<Named<OccupancyVsUniform>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    anchor: Option<AnchorJson<'a>>,
 }
 
 #[derive(Serialize)]
@@ -153,7 +165,8 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
 }
 
 /// Writes into `dir` (created if missing): `psnr-vs-seconds.svg/.png` and
-/// `psnr-vs-steps.svg/.png` (one curve per run), `report.md`, `report.json` (every run's log
+/// `psnr-vs-steps.svg/.png` (one curve per run), with an anchor `psnr-vs-seconds-log.svg/.png`
+/// (the runs and the anchor, log-scaled seconds), `report.md`, `report.json` (every run's log
 /// and figures, the comparisons and the stamp), and pictures of the best run: each test view's
 /// photograph, render and error (`test-view-NNN.png`), `density-slices.png` and, where a run
 /// sampled with an occupancy grid, `occupancy-slices.png`. Returns `report.md`'s path.
@@ -185,6 +198,20 @@ pub fn write_report(
     let taped: Vec<usize> = (0..runs.len()).filter(|&i| runs[i].method == "taped").collect();
     psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
     psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
+    let anchor_log = setup.anchor.map(Anchor::entries);
+    if let (Some(anchor), Some(log)) = (setup.anchor, &anchor_log) {
+        let mut with_anchor = curves.clone();
+        with_anchor.push(Curve {
+            label: anchor.name.clone(),
+            log,
+        });
+        psnr_curves_against(
+            &dir.join("psnr-vs-seconds-log"),
+            &with_anchor,
+            XAxis::LogSeconds,
+            &taped,
+        )?;
+    }
     let pictures = pictures(dir, runs, data, scene)?;
     let ctx = ReportContext {
         stamp: setup.stamp,
@@ -193,6 +220,7 @@ pub fn write_report(
         batch: setup.batch,
         problem: setup.problem,
         evaluations: setup.evaluations,
+        anchor: setup.anchor,
         pictures: &pictures,
     };
     let md_path = dir.join("report.md");
@@ -210,6 +238,13 @@ pub fn write_report(
         configurations: runs,
         fused_vs_taped: named(fused_vs_taped_rows(runs)?),
         occupancy_vs_uniform: named(occupancy_vs_uniform_rows(runs, setup.batch)?),
+        anchor: match setup.anchor {
+            Some(anchor) => Some(AnchorJson {
+                anchor,
+                against: named(anchor_rows(runs, anchor)?),
+            }),
+            None => None,
+        },
     };
     let text = serde_json::to_string_pretty(&json).map_err(|e| ReportError::Write {
         path: dir.join("report.json"),
