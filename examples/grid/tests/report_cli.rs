@@ -22,12 +22,21 @@ fn report_writes_its_files_and_names_its_command() {
         "--steps",
         "6",
     ];
+    std::fs::create_dir_all(&dir).unwrap();
+    let anchor = dir.join("anchor.json");
+    std::fs::write(
+        &anchor,
+        r#"{"name": "a slow pipeline", "log": [{"seconds": 0, "test_psnr": 0.5}, {"seconds": 1000, "test_psnr": 1}]}"#,
+    )
+    .unwrap();
     let args = [
         &["report"][..],
         &tiny,
         &[
             "--configs",
             "fused-uniform,fused-occupancy-f64",
+            "--anchor",
+            anchor.to_str().unwrap(),
             "--out",
             out.to_str().unwrap(),
         ],
@@ -52,9 +61,13 @@ fn report_writes_its_files_and_names_its_command() {
     // No taped run, no f32 occupancy run: neither comparison has a pair.
     assert!(!md.contains("## Fused against taped"), "{md}");
     assert!(!md.contains("## Occupancy against uniform"), "{md}");
+    // Every run starts above the anchor's final 1 dB: reached at 0 s, so no ratio.
+    assert!(md.contains("## Against an outside pipeline: a slow pipeline"), "{md}");
+    assert!(md.contains("| fused-uniform | 0.00 | - |"), "{md}");
     for file in [
         "psnr-vs-seconds.png",
         "psnr-vs-steps.svg",
+        "psnr-vs-seconds-log.png",
         "report.json",
         "density-slices.png",
         "occupancy-slices.png",
