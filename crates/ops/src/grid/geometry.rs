@@ -8,7 +8,8 @@
 //! it with `t = 0`, one on the max face to the last cell with `t = 1`. Outside `[min, max]`
 //! (infinities included) there is no cell.
 
-use crate::error::GridError;
+use crate::error::{GeometryError, GridError};
+use crate::rays::Aabb;
 
 /// An axis-aligned box in 2 or 3 dimensions, finite with `min < max` on every axis.
 ///
@@ -70,6 +71,35 @@ impl GridBox {
                 .zip(self.min())
                 .zip(self.max())
                 .all(|((&x, &lo), &hi)| lo <= x && x <= hi)
+    }
+}
+
+/// The same box as the rays are clipped to, so that a renderer states its bounds once:
+/// `GridField::new(bounds.into(), shape)`. Infallible: an [`Aabb`] is finite with `min < max`.
+impl From<Aabb> for GridBox {
+    fn from(b: Aabb) -> Self {
+        GridBox {
+            min: b.min(),
+            max: b.max(),
+            dims: 3,
+        }
+    }
+}
+
+/// The 3-D grid box as a box to clip rays to.
+/// Errors: [`GeometryError::Shape`] for a 2-D box.
+impl TryFrom<GridBox> for Aabb {
+    type Error = GeometryError;
+
+    fn try_from(b: GridBox) -> Result<Self, GeometryError> {
+        if b.dims != 3 {
+            return Err(GeometryError::Shape {
+                what: "box",
+                expected: "3 axes to clip rays to".into(),
+                got: format!("{} axes", b.dims),
+            });
+        }
+        Aabb::new(b.min, b.max)
     }
 }
 
@@ -246,6 +276,20 @@ mod tests {
         assert_eq!(thin.scale, f64::INFINITY);
         assert_eq!(thin.locate(0.0), Some((1, 1.0)));
         assert_eq!(thin.locate(5e-324), Some((1, 1.0)));
+    }
+
+    #[test]
+    fn boxes_convert_both_ways_and_a_flat_one_is_refused() {
+        let aabb = Aabb::new([-1.0, -2.0, 0.5], [1.0, 2.0, 3.0]).unwrap();
+        let grid = GridBox::from(aabb);
+        assert_eq!(
+            (grid.dims(), grid.min(), grid.max()),
+            (3, &[-1.0, -2.0, 0.5][..], &[1.0, 2.0, 3.0][..])
+        );
+        assert_eq!(Aabb::try_from(grid).unwrap(), aabb);
+        assert_eq!(grid, GridBox::new(&[-1.0, -2.0, 0.5], &[1.0, 2.0, 3.0]).unwrap());
+        let flat = GridBox::new(&[0.0, 0.0], &[1.0, 1.0]).unwrap();
+        assert!(matches!(Aabb::try_from(flat), Err(GeometryError::Shape { .. })));
     }
 
     #[test]
