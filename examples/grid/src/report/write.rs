@@ -198,12 +198,12 @@ pub fn write_report(
     let taped: Vec<usize> = (0..runs.len()).filter(|&i| runs[i].method == "taped").collect();
     psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
     psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
-    let anchor_log = setup.anchor.map(Anchor::entries);
-    if let (Some(anchor), Some(log)) = (setup.anchor, &anchor_log) {
+    if let Some(anchor) = setup.anchor {
+        let log = anchor.entries();
         let mut with_anchor = curves.clone();
         with_anchor.push(Curve {
             label: anchor.name.clone(),
-            log,
+            log: &log,
         });
         psnr_curves_against(
             &dir.join("psnr-vs-seconds-log"),
