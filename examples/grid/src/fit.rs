@@ -32,6 +32,7 @@ use rand_chacha::ChaCha12Rng;
 use serde::Serialize;
 use thiserror::Error;
 
+use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
 use crate::images::{psnr, ImageError};
 use crate::model::{GridModel, Method, BOUNDS};
@@ -268,7 +269,7 @@ fn batch_of<F: Float>(o: &Array2<f64>, d: &Array2<f64>, rows: &[usize]) -> Resul
 }
 
 /// The rows `rows` of `[P, 3]` table `a`, converted to `F`. A direct copy: ndarray's
-/// `select` concatenates one view per row, which cost more than a fused training step's march.
+/// `select` concatenates one view per row, which costs more than the copy itself.
 fn rows_of<F: Float>(a: &Array2<f64>, rows: &[usize]) -> Array2<F> {
     Array2::from_shape_fn((rows.len(), a.ncols()), |(k, c)| F::lit(a[[rows[k], c]]))
 }
@@ -428,7 +429,8 @@ pub fn fit_from<F: Float>(
     let first_step = step;
     let mut interrupted = false;
     let mut tape = Tape::<F>::new();
-    let pixels = data.origins.nrows();
+    let table = TrainingTable::<F>::new(data);
+    let pixels = table.pixels();
     let (mut loss, mut samples_total) = (f64::NAN, 0usize);
     let fraction = |step: usize, seconds: f64| match config.budget {
         Budget::Steps(n) => step as f64 / n as f64,
@@ -460,10 +462,10 @@ pub fn fit_from<F: Float>(
         }
         adam.set_lr(learning_rate(config, fraction(step, seconds)))?;
         let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();
-        let rays = batch_of::<F>(&data.origins, &data.directions, &rows)?;
-        let samples = sample_rays(sampler.occupancy(), &rays, model.voxel() / 2.0)?;
+        let batch = table.gather(&rows)?;
+        let samples = sample_rays(sampler.occupancy(), &batch.rays, model.voxel() / 2.0)?;
         samples_total += samples.len();
-        let target = tape.constant(rows_of::<F>(&data.colors, &rows));
+        let target = tape.constant(batch.colors);
         let grid = tape.param_from(model.params(), model.grid_id())?;
         let color = model.render_grid(&mut tape, grid, &samples, data.background, config.method)?;
         let residual = tape.sub(color, target)?;

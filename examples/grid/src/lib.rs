@@ -14,6 +14,8 @@
 //! - [`model`]: the dense grid of raw density and colour, rendered with fogray's grid field,
 //!   density/colour activation and composite (fused, or their taped twins);
 //! - [`dataset`]: the training rays and colours, the test views;
+//! - [`batch`]: the training pixels a step draws, gathered from one table in the fit's
+//!   precision;
 //! - [`fit`]: Adam on random batches of training rays, test PSNR on the held-out views;
 //! - [`state`], [`checkpoint`]: where a fit stands, saved to a safetensors file and read back
 //!   to continue it or render from it;
@@ -35,6 +37,7 @@
 
 #![warn(missing_docs)]
 
+pub mod batch;
 pub mod checkpoint;
 pub mod dataset;
 pub mod depth;
