@@ -114,9 +114,20 @@ impl<F: Float> RayBatch<F> {
     }
 }
 
-/// Euclidean length, without overflow for large finite components.
+/// Euclidean length, without overflow for large finite components or lost digits for tiny
+/// ones: the square root of the sum of squares where that sum lies far from both ends of the
+/// exponent range (every batch's directions, on every training step), else nested `hypot`,
+/// which scales but costs several times as much.
 pub(crate) fn norm(v: [f64; 3]) -> f64 {
-    v[0].hypot(v[1]).hypot(v[2])
+    // About 2^-900 and 2^900: a component square below the first (perhaps subnormal) is below the
+    // sum's last digit, and no square overflowed.
+    const SAFE: std::ops::Range<f64> = 1.2e-271..8.5e270;
+    let s = v[0] * v[0] + v[1] * v[1] + v[2] * v[2];
+    if SAFE.contains(&s) {
+        s.sqrt()
+    } else {
+        v[0].hypot(v[1]).hypot(v[2])
+    }
 }
 
 /// `v / |v|`, or `None` when the length is zero or not finite.
@@ -139,6 +150,32 @@ mod tests {
         let ab = RayBatch::concat(&[a, b]);
         assert_eq!(ab.origins(), arr2(&[[1.0, 2.0, 3.0], [-1.0, 0.0, 0.0]]));
         assert_eq!(ab.directions(), arr2(&[[0.0, 0.6, 0.8], [0.0, 0.0, -1.0]]));
+    }
+
+    #[test]
+    fn tiny_directions_normalise_without_underflow() {
+        // |(3e-170, 4e-170, 0)|: the squares underflow to zero, so the naive sum gives 0.
+        let d: [f64; 3] = [3e-170, 4e-170, 0.0];
+        assert_eq!(d[0] * d[0] + d[1] * d[1], 0.0);
+        let r = RayBatch::new(arr2(&[[0.0; 3]]), arr2(&[d])).unwrap();
+        let got = r.directions().row(0).to_vec();
+        assert!(
+            got.iter().zip([0.6f64, 0.8, 0.0]).all(|(g, w)| (g - w).abs() < 1e-15),
+            "{got:?}"
+        );
+        // Where the sum of squares is safe it agrees with nested hypot to an ulp or two.
+        for v in [
+            [1.0, 2.0, 3.0],
+            [1e-120, -3e-121, 2e-120],
+            [0.3, -1e5, 7.0],
+            [4e130, 1e130, -2e129],
+        ] {
+            let (fast, scaled) = (norm(v), v[0].hypot(v[1]).hypot(v[2]));
+            assert!(
+                (fast - scaled).abs() <= 2.0 * f64::EPSILON * scaled,
+                "{v:?}: {fast} vs {scaled}"
+            );
+        }
     }
 
     #[test]
