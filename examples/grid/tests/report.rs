@@ -158,6 +158,10 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     assert_eq!(against[1]["target_psnr"].as_f64().unwrap(), runs[1].final_test_psnr);
     let speedup = against[1]["speedup"].as_f64().unwrap();
     assert!((speedup - 10.0).abs() < 1e-9, "{speedup}");
+
+    // Written again into the same folder without the anchor, the report leaves no plot of it.
+    write_report(&dir, &runs, &data, &scene, &setup).unwrap();
+    assert!(!dir.join("psnr-vs-seconds-log.png").exists() && !dir.join("psnr-vs-seconds-log.svg").exists());
     let _ = std::fs::remove_dir_all(&dir);
 }
 

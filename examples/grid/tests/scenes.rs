@@ -11,7 +11,6 @@ fn the_shipped_scenes_read_and_hold_matter() {
         let path = entry.unwrap().path();
         if path.extension().is_some_and(|e| e == "json") {
             let scene = Scene::read(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
-            assert!(scene.density_at([0.0; 3]) >= 0.0);
             let inside = (0..1000).any(|i| {
                 let f = |k: u32| -0.9 + 1.8 * (((i * k) % 997) as f64 / 997.0);
                 scene.density_at([f(7), f(13), f(29)]) > 0.0

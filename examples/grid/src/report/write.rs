@@ -85,6 +85,16 @@ fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
     })
 }
 
+fn remove_if_present(path: &Path) -> Result<(), ReportError> {
+    match std::fs::remove_file(path) {
+        Err(e) if e.kind() != std::io::ErrorKind::NotFound => Err(ReportError::Write {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        }),
+        _ => Ok(()),
+    }
+}
+
 /// The pictures of the best run (and of the best occupancy run's grid); returns their markdown.
 fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Result<String, ReportError> {
     let Some(top) = best(runs) else {
@@ -166,7 +176,8 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
 
 /// Writes into `dir` (created if missing): `psnr-vs-seconds.svg/.png` and
 /// `psnr-vs-steps.svg/.png` (one curve per run), with an anchor `psnr-vs-seconds-log.svg/.png`
-/// (the runs and the anchor, log-scaled seconds), `report.md`, `report.json` (every run's log
+/// (the runs and the anchor, log-scaled seconds; without one, an earlier report's such plot is
+/// removed), `report.md`, `report.json` (every run's log
 /// and figures, the comparisons and the stamp), and pictures of the best run: each test view's
 /// photograph, render and error (`test-view-NNN.png`), `density-slices.png` and, where a run
 /// sampled with an occupancy grid, `occupancy-slices.png`. Returns `report.md`'s path.
@@ -198,6 +209,13 @@ pub fn write_report(
     let taped: Vec<usize> = (0..runs.len()).filter(|&i| runs[i].method == "taped").collect();
     psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
     psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
+    let anchor_plot = dir.join("psnr-vs-seconds-log");
+    if setup.anchor.is_none() {
+        // An earlier report's plot with an anchor would stand beside curves it does not show.
+        for ext in ["png", "svg"] {
+            remove_if_present(&anchor_plot.with_extension(ext))?;
+        }
+    }
     if let Some(anchor) = setup.anchor {
         let log = anchor.entries();
         let mut with_anchor = curves.clone();
@@ -205,12 +223,7 @@ pub fn write_report(
             label: anchor.name.clone(),
             log: &log,
         });
-        psnr_curves_against(
-            &dir.join("psnr-vs-seconds-log"),
-            &with_anchor,
-            XAxis::LogSeconds,
-            &taped,
-        )?;
+        psnr_curves_against(&anchor_plot, &with_anchor, XAxis::LogSeconds, &taped)?;
     }
     let pictures = pictures(dir, runs, data, scene)?;
     let ctx = ReportContext {
