@@ -177,10 +177,10 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
 /// Writes into `dir` (created if missing): `psnr-vs-seconds.svg/.png` and
 /// `psnr-vs-steps.svg/.png` (one curve per run), with an anchor `psnr-vs-seconds-log.svg/.png`
 /// (the runs and the anchor, log-scaled seconds; without one, an earlier report's such plot is
-/// removed), `report.md`, `report.json` (every run's log
-/// and figures, the comparisons and the stamp), and pictures of the best run: each test view's
-/// photograph, render and error (`test-view-NNN.png`), `density-slices.png` and, where a run
-/// sampled with an occupancy grid, `occupancy-slices.png`. Returns `report.md`'s path.
+/// removed), `report.md`, `report.json` (every run's log and figures, the comparisons and the
+/// stamp), and pictures of the best run: each test view's photograph, render and error
+/// (`test-view-NNN.png`), `density-slices.png` and, where a run sampled with an occupancy
+/// grid, `occupancy-slices.png`. Returns `report.md`'s path.
 ///
 /// Errors: [`ReportError::Write`] or [`ReportError::Image`] for a file that cannot be written,
 /// [`ReportError::Log`] for a log that is not a curve, [`ReportError::Config`] for no runs.
@@ -210,20 +210,22 @@ pub fn write_report(
     psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
     psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
     let anchor_plot = dir.join("psnr-vs-seconds-log");
-    if setup.anchor.is_none() {
-        // An earlier report's plot with an anchor would stand beside curves it does not show.
-        for ext in ["png", "svg"] {
-            remove_if_present(&anchor_plot.with_extension(ext))?;
+    match setup.anchor {
+        Some(anchor) => {
+            let log = anchor.entries();
+            let mut with_anchor = curves.clone();
+            with_anchor.push(Curve {
+                label: anchor.name.clone(),
+                log: &log,
+            });
+            psnr_curves_against(&anchor_plot, &with_anchor, XAxis::LogSeconds, &taped)?;
         }
-    }
-    if let Some(anchor) = setup.anchor {
-        let log = anchor.entries();
-        let mut with_anchor = curves.clone();
-        with_anchor.push(Curve {
-            label: anchor.name.clone(),
-            log: &log,
-        });
-        psnr_curves_against(&anchor_plot, &with_anchor, XAxis::LogSeconds, &taped)?;
+        // An earlier report's plot with an anchor would stand beside curves it does not show.
+        None => {
+            for ext in ["png", "svg"] {
+                remove_if_present(&anchor_plot.with_extension(ext))?;
+            }
+        }
     }
     let pictures = pictures(dir, runs, data, scene)?;
     let ctx = ReportContext {
