@@ -4,6 +4,7 @@ use ndarray::{ArrayD, ArrayViewD, Zip};
 
 use crate::error::Result;
 use crate::float::Float;
+use crate::optim::chunks::zip2;
 use crate::params::Lent;
 use crate::tape::Tape;
 use crate::var::Var;
@@ -54,9 +55,44 @@ impl<F: Float> Gradients<F> {
         match &mut self.grads[index] {
             slot @ None => *slot = Some(g),
             Some(acc) => {
-                Zip::from(acc).and(&g).for_each(|a, &b| *a += b);
+                // Contiguous sums of one shape (a parameter's, from several ops) are added in
+                // parallel chunks: they can be a whole grid, on the thread that runs the
+                // backward while the others wait.
+                let contiguous = acc.shape() == g.shape() && acc.is_standard_layout() && g.is_standard_layout();
+                if !contiguous {
+                    Zip::from(&mut *acc).and(&g).for_each(|a, &b| *a += b);
+                } else if let (Some(a), Some(b)) = (acc.as_slice_mut(), g.as_slice()) {
+                    zip2(a, b, |a, b| *a += b);
+                }
                 crate::pool::give(g.into_raw_vec_and_offset().0);
             }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::Tape;
+    use ndarray::Array1;
+
+    #[test]
+    fn contributions_to_a_large_value_add_up_exactly() {
+        // Larger than one parallel chunk, reached by three paths: d/dx (sum x + sum x^2 +
+        // sum x) = 2 + 2x, exact in f64 for these x.
+        let n = 3 * (1 << 14) + 5;
+        let mut t = Tape::<f64>::new();
+        let x = t.param(Array1::from_shape_fn(n, |i| i as f64 * 0.25 - 100.0));
+        let s1 = t.sum(x).unwrap();
+        let sq = t.square(x).unwrap();
+        let s2 = t.sum(sq).unwrap();
+        let s3 = t.sum(x).unwrap();
+        let s12 = t.add(s1, s2).unwrap();
+        let total = t.add(s12, s3).unwrap();
+        let g = t.backward(total).unwrap();
+        let gx = g.get(x).unwrap();
+        assert_eq!(gx.len(), n);
+        for (i, &v) in gx.iter().enumerate() {
+            assert_eq!(v, 2.0 + 2.0 * (i as f64 * 0.25 - 100.0), "element {i}");
         }
     }
 }

@@ -59,16 +59,25 @@ impl<F: Float> CustomOp<F> for Reduce {
         let x = ctx.input(0);
         let shape = IxDyn(x.shape());
         let spread = |g: ArrayViewD<'_, F>| {
-            g.broadcast(shape.clone())
+            g.broadcast(x.shape())
                 .map(|b| b.to_owned())
                 .ok_or_else(|| OpError::ShapeMismatch {
                     lhs: x.shape().to_vec(),
                     rhs: g.shape().to_vec(),
                 })
         };
+        // The 0-d upstream value of a whole reduction, filled in one contiguous pass: copying a
+        // broadcast view of dynamic dimension goes index by index, several times slower.
+        let whole = || match g.iter().next() {
+            Some(&v) if g.len() == 1 => Ok(v),
+            _ => Err(OpError::ShapeMismatch {
+                lhs: Vec::new(),
+                rhs: g.shape().to_vec(),
+            }),
+        };
         let gx = match *self {
-            Reduce::Sum => spread(g.view())?,
-            Reduce::Mean => spread(g.view())?.mapv(|v| v / F::lit(x.len() as f64)),
+            Reduce::Sum => ArrayD::from_elem(shape, whole()?),
+            Reduce::Mean => ArrayD::from_elem(shape, whole()? / F::lit(x.len() as f64)),
             Reduce::SumAxis(k) => spread(g.view().insert_axis(Axis(k)))?,
         };
         Ok(vec![Some(gx)])

@@ -56,7 +56,7 @@
 //! it in a [`ParamGradients`].
 
 mod adam;
-mod chunks;
+pub(crate) mod chunks;
 mod sgd;
 mod slots;
 mod source;
