@@ -291,7 +291,7 @@ fn render_rays<F: Float>(
         let rows: Vec<usize> = (start..(start + CHUNK).min(n)).collect();
         let rays = batch_of::<F>(origins, directions, &rows)?;
         let samples = sample_rays(occupancy, &rays, model.voxel() / 2.0)?;
-        let color = model.render(&mut tape, &samples, background, method)?;
+        let color = model.render(&mut tape, samples, background, method)?;
         let values = tape.value(color)?;
         for (k, &r) in rows.iter().enumerate() {
             for c in 0..3 {
@@ -467,7 +467,7 @@ pub fn fit_from<F: Float>(
         samples_total += samples.len();
         let target = tape.constant(batch.colors);
         let grid = tape.param_from(model.params(), model.grid_id())?;
-        let color = model.render_grid(&mut tape, grid, &samples, data.background, config.method)?;
+        let color = model.render_grid(&mut tape, grid, samples, data.background, config.method)?;
         let residual = tape.sub(color, target)?;
         let squared = tape.square(residual)?;
         let mse = tape.mean(squared)?;

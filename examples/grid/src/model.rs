@@ -15,7 +15,7 @@
 //! let clip = Aabb::new([-1.0; 3], [1.0; 3])?.clip(&rays);
 //! let samples = Uniform::new(Spacing::Step(model.voxel() / 2.0))?.sample(&rays, &clip)?;
 //! let mut tape = Tape::new();
-//! let color = model.render(&mut tape, &samples, [1.0, 1.0, 1.0], Method::Fused)?;
+//! let color = model.render(&mut tape, samples, [1.0, 1.0, 1.0], Method::Fused)?;
 //! // A fresh grid is a thin grey fog: density softplus(-4) = 0.018 over a length of 2.
 //! let c = tape.value(color)?[[0, 0]];
 //! assert!(c > 0.98 && c < 1.0);
@@ -156,7 +156,7 @@ impl<F: Float> GridModel<F> {
     pub fn render(
         &self,
         tape: &mut Tape<F>,
-        samples: &PackedSamples<F>,
+        samples: PackedSamples<F>,
         background: [f64; 3],
         method: Method,
     ) -> Result<Var, TapeError> {
@@ -168,16 +168,25 @@ impl<F: Float> GridModel<F> {
     /// `[N, N, N, 4]`, this model's or any other): looks it up at the sample positions,
     /// activates and composites over `background`. Returns the colours `[R, 3]`.
     ///
+    /// The samples' arrays move onto the tape as its constants: a training step's samples are
+    /// megabytes, which a copy would spend the step's one-threaded part on.
+    ///
     /// Errors: from the ops (a tape error naming the op).
     pub fn render_grid(
         &self,
         tape: &mut Tape<F>,
         grid: Var,
-        samples: &PackedSamples<F>,
+        samples: PackedSamples<F>,
         background: [f64; 3],
         method: Method,
     ) -> Result<Var, TapeError> {
-        let positions = tape.constant(samples.positions.clone());
+        let PackedSamples {
+            positions,
+            delta,
+            offsets,
+            ..
+        } = samples;
+        let positions = tape.constant(positions);
         let raw = match method {
             Method::Fused => self.field.apply(tape, grid, positions)?,
             Method::Taped => fogray::ops::grid::twin::lookup(tape, &self.field, grid, positions)?,
@@ -186,10 +195,10 @@ impl<F: Float> GridModel<F> {
             Method::Fused => self.activation.apply(tape, raw)?,
             Method::Taped => twin::density_color(tape, &self.activation, raw)?,
         };
-        let op = Composite::packed(samples.offsets.clone());
+        let op = Composite::packed(offsets);
         let inputs = CompositeInputs {
             sigma: activated.sigma,
-            delta: tape.constant(samples.delta.clone()),
+            delta: tape.constant(delta),
             color: activated.color,
             background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
             t: None,
@@ -210,23 +219,28 @@ impl<F: Float> GridModel<F> {
     pub fn render_with_depth(
         &self,
         tape: &mut Tape<F>,
-        samples: &PackedSamples<F>,
+        samples: PackedSamples<F>,
         background: [f64; 3],
     ) -> Result<CompositeVars, TapeError> {
+        let PackedSamples {
+            positions,
+            t,
+            delta,
+            offsets,
+            ..
+        } = samples;
         let grid = tape.param_from(&self.params, self.grid)?;
-        let positions = tape.constant(samples.positions.clone());
+        let positions = tape.constant(positions);
         let raw = self.field.apply(tape, grid, positions)?;
         let activated = self.activation.apply(tape, raw)?;
         let inputs = CompositeInputs {
             sigma: activated.sigma,
-            delta: tape.constant(samples.delta.clone()),
+            delta: tape.constant(delta),
             color: activated.color,
             background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
-            t: Some(tape.constant(samples.t.clone())),
+            t: Some(tape.constant(t)),
         };
-        Composite::packed(samples.offsets.clone())
-            .with_depth()
-            .apply(tape, &inputs)
+        Composite::packed(offsets).with_depth().apply(tape, &inputs)
     }
 
     /// The density at `positions` (`[m, 3]`), without a tape: for the occupancy grid and for

@@ -34,7 +34,7 @@ fn raw_grid() -> ArrayD<f64> {
 
 fn loss(tape: &mut Tape<f64>, grid: Var, method: Method) -> Result<Var, fogray::tape::TapeError> {
     let (model, samples, target) = setup();
-    let color = model.render_grid(tape, grid, &samples, [1.0, 0.95, 0.9], method)?;
+    let color = model.render_grid(tape, grid, samples, [1.0, 0.95, 0.9], method)?;
     let target = tape.constant(target);
     let r = tape.sub(color, target)?;
     let sq = tape.square(r)?;
