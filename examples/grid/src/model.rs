@@ -168,7 +168,7 @@ impl<F: Float> GridModel<F> {
     /// `[N, N, N, 4]`, this model's or any other): looks it up at the sample positions,
     /// activates and composites over `background`. Returns the colours `[R, 3]`.
     ///
-    /// The samples' arrays move onto the tape as its constants: a training step's samples are
+    /// The samples move onto the tape ([`PackedSamples::into_tape`]): a training step's are
     /// megabytes, which a copy would spend the step's one-threaded part on.
     ///
     /// Errors: from the ops (a tape error naming the op).
@@ -180,16 +180,10 @@ impl<F: Float> GridModel<F> {
         background: [f64; 3],
         method: Method,
     ) -> Result<Var, TapeError> {
-        let PackedSamples {
-            positions,
-            delta,
-            offsets,
-            ..
-        } = samples;
-        let positions = tape.constant(positions);
+        let (vars, offsets) = samples.into_tape(tape);
         let raw = match method {
-            Method::Fused => self.field.apply(tape, grid, positions)?,
-            Method::Taped => fogray::ops::grid::twin::lookup(tape, &self.field, grid, positions)?,
+            Method::Fused => self.field.apply(tape, grid, vars.positions)?,
+            Method::Taped => fogray::ops::grid::twin::lookup(tape, &self.field, grid, vars.positions)?,
         };
         let activated = match method {
             Method::Fused => self.activation.apply(tape, raw)?,
@@ -198,7 +192,7 @@ impl<F: Float> GridModel<F> {
         let op = Composite::packed(offsets);
         let inputs = CompositeInputs {
             sigma: activated.sigma,
-            delta: tape.constant(delta),
+            delta: vars.delta,
             color: activated.color,
             background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
             t: None,
@@ -222,23 +216,16 @@ impl<F: Float> GridModel<F> {
         samples: PackedSamples<F>,
         background: [f64; 3],
     ) -> Result<CompositeVars, TapeError> {
-        let PackedSamples {
-            positions,
-            t,
-            delta,
-            offsets,
-            ..
-        } = samples;
         let grid = tape.param_from(&self.params, self.grid)?;
-        let positions = tape.constant(positions);
-        let raw = self.field.apply(tape, grid, positions)?;
+        let (vars, offsets) = samples.into_tape(tape);
+        let raw = self.field.apply(tape, grid, vars.positions)?;
         let activated = self.activation.apply(tape, raw)?;
         let inputs = CompositeInputs {
             sigma: activated.sigma,
-            delta: tape.constant(delta),
+            delta: vars.delta,
             color: activated.color,
             background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
-            t: Some(tape.constant(t)),
+            t: Some(vars.t),
         };
         Composite::packed(offsets).with_depth().apply(tape, &inputs)
     }

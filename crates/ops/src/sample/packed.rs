@@ -80,6 +80,18 @@ impl<F: Float> PackedSamples<F> {
             delta: tape.constant(self.delta.clone()),
         })
     }
+
+    /// Moves positions, depths and lengths onto `tape` as constants, as
+    /// [`PackedSamples::to_tape`] records them but without a copy (a training step's samples
+    /// are megabytes), and returns them with the offsets for the composite.
+    pub fn into_tape(self, tape: &mut Tape<F>) -> (SampleVars, Offsets) {
+        let vars = SampleVars {
+            positions: tape.constant(self.positions),
+            t: tape.constant(self.t),
+            delta: tape.constant(self.delta),
+        };
+        (vars, self.offsets)
+    }
 }
 
 /// A piece `[lo, hi]` of a ray, in f64.
@@ -252,6 +264,16 @@ mod tape_tests {
         let s = Uniform::new(Spacing::Step(0.3)).unwrap().sample(&rays, &clip).unwrap();
         let mut tape = Tape::<f64>::new();
         let vars = s.to_tape(&mut tape).unwrap();
+        // Moved instead of copied, the same constants.
+        let (moved, offsets) = s.clone().into_tape(&mut tape);
+        for (a, b) in [
+            (vars.positions, moved.positions),
+            (vars.t, moved.t),
+            (vars.delta, moved.delta),
+        ] {
+            assert_eq!(tape.value(a).unwrap(), tape.value(b).unwrap());
+        }
+        assert_eq!(offsets, s.offsets);
         let a = tape.param(ndarray::arr1(&[0.5]));
         let x = s.positions.column(0).mapv(|x| x + 1.0);
         let x1 = tape.constant(x);
