@@ -169,6 +169,28 @@ fn the_gradient_is_bitwise_the_per_node_definition() {
 }
 
 #[test]
+fn a_reused_tape_overwrites_its_pooled_gradient_buffer() {
+    // The backward writes into a buffer of the tape's pool, which holds the step before's
+    // gradient: every value must be overwritten. 32^3 f64 nodes are large enough to be pooled.
+    let tv = TotalVariation::new(0.37).unwrap();
+    let shape = [32, 32, 32, 1];
+    let (first, second) = (grid(&shape).mapv(|v| v * 1e6 + 7.0), grid(&shape));
+    let want: Vec<u64> = gradient_oracle(&second, 0.37).iter().map(|v| v.to_bits()).collect();
+    let mut tape = Tape::<f64>::new();
+    for (step, values) in [first, second].into_iter().enumerate() {
+        let g = tape.param(values);
+        let prior = tv.apply(&mut tape, g).unwrap();
+        let grads = tape.backward(prior).unwrap();
+        let got: Vec<u64> = grads.get(g).unwrap().iter().map(|v| v.to_bits()).collect();
+        if step == 1 {
+            assert_eq!(got, want);
+        }
+        tape.clear();
+        tape.recycle(grads);
+    }
+}
+
+#[test]
 fn a_grid_without_neighbours_has_no_prior() {
     let g = ArrayD::<f64>::from_elem(IxDyn(&[1, 1, 1, 3]), 5.0);
     let tv = TotalVariation::new(2.0).unwrap();

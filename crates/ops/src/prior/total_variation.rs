@@ -268,7 +268,11 @@ impl<F: Float> CustomOp<F> for TotalVariation {
         };
         let scale = upstream.iter().next().map_or(0.0, |v| v.as_f64());
         let grid = ctx.input(0);
-        let mut out = ArrayD::zeros(grid.shape());
+        // Every value is overwritten, so the tape's pooled buffer needs no zeros (a grid's
+        // worth of them was a serial pass on every step).
+        let len = grid.len();
+        let mut out =
+            ArrayD::from_shape_vec(IxDyn(grid.shape()), fogray_tape::buffer::scratch(len)).map_err(OpError::typed)?;
         self.gradient_into(&grid, scale, out.view_mut())
             .map_err(OpError::typed)?;
         Ok(vec![Some(out)])

@@ -147,14 +147,21 @@ pub(crate) fn pack<F: Float>(
         .collect();
     let offsets = Offsets::from_lengths(chunks.iter().flat_map(|c| c.counts.iter().copied()));
     let n = offsets.rows();
-    let mut positions = vec![F::zero(); 3 * n];
-    let mut t = vec![F::zero(); n];
-    let mut delta = vec![F::zero(); n];
-    let mut ray = vec![0usize; n];
-    // Each task's share of the outputs, split off in order.
+    // The outputs are written once, in parallel, into uninitialised capacity: a zero-filled
+    // `vec!` is a serial pass over megabytes that every sample then overwrites.
+    let mut positions: Vec<F> = Vec::with_capacity(3 * n);
+    let mut t: Vec<F> = Vec::with_capacity(n);
+    let mut delta: Vec<F> = Vec::with_capacity(n);
+    let mut ray: Vec<usize> = Vec::with_capacity(n);
+    // Each task's share of the outputs, split off in order: the shares partition the first
+    // `3 n` / `n` slots, since the chunks' pieces add up to the offsets' rows.
     let mut shares = Vec::with_capacity(chunks.len());
-    let (mut p_rest, mut t_rest, mut d_rest, mut r_rest) =
-        (&mut positions[..], &mut t[..], &mut delta[..], &mut ray[..]);
+    let (mut p_rest, mut t_rest, mut d_rest, mut r_rest) = (
+        &mut positions.spare_capacity_mut()[..3 * n],
+        &mut t.spare_capacity_mut()[..n],
+        &mut delta.spare_capacity_mut()[..n],
+        &mut ray.spare_capacity_mut()[..n],
+    );
     for chunk in &chunks {
         let m = chunk.pieces.len();
         let (p, p_next) = p_rest.split_at_mut(3 * m);
@@ -164,25 +171,38 @@ pub(crate) fn pack<F: Float>(
         shares.push((p, tt, dd, rr));
         (p_rest, t_rest, d_rest, r_rest) = (p_next, t_next, d_next, r_next);
     }
-    shares
+    let all_written = shares
         .into_par_iter()
         .zip(chunks.par_iter().enumerate())
-        .for_each(|((p, tt, dd, rr), (c, chunk))| {
+        .map(|((p, tt, dd, rr), (c, chunk))| {
             let mut k = 0;
             for (r, &count) in task_rays(c).zip(&chunk.counts) {
                 let (o, d) = rays.ray(r);
                 for &(lo, hi) in &chunk.pieces[k..k + count] {
                     let mid = 0.5 * (lo + hi);
                     for a in 0..3 {
-                        p[3 * k + a] = F::lit(o[a] + mid * d[a]);
+                        p[3 * k + a].write(F::lit(o[a] + mid * d[a]));
                     }
-                    tt[k] = F::lit(mid);
-                    dd[k] = F::lit(hi - lo);
-                    rr[k] = r;
+                    tt[k].write(F::lit(mid));
+                    dd[k].write(F::lit(hi - lo));
+                    rr[k].write(r);
                     k += 1;
                 }
             }
-        });
+            k == tt.len()
+        })
+        .all(|written| written);
+    // A broken invariant must not expose uninitialised memory: checked, not assumed.
+    assert!(all_written, "every packed sample is written");
+    // SAFETY: the shares partition the first 3 n slots of `positions` and the first n of the
+    // others (checked just above: each task wrote its share's every slot, k reaching the
+    // share's length), so these elements are initialised.
+    unsafe {
+        positions.set_len(3 * n);
+        t.set_len(n);
+        delta.set_len(n);
+        ray.set_len(n);
+    }
     PackedSamples {
         positions: Array2::from_shape_vec((n, 3), positions).expect("three coordinates per sample"),
         t: Array1::from(t),
