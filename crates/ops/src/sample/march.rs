@@ -61,6 +61,10 @@ impl OccupancyGrid {
         // The exit of the next cell along each axis, computed a step ahead: a step's new exit
         // is then a copy, and the next choice of axis need not wait for the arithmetic.
         let mut t_after: [f64; 3] = std::array::from_fn(|a| exit(a, idx[a] + dir[a]));
+        // The boundary index of the exit after `t_after` along each axis, kept as an f64 (an
+        // integer, so exactly `exit`'s): no conversion on the walk's chain of arithmetic.
+        let dir_f: [f64; 3] = dir.map(|s| s as f64);
+        let mut edge_f: [f64; 3] = std::array::from_fn(|a| (idx[a] + 2 * dir[a] + i64::from(dir[a] > 0)) as f64);
         // The last cell along each axis before the ray leaves the grid (an axis the ray does
         // not move along is never the first exit).
         let last: [i64; 3] = dir.map(|s| if s > 0 { r - 1 } else { 0 });
@@ -98,7 +102,9 @@ impl OccupancyGrid {
             linear += step[axis];
             // Only the crossed axis has a new exit, computed a step ago.
             t_exit[axis] = t_after[axis];
-            t_after[axis] = exit(axis, idx[axis] + dir[axis]);
+            // exit(axis, idx[axis] + dir[axis]): the crossed axis moves, so dir[axis] != 0.
+            t_after[axis] = (min[axis] + edge_f[axis] * self.cell[axis] - o[axis]) * inv[axis];
+            edge_f[axis] += dir_f[axis];
         }
         if let Some((a, b)) = pending {
             run(a, b);
