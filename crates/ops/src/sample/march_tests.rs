@@ -218,3 +218,59 @@ fn bad_marches_are_errors() {
         Err(SampleError::Shape { .. })
     ));
 }
+
+/// Rays are walked two at a time: every ray's samples must be those of its walk alone (the
+/// per-ray walk and cut), bit for bit, whatever its neighbour does: misses the box, ends
+/// sooner or later, starts inside, or is the odd one out of its task.
+#[test]
+fn rays_walked_in_pairs_sample_as_each_walked_alone() {
+    let r = 16;
+    let mut grid = OccupancyGrid::new(cube(), r, OccupancyConfig::density(1.0).unwrap()).unwrap();
+    grid.update(balls, CellPoints::Centre).unwrap();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    // More than two parallel tasks of rays, and an odd count.
+    let n = 2 * super::packed::RAYS_PER_TASK + 37;
+    let mut o = ndarray::Array2::zeros((n, 3));
+    let mut d = ndarray::Array2::zeros((n, 3));
+    let centres = [[0.3, -0.2, 0.1], [-0.5, 0.5, -0.4], [0.6, 0.6, 0.6]];
+    for i in 0..n {
+        let aim = centres[i % 3];
+        for a in 0..3 {
+            // From outside towards a ball, from inside anywhere, or from outside away.
+            let (start, dir) = match i % 4 {
+                0 | 1 => {
+                    let s = rng.gen_range(-3.0..3.0);
+                    (s, aim[a] + rng.gen_range(-0.2..0.2) - s)
+                }
+                2 => (rng.gen_range(-1.0..1.0), rng.gen_range(-1.0..1.0)),
+                _ => (rng.gen_range(2.0..4.0), rng.gen_range(0.1..1.0)),
+            };
+            o[[i, a]] = start;
+            d[[i, a]] = dir;
+        }
+    }
+    let rays = RayBatch::new(o, d).unwrap();
+    let iv = cube().clip(&rays);
+    assert!(iv.hit().iter().filter(|h| !**h).count() > 10, "some rays miss");
+    let step = 0.05;
+    for jitter in [Jitter::None, Jitter::PerRay { seed: 3 }, Jitter::PerSample { seed: 3 }] {
+        let marched = grid.march(&rays, &iv, step, jitter).unwrap();
+        let alone = super::packed::pack(&rays, |ray, pieces| {
+            let (orig, dir) = rays.ray(ray);
+            let (Some((near, far)), Some((bn, bf))) = (iv.segment(ray), cube().clip_ray(orig, dir)) else {
+                return;
+            };
+            let (lo, hi) = (near.max(bn), far.min(bf));
+            if hi > lo {
+                let mut j = super::stratified::RayJitter::for_ray(jitter, ray);
+                grid.occupied_runs(orig, dir, lo, hi, |a, b| j.cut(a, b, lo, step, pieces));
+            }
+        });
+        let rays_with_samples = (0..n).filter(|&r| !marched.range(r).unwrap().is_empty()).count();
+        assert!(
+            rays_with_samples > n / 5,
+            "{jitter:?}: {rays_with_samples} rays with samples"
+        );
+        assert_eq!(marched, alone, "{jitter:?}");
+    }
+}

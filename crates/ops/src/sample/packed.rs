@@ -116,17 +116,36 @@ struct Chunk {
 }
 
 /// Rays per parallel task: enough to amortise the task, few enough to balance two cores.
-const RAYS_PER_TASK: usize = 64;
+pub(crate) const RAYS_PER_TASK: usize = 64;
 
 /// Runs `pieces_of(r, out)` (which appends ray `r`'s pieces to `out`) for every ray, in
 /// parallel over chunks of rays, and packs the samples in ray order (so the output does not
 /// depend on the number of threads).
-///
-/// The pieces are gathered first and the samples written once, in parallel, straight into
-/// the output arrays: no growing per-task copies of the samples to concatenate.
 pub(crate) fn pack<F: Float>(
     rays: &RayBatch<F>,
     pieces_of: impl Fn(usize, &mut Vec<Piece>) + Sync,
+) -> PackedSamples<F> {
+    pack_chunks(
+        rays,
+        |task: std::ops::Range<usize>, counts: &mut Vec<usize>, pieces: &mut Vec<Piece>| {
+            for r in task {
+                let before = pieces.len();
+                pieces_of(r, pieces);
+                counts.push(pieces.len() - before);
+            }
+        },
+    )
+}
+
+/// [`pack`] for a sampler that handles a task's rays together: `fill(rays, counts, pieces)`
+/// appends, for each ray of the range in order, its piece count to `counts` and its pieces to
+/// `pieces`.
+///
+/// The pieces are gathered first and the samples written once, in parallel, straight into
+/// the output arrays: no growing per-task copies of the samples to concatenate.
+pub(crate) fn pack_chunks<F: Float>(
+    rays: &RayBatch<F>,
+    fill: impl Fn(std::ops::Range<usize>, &mut Vec<usize>, &mut Vec<Piece>) + Sync,
 ) -> PackedSamples<F> {
     let n_rays = rays.len();
     let task_rays = |c: usize| c * RAYS_PER_TASK..((c + 1) * RAYS_PER_TASK).min(n_rays);
@@ -137,11 +156,10 @@ pub(crate) fn pack<F: Float>(
                 counts: Vec::with_capacity(RAYS_PER_TASK),
                 pieces: Vec::new(),
             };
-            for r in task_rays(c) {
-                let before = chunk.pieces.len();
-                pieces_of(r, &mut chunk.pieces);
-                chunk.counts.push(chunk.pieces.len() - before);
-            }
+            let task = task_rays(c);
+            let rays_in_task = task.len();
+            fill(task, &mut chunk.counts, &mut chunk.pieces);
+            assert_eq!(chunk.counts.len(), rays_in_task, "one piece count per ray");
             chunk
         })
         .collect();
