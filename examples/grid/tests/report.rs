@@ -158,6 +158,12 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     assert_eq!(against[1]["target_psnr"].as_f64().unwrap(), runs[1].final_test_psnr);
     let speedup = against[1]["speedup"].as_f64().unwrap();
     assert!((speedup - 10.0).abs() < 1e-9, "{speedup}");
+    // The markdown's table holds the same comparisons.
+    let row = text
+        .lines()
+        .find(|l| l.starts_with("| taped-uniform |") && l.ends_with(" x |") && l.split('|').count() == 5)
+        .unwrap_or_else(|| panic!("no anchor row for taped-uniform in:\n{text}"));
+    assert!(row.ends_with("| 10.0 x |"), "{row}");
 
     // Written again into the same folder without the anchor, the report leaves no plot of it.
     write_report(&dir, &runs, &data, &scene, &setup).unwrap();

@@ -146,16 +146,17 @@ pub struct ReportContext<'a> {
     pub problem: &'a str,
     /// Test evaluations each run makes over its budget (besides the one at the start).
     pub evaluations: usize,
-    /// An outside pipeline's run to compare with, if given.
-    pub anchor: Option<&'a Anchor>,
+    /// An outside pipeline's run to compare with, if given, and every configuration against
+    /// it (as [`anchor_rows`] gives them).
+    pub anchor: Option<(&'a Anchor, &'a [(String, AgainstAnchor)])>,
     /// Markdown for the pictures section (images and captions), or empty.
     pub pictures: &'a str,
 }
 
-fn anchor_section(runs: &[ConfigRun], anchor: &Anchor) -> Result<String, ReportError> {
-    let rows = anchor_rows(runs, anchor)?;
+fn anchor_section(anchor: &Anchor, rows: &[(String, AgainstAnchor)]) -> String {
+    // Every row has the anchor's own target and time.
     let Some((_, first)) = rows.first() else {
-        return Ok(String::new());
+        return String::new();
     };
     let mut md = format!("## Against an outside pipeline: {}\n\n", anchor.name);
     if let Some(note) = &anchor.note {
@@ -169,7 +170,7 @@ fn anchor_section(runs: &[ConfigRun], anchor: &Anchor) -> Result<String, ReportE
         num(Some(first.anchor.seconds), 1)
     );
     md += "| configuration | s to reach the outside pipeline's final PSNR | speed-up |\n|---|---|---|\n";
-    for (name, c) in &rows {
+    for (name, c) in rows {
         md += &format!(
             "| {name} | {} | {} |\n",
             num(c.run.map(|r| r.seconds), 2),
@@ -179,7 +180,7 @@ fn anchor_section(runs: &[ConfigRun], anchor: &Anchor) -> Result<String, ReportE
     md += "\nThe seconds are read as in the tables above (the first crossing, interpolated between \
            evaluations); `-` where a configuration never reached it. Both runs' seconds are \
            training seconds, evaluations excluded; the outside pipeline's come from its own log.\n\n";
-    Ok(md)
+    md
 }
 
 /// The whole of `report.md`. Errors: as [`config_rows`].
@@ -267,8 +268,8 @@ pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, Rep
         md += "\nSamples per ray: the training samples drawn until the run first reached the target \
                PSNR, over the rays of those steps (both interpolated between evaluations).\n\n";
     }
-    if let Some(anchor) = ctx.anchor {
-        md += &anchor_section(runs, anchor)?;
+    if let Some((anchor, rows)) = ctx.anchor {
+        md += &anchor_section(anchor, rows);
     }
     md += ctx.pictures;
     Ok(md)

@@ -228,6 +228,7 @@ pub fn write_report(
         }
     }
     let pictures = pictures(dir, runs, data, scene)?;
+    let against_anchor = setup.anchor.map(|a| anchor_rows(runs, a)).transpose()?;
     let ctx = ReportContext {
         stamp: setup.stamp,
         reproduce: setup.reproduce,
@@ -235,7 +236,7 @@ pub fn write_report(
         batch: setup.batch,
         problem: setup.problem,
         evaluations: setup.evaluations,
-        anchor: setup.anchor,
+        anchor: setup.anchor.zip(against_anchor.as_deref()),
         pictures: &pictures,
     };
     let md_path = dir.join("report.md");
@@ -256,7 +257,7 @@ pub fn write_report(
         anchor: match setup.anchor {
             Some(anchor) => Some(AnchorJson {
                 anchor,
-                against: named(anchor_rows(runs, anchor)?),
+                against: named(against_anchor.unwrap_or_default()),
             }),
             None => None,
         },
