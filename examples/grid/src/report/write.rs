@@ -254,13 +254,10 @@ pub fn write_report(
         configurations: runs,
         fused_vs_taped: named(fused_vs_taped_rows(runs)?),
         occupancy_vs_uniform: named(occupancy_vs_uniform_rows(runs, setup.batch)?),
-        anchor: match setup.anchor {
-            Some(anchor) => Some(AnchorJson {
-                anchor,
-                against: named(against_anchor.unwrap_or_default()),
-            }),
-            None => None,
-        },
+        anchor: setup.anchor.zip(against_anchor).map(|(anchor, rows)| AnchorJson {
+            anchor,
+            against: named(rows),
+        }),
     };
     let text = serde_json::to_string_pretty(&json).map_err(|e| ReportError::Write {
         path: dir.join("report.json"),
