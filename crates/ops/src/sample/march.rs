@@ -254,6 +254,15 @@ impl OccupancyGrid {
             }
             counts.push(pieces.len() - before);
         };
+        // Ray r's buffered runs (its walk started at lo) cut into pieces, and their count.
+        let cut_runs = |r: usize, lo: f64, runs: &[(f64, f64)], counts: &mut Vec<usize>, pieces: &mut Vec<Piece>| {
+            let before = pieces.len();
+            let mut jitter = RayJitter::for_ray(jitter, r);
+            for &(a, b) in runs {
+                jitter.cut(a, b, lo, step, pieces);
+            }
+            counts.push(pieces.len() - before);
+        };
         // Rays walked two at a time; their runs wait in two buffers and are cut into pieces
         // in ray order (so a jittered ray draws in the same order as walked alone).
         Ok(pack_chunks(rays, |task, counts, pieces| {
@@ -266,18 +275,8 @@ impl OccupancyGrid {
                         first_runs.clear();
                         second_runs.clear();
                         self.occupied_runs_pair(a, b, |x, y| first_runs.push((x, y)), |x, y| second_runs.push((x, y)));
-                        let before = pieces.len();
-                        let mut jitter_a = RayJitter::for_ray(jitter, r);
-                        for &(x, y) in &first_runs {
-                            jitter_a.cut(x, y, a.2, step, pieces);
-                        }
-                        counts.push(pieces.len() - before);
-                        let before = pieces.len();
-                        let mut jitter_b = RayJitter::for_ray(jitter, r + 1);
-                        for &(x, y) in &second_runs {
-                            jitter_b.cut(x, y, b.2, step, pieces);
-                        }
-                        counts.push(pieces.len() - before);
+                        cut_runs(r, a.2, &first_runs, counts, pieces);
+                        cut_runs(r + 1, b.2, &second_runs, counts, pieces);
                     }
                     (a, b) => {
                         single(r, a, counts, pieces);
