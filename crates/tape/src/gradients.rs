@@ -58,11 +58,16 @@ impl<F: Float> Gradients<F> {
                 // Contiguous sums of one shape (a parameter's, from several ops) are added in
                 // parallel chunks: they can be a whole grid, on the thread that runs the
                 // backward while the others wait.
-                let contiguous = acc.shape() == g.shape() && acc.is_standard_layout() && g.is_standard_layout();
-                if !contiguous {
+                let added_in_chunks = acc.shape() == g.shape()
+                    && match (acc.as_slice_mut(), g.as_slice()) {
+                        (Some(a), Some(b)) => {
+                            zip2(a, b, |a, b| *a += b);
+                            true
+                        }
+                        _ => false,
+                    };
+                if !added_in_chunks {
                     Zip::from(&mut *acc).and(&g).for_each(|a, &b| *a += b);
-                } else if let (Some(a), Some(b)) = (acc.as_slice_mut(), g.as_slice()) {
-                    zip2(a, b, |a, b| *a += b);
                 }
                 crate::pool::give(g.into_raw_vec_and_offset().0);
             }
