@@ -53,7 +53,7 @@ const BATCH: usize = 16;
 /// Asks the CPU to start loading the cache line holding `x` into cache (a hint: it changes no
 /// value, and does nothing on other architectures).
 #[inline(always)]
-fn prefetch<T>(x: *const T) {
+pub(crate) fn prefetch<T>(x: *const T) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: a prefetch never faults (not even for an address outside the process) and has
     // no visible effect; SSE is part of the x86_64 baseline. (The intrinsic is a safe function from Rust 1.87.)

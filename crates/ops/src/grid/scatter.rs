@@ -16,7 +16,9 @@
 use fogray_tape::Float;
 use rayon::prelude::*;
 
-use super::forward::position;
+use multiversion::multiversion;
+
+use super::forward::{position, prefetch};
 use super::geometry::{weights, Layout};
 use super::scratch::Scratch;
 
@@ -255,22 +257,55 @@ impl<const D: usize> SlabTask<'_, D> {
     /// layer on; `ch` channels per row in groups of `G` (`G` divides `ch`).
     #[inline(always)]
     fn sum<F: Float, const G: usize>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
-        // The slab's first node, as a linear node index.
-        let origin = self.slab * self.tiles.thickness * self.layout.strides[0];
-        let first = self.slab * self.tiles.per_slab;
-        let corners = &self.layout.corners[..1 << D];
-        for tile in first..first + self.tiles.per_slab {
-            for block in blocks {
-                let (lo, hi) = (block.starts[tile] as usize, block.starts[tile + 1] as usize);
-                for record in block.records[lo * (D + ch)..hi * (D + ch)].chunks_exact(D + ch) {
-                    let (p, g) = record.split_at(D);
+        sum_slab::<F, D, G>(self, blocks, dst, ch);
+    }
+}
+
+/// Records whose corner rows are requested from memory before the first of them is summed:
+/// a tile's sums are read and written at scattered places, and one record at a time waits on
+/// each of them in turn. The sums are still added record by record, in order.
+const BATCH: usize = 16;
+
+/// [`SlabTask::sum`], compiled for the vector units this machine has (the products and sums
+/// are separate operations, as in the baseline build, so the values do not depend on it).
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn sum_slab<F: Float, const D: usize, const G: usize>(
+    task: &SlabTask<'_, D>,
+    blocks: &[Sorted<F>],
+    dst: &mut [f64],
+    ch: usize,
+) {
+    let layout = task.layout;
+    // The slab's first node, as a linear node index.
+    let origin = task.slab * task.tiles.thickness * layout.strides[0];
+    let first = task.slab * task.tiles.per_slab;
+    let corners = &layout.corners[..1 << D];
+    let width = D + ch;
+    for tile in first..first + task.tiles.per_slab {
+        for block in blocks {
+            let (lo, hi) = (block.starts[tile] as usize, block.starts[tile + 1] as usize);
+            for batch in block.records[lo * width..hi * width].chunks(BATCH * width) {
+                // First every cell of the batch, with its corner rows requested...
+                let mut cells = [None; BATCH];
+                for (cell, record) in cells.iter_mut().zip(batch.chunks_exact(width)) {
                     // The sort located it in this tile; the same code finds the same cell.
-                    let Some(cell) = self.layout.locate(position::<F, D>(p, 0)) else {
+                    *cell = layout.locate(position::<F, D>(record, 0));
+                    if let Some(c) = cell {
+                        for &corner in corners {
+                            // A hint needs no bounds check: the address is computed, never read.
+                            let at = (c.node + corner).wrapping_sub(origin).wrapping_mul(ch);
+                            prefetch(dst.as_ptr().wrapping_add(at));
+                        }
+                    }
+                }
+                // ...then their terms, record by record.
+                for (cell, record) in cells.iter().zip(batch.chunks_exact(width)) {
+                    let Some(cell) = cell else {
                         continue;
                     };
                     let w = weights(cell.t);
                     let rows = &mut dst[(cell.node - origin) * ch..];
-                    for (group, g) in g.chunks_exact(G).enumerate() {
+                    for (group, g) in record[D..].chunks_exact(G).enumerate() {
                         let g: [f64; G] = std::array::from_fn(|c| g[c].as_f64());
                         for (&wk, &corner) in w.iter().zip(corners) {
                             let at = corner * ch + group * G;
