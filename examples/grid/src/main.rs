@@ -111,8 +111,10 @@ enum Command {
     Render(RenderArgs),
     /// The speed-against-error report: fits each configuration in turn for the same budget and
     /// writes test PSNR against training time (psnr-vs-seconds.svg/.png, psnr-vs-steps.svg/.png),
-    /// report.md, report.json and pictures of the best configuration's model into --out. The
-    /// runs are timed: run it on a quiet machine.
+    /// report.md, report.json and pictures of the best configuration's model into --out. Fused
+    /// against taped is timed over the same steps: with a budget of seconds, each pair of twins
+    /// trains again for the steps the taped run made. The runs are timed: run it on a quiet
+    /// machine.
     Report(ReportArgs),
     /// Writes the built-in scene as JSON, to edit and pass back with --scene.
     Scene {
@@ -276,6 +278,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
     use fogray_grid::report::anchor::Anchor;
     use fogray_grid::report::configuration::RunConfig;
     use fogray_grid::report::run::{run_configs, ReportOptions};
+    use fogray_grid::report::same_steps::same_steps;
     use fogray_grid::report::write::{write_report, ReportSetup};
 
     let configs = args
@@ -319,6 +322,16 @@ fn run_report(args: ReportArgs) -> Result<()> {
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!("step {}", p.step));
     })?;
+    // Fused against taped to the same PSNR: over the same steps (with a budget of seconds, a
+    // second pair of runs; the progress bar names them).
+    let pairs = same_steps(&data, &options, &runs, &mut |label, p| {
+        if bar.prefix() != label {
+            bar.reset();
+            bar.set_prefix(label.to_string());
+        }
+        bar.set_position((p.fraction * 1000.0) as u64);
+        bar.set_message(format!("step {}", p.step));
+    })?;
     bar.finish_and_clear();
     let problem = format!(
         "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",
@@ -341,12 +354,19 @@ fn run_report(args: ReportArgs) -> Result<()> {
         problem: &problem,
         evaluations: args.evaluations,
         anchor: anchor.as_ref(),
+        same_steps: &pairs,
     };
     let md = write_report(&args.out, &runs, &data, &scene, &setup)?;
     for r in &runs {
         println!(
             "{:<22} final test PSNR {:.2} dB, {} steps in {:.1} s",
             r.name, r.final_test_psnr, r.steps, r.seconds
+        );
+    }
+    for (name, pair) in &pairs {
+        println!(
+            "fused against taped, {name}, the same {} steps: {:.1} s against {:.1} s ({:.2} and {:.2} dB)",
+            pair.steps, pair.fused.seconds, pair.taped.seconds, pair.fused.final_test_psnr, pair.taped.final_test_psnr
         );
     }
     println!("written: {}", md.display());

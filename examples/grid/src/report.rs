@@ -5,6 +5,7 @@
 //! - [`reach`]: a log read as a curve (PSNR at a time, time to a PSNR);
 //! - [`anchor`]: an outside pipeline's log, set beside the configurations;
 //! - [`compare`]: fused against taped, occupancy against uniform, each against the anchor;
+//! - [`same_steps`]: fused against taped over the same steps (the time to the same PSNR);
 //! - [`configuration`]: the configurations and their names;
 //! - [`run`]: running the fits; [`markdown`] and [`write`]: the report's files.
 //!
@@ -33,6 +34,7 @@ pub mod configuration;
 pub mod markdown;
 pub mod reach;
 pub mod run;
+pub mod same_steps;
 pub mod write;
 
 /// Why a report could not be made.

@@ -8,6 +8,7 @@ use fogray_grid::report::anchor::{Anchor, AnchorPoint};
 use fogray_grid::report::configuration::DEFAULT_CONFIGS;
 use fogray_grid::report::markdown::fused_vs_taped_rows;
 use fogray_grid::report::run::{run_configs, ReportOptions};
+use fogray_grid::report::same_steps::same_steps;
 use fogray_grid::report::write::{write_report, ReportSetup};
 use fogray_grid::report::ReportError;
 use fogray_grid::ring::Ring;
@@ -85,6 +86,26 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
         assert_eq!(c.target_psnr, final_of("taped").min(final_of("fused")));
     }
 
+    // With a budget of steps the runs are already pairs over the same steps: nothing runs again.
+    let mut reran = false;
+    let pairs = same_steps(&data, &options, &runs, &mut |_, _| reran = true).unwrap();
+    assert!(!reran);
+    assert_eq!(pairs.len(), 2);
+    for (name, pair) in &pairs {
+        let of = |method: &str| runs.iter().find(|r| r.method == method && r.sampling == name).unwrap();
+        let (f, t) = (of("fused"), of("taped"));
+        assert!(!pair.extra_runs && pair.steps == 70, "{name}");
+        assert_eq!(
+            (pair.fused.seconds, pair.fused.final_test_psnr),
+            (f.seconds, f.final_test_psnr)
+        );
+        assert_eq!(
+            (pair.taped.seconds, pair.taped.final_test_psnr),
+            (t.seconds, t.final_test_psnr)
+        );
+        assert_eq!(pair.speedup, Some(t.seconds / f.seconds));
+    }
+
     let dir = std::env::temp_dir().join(format!("fogray-grid-report-{}", std::process::id()));
     let stamp = fogray::stamp::Stamp::now("fogray-grid report --steps 70");
     let setup = ReportSetup {
@@ -95,9 +116,18 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
         problem: "A tiny problem.",
         evaluations: config.evaluations,
         anchor: None,
+        same_steps: &pairs,
     };
     let md = write_report(&dir, &runs, &data, &scene, &setup).unwrap();
     let text = std::fs::read_to_string(&md).unwrap();
+    assert!(
+        text.contains("## Fused against taped: time to the same PSNR\n"),
+        "{text}"
+    );
+    assert!(
+        text.contains("| occupancy | 70 |") && text.contains("which made the same steps"),
+        "{text}"
+    );
     assert!(text.contains("`cargo run --release -p fogray-grid -- report --steps 70`"));
     assert!(text.contains("(5 per run, evenly spaced"), "{text}");
     for row in ["| fused-uniform |", "| taped-occupancy |", "| uniform |", "| fused |"] {
@@ -122,6 +152,13 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     assert_eq!(configs[1]["log"].as_array().unwrap().len(), runs[1].log.len());
     assert_eq!(configs[1]["final_test_psnr"].as_f64().unwrap(), runs[1].final_test_psnr);
     assert_eq!(json["fused_vs_taped"].as_array().unwrap().len(), 2);
+    let json_pairs = json["fused_vs_taped_same_steps"].as_array().unwrap();
+    assert_eq!(json_pairs.len(), 2);
+    assert_eq!(json_pairs[1]["name"], "occupancy");
+    assert_eq!(
+        json_pairs[1]["taped"]["seconds"].as_f64().unwrap(),
+        pairs[1].1.taped.seconds
+    );
     assert!(json.get("anchor").is_none() && !text.contains("outside pipeline"));
     assert!(!dir.join("psnr-vs-seconds-log.png").exists());
 
@@ -199,4 +236,53 @@ fn bad_options_fail_before_any_fit() {
         run_configs(&data, &options, &mut |_, _| {}),
         Err(ReportError::Fit(_))
     ));
+}
+
+#[test]
+fn with_a_budget_of_seconds_each_pair_trains_again_for_the_taped_runs_steps() {
+    let (_, data, config) = tiny();
+    let options = ReportOptions {
+        fit: FitConfig {
+            budget: Budget::Seconds(0.3),
+            ..config
+        },
+        configs: vec![DEFAULT_CONFIGS[2], DEFAULT_CONFIGS[3]],
+        slice_pixels: 12,
+    };
+    let runs = run_configs(&data, &options, &mut |_, _| {}).unwrap();
+    let taped_steps = runs[1].steps;
+    assert!(taped_steps > 0);
+    let mut heard: Vec<String> = Vec::new();
+    let pairs = same_steps(&data, &options, &runs, &mut |label, _| {
+        if heard.last().map(String::as_str) != Some(label) {
+            heard.push(label.to_string());
+        }
+    })
+    .unwrap();
+    assert_eq!(
+        heard,
+        [
+            format!("taped-occupancy, {taped_steps} steps"),
+            format!("fused-occupancy, {taped_steps} steps")
+        ]
+    );
+    assert_eq!(pairs.len(), 1);
+    let (name, pair) = &pairs[0];
+    assert_eq!(name, "occupancy");
+    assert!(pair.extra_runs);
+    assert_eq!(
+        (pair.steps, pair.fused.steps, pair.taped.steps),
+        (taped_steps, taped_steps, taped_steps)
+    );
+    // The same steps of the same arithmetic: the same PSNR but for rounding.
+    assert!(
+        (pair.fused.final_test_psnr - pair.taped.final_test_psnr).abs() < 0.01,
+        "{pair:?}"
+    );
+    assert_eq!(pair.speedup, Some(pair.taped.seconds / pair.fused.seconds));
+
+    // Runs that are not the configurations' are refused before anything trains.
+    let mut ran = false;
+    let result = same_steps(&data, &options, &runs[..1], &mut |_, _| ran = true);
+    assert!(matches!(result, Err(ReportError::Config(_))) && !ran);
 }

@@ -17,6 +17,7 @@ use super::anchor::Anchor;
 use super::compare::{AgainstAnchor, FusedVsTaped, OccupancyVsUniform};
 use super::markdown::{anchor_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows, report, ReportContext};
 use super::run::{best, ConfigRun};
+use super::same_steps::SameSteps;
 use super::ReportError;
 
 /// Magnification of the test views in their PNGs.
@@ -42,6 +43,9 @@ pub struct ReportSetup<'a> {
     pub evaluations: usize,
     /// An outside pipeline's run to set beside the configurations, if given.
     pub anchor: Option<&'a Anchor>,
+    /// Fused against taped over the same steps, as
+    /// [`same_steps`](super::same_steps::same_steps) gives them (empty for none).
+    pub same_steps: &'a [(String, SameSteps)],
 }
 
 #[derive(Serialize)]
@@ -59,6 +63,7 @@ struct ReportJson<'a> {
     budget_steps: Option<usize>,
     batch: usize,
     configurations: &'a [ConfigRun],
+    fused_vs_taped_same_steps: Vec<Named<SameSteps>>,
     fused_vs_taped: Vec<Named<FusedVsTaped>>,
     occupancy_vs_uniform: Vec<Named<OccupancyVsUniform>>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -72,9 +77,12 @@ struct Named<T> {
     comparison: T,
 }
 
-fn named<T>(rows: Vec<(String, T)>) -> Vec<Named<T>> {
-    rows.into_iter()
-        .map(|(name, comparison)| Named { name, comparison })
+fn named<T: Copy>(rows: &[(String, T)]) -> Vec<Named<T>> {
+    rows.iter()
+        .map(|(name, comparison)| Named {
+            name: name.clone(),
+            comparison: *comparison,
+        })
         .collect()
 }
 
@@ -229,6 +237,8 @@ pub fn write_report(
     }
     let pictures = pictures(dir, runs, data, scene)?;
     let against_anchor = setup.anchor.map(|a| anchor_rows(runs, a)).transpose()?;
+    let fused_vs_taped = fused_vs_taped_rows(runs)?;
+    let occupancy_vs_uniform = occupancy_vs_uniform_rows(runs, setup.batch)?;
     let ctx = ReportContext {
         stamp: setup.stamp,
         reproduce: setup.reproduce,
@@ -238,6 +248,9 @@ pub fn write_report(
         evaluations: setup.evaluations,
         anchor: setup.anchor.zip(against_anchor.as_deref()),
         pictures: &pictures,
+        same_steps: setup.same_steps,
+        fused_vs_taped: &fused_vs_taped,
+        occupancy_vs_uniform: &occupancy_vs_uniform,
     };
     let md_path = dir.join("report.md");
     write_text(&md_path, &report(runs, &ctx)?)?;
@@ -252,11 +265,12 @@ pub fn write_report(
         budget_steps,
         batch: setup.batch,
         configurations: runs,
-        fused_vs_taped: named(fused_vs_taped_rows(runs)?),
-        occupancy_vs_uniform: named(occupancy_vs_uniform_rows(runs, setup.batch)?),
+        fused_vs_taped_same_steps: named(setup.same_steps),
+        fused_vs_taped: named(&fused_vs_taped),
+        occupancy_vs_uniform: named(&occupancy_vs_uniform),
         anchor: setup.anchor.zip(against_anchor).map(|(anchor, rows)| AnchorJson {
             anchor,
-            against: named(rows),
+            against: named(&rows),
         }),
     };
     let text = serde_json::to_string_pretty(&json).map_err(|e| ReportError::Write {

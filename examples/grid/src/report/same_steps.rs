@@ -1,0 +1,158 @@
+//! Fused against taped over the same steps: the time each method takes to the same PSNR.
+//!
+//! A fit's schedule (the grid's growth, the learning rate's annealing) is a fraction of its
+//! budget. Partway through a timed run, the faster method is therefore still on a coarser grid
+//! at a higher rate than a run of that length would be, and where the curves flatten, the
+//! first time one run passes the other's final PSNR says more about the schedule than about
+//! the ops (the first crossing of [`fused_vs_taped`](super::compare::fused_vs_taped)). The
+//! fused ops and their taped twins do the same arithmetic, so over the same number of steps,
+//! each with its schedule over those steps, the two end at the same PSNR up to rounding: the
+//! ratio of their training seconds is the speed-up to that PSNR.
+
+use fogray::tape::Float;
+use serde::Serialize;
+
+use crate::dataset::Dataset;
+use crate::fit::{fit, Budget, FitConfig, Progress};
+use crate::model::Method;
+
+use super::configuration::{Precision, RunConfig};
+use super::run::{ConfigRun, ReportOptions};
+use super::ReportError;
+
+/// Test evaluations of an extra run: only its final PSNR is reported (evaluations are off the
+/// clock either way; fewer of them shorten the report).
+const EXTRA_RUN_EVALUATIONS: usize = 1;
+
+/// One method's run of a pair.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct StepsRun {
+    /// Steps done.
+    pub steps: usize,
+    /// Training seconds, evaluations excluded.
+    pub seconds: f64,
+    /// Test PSNR at the end (dB).
+    pub final_test_psnr: f64,
+}
+
+impl StepsRun {
+    fn of(run: &ConfigRun) -> Self {
+        StepsRun {
+            steps: run.steps,
+            seconds: run.seconds,
+            final_test_psnr: run.final_test_psnr,
+        }
+    }
+}
+
+/// A fused and a taped run of the same steps, each with its schedule over those steps.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SameSteps {
+    /// The steps of both (those the taped configuration made in the report's budget).
+    pub steps: usize,
+    /// Whether the pair was run for this comparison (a budget of seconds) rather than taken
+    /// from the report's runs (a budget of steps, which already are such a pair).
+    pub extra_runs: bool,
+    /// The fused run.
+    pub fused: StepsRun,
+    /// The taped run.
+    pub taped: StepsRun,
+    /// Taped seconds over fused seconds; `None` if the fused run took no time.
+    pub speedup: Option<f64>,
+}
+
+fn steps_run<F: Float>(
+    data: &Dataset,
+    config: &FitConfig,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<StepsRun, ReportError> {
+    let result = fit::<F>(data, config, progress)?;
+    Ok(StepsRun {
+        steps: result.log.last().map_or(0, |e| e.step),
+        seconds: result.seconds,
+        final_test_psnr: result.final_test_psnr,
+    })
+}
+
+/// Fused against taped over the same steps for every sampling and precision that `options`
+/// runs with both methods, named as the report's other pairs are (`"uniform"`,
+/// `"occupancy-f64"`). `runs` are the report's runs of `options.configs`, in that order.
+///
+/// With a budget of steps the report's own runs are the pairs. With a budget of seconds, each
+/// pair trains again (taped, then fused) for the steps the taped run made, with
+/// [`EXTRA_RUN_EVALUATIONS`] evaluations; `progress` hears each extra run's name (such as
+/// `"taped-occupancy, 826 steps"`) and its fit's progress. A taped run that made no step gives
+/// no pair.
+///
+/// Errors: [`ReportError::Config`] if `runs` are not the runs of `options.configs`; a fit's
+/// error.
+pub fn same_steps(
+    data: &Dataset,
+    options: &ReportOptions,
+    runs: &[ConfigRun],
+    progress: &mut dyn FnMut(&str, Progress),
+) -> Result<Vec<(String, SameSteps)>, ReportError> {
+    let names_match =
+        runs.len() == options.configs.len() && runs.iter().zip(&options.configs).all(|(r, c)| r.name == c.to_string());
+    if !names_match {
+        return Err(ReportError::Config(
+            "the runs are not those of the report's configurations".into(),
+        ));
+    }
+    let mut pairs = Vec::new();
+    for (fused_config, fused) in options.configs.iter().zip(runs) {
+        if fused_config.method != Method::Fused {
+            continue;
+        }
+        let taped_config = RunConfig {
+            method: Method::Taped,
+            ..*fused_config
+        };
+        let Some(taped) = options
+            .configs
+            .iter()
+            .position(|c| *c == taped_config)
+            .map(|i| &runs[i])
+        else {
+            continue;
+        };
+        if taped.steps == 0 {
+            continue;
+        }
+        let name = super::markdown::shared(fused.sampling, fused.precision);
+        let (fused_run, taped_run, extra_runs) = match options.fit.budget {
+            Budget::Steps(_) => (StepsRun::of(fused), StepsRun::of(taped), false),
+            Budget::Seconds(_) => {
+                let mut run = |config: &RunConfig| -> Result<StepsRun, ReportError> {
+                    let fit_config = FitConfig {
+                        method: config.method,
+                        sampling: config.sampling,
+                        budget: Budget::Steps(taped.steps),
+                        evaluations: EXTRA_RUN_EVALUATIONS,
+                        ..options.fit
+                    };
+                    let label = format!("{config}, {} steps", taped.steps);
+                    let mut report = |p| progress(&label, p);
+                    match config.precision {
+                        Precision::F32 => steps_run::<f32>(data, &fit_config, &mut report),
+                        Precision::F64 => steps_run::<f64>(data, &fit_config, &mut report),
+                    }
+                };
+                let taped_run = run(&taped_config)?;
+                (run(fused_config)?, taped_run, true)
+            }
+        };
+        let speedup = (fused_run.seconds > 0.0).then(|| taped_run.seconds / fused_run.seconds);
+        pairs.push((
+            name,
+            SameSteps {
+                steps: taped.steps,
+                extra_runs,
+                fused: fused_run,
+                taped: taped_run,
+                speedup,
+            },
+        ));
+    }
+    Ok(pairs)
+}
