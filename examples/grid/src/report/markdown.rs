@@ -141,8 +141,6 @@ pub struct ReportContext<'a> {
     pub reproduce: &'a str,
     /// The budget every run had.
     pub budget: Budget,
-    /// Rays per step.
-    pub batch: usize,
     /// A sentence on the problem (grid, views, image size).
     pub problem: &'a str,
     /// Test evaluations each run makes over its budget (besides the one at the start).

@@ -243,7 +243,6 @@ pub fn write_report(
         stamp: setup.stamp,
         reproduce: setup.reproduce,
         budget: setup.budget,
-        batch: setup.batch,
         problem: setup.problem,
         evaluations: setup.evaluations,
         anchor: setup.anchor.zip(against_anchor.as_deref()),
