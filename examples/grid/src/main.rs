@@ -312,26 +312,21 @@ fn run_report(args: ReportArgs) -> Result<()> {
         bar.set_style(style.progress_chars("=> "));
     }
     let names: Vec<String> = options.configs.iter().map(|c| c.to_string()).collect();
-    let mut current = usize::MAX;
-    let runs = run_configs(&data, &options, &mut |i, p| {
-        if i != current {
-            current = i;
-            bar.reset();
-            bar.set_prefix(format!("{} ({}/{})", names[i], i + 1, names.len()));
-        }
-        bar.set_position((p.fraction * 1000.0) as u64);
-        bar.set_message(format!("step {}", p.step));
-    })?;
-    // Fused against taped to the same PSNR: over the same steps (with a budget of seconds, a
-    // second pair of runs; the progress bar names them).
-    let pairs = same_steps(&data, &options, &runs, &mut |label, p| {
+    // One bar for every fit, restarted under a new label when the fit changes.
+    let show = |label: String, p: fogray_grid::fit::Progress| {
         if bar.prefix() != label {
             bar.reset();
-            bar.set_prefix(label.to_string());
+            bar.set_prefix(label);
         }
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!("step {}", p.step));
+    };
+    let runs = run_configs(&data, &options, &mut |i, p| {
+        show(format!("{} ({}/{})", names[i], i + 1, names.len()), p)
     })?;
+    // Fused against taped to the same PSNR: over the same steps (with a budget of seconds, a
+    // second pair of runs; the bar names them).
+    let pairs = same_steps(&data, &options, &runs, &mut |label, p| show(label.to_string(), p))?;
     bar.finish_and_clear();
     let problem = format!(
         "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",

@@ -233,12 +233,12 @@ fn sum_slabs<F: Float, const D: usize>(
                 match ch {
                     // A channel group the compiler knows the width of is summed in vector
                     // lanes.
-                    1 => task.sum::<F, 1>(blocks, dst, 1),
-                    2 => task.sum::<F, 2>(blocks, dst, 2),
-                    3 => task.sum::<F, 3>(blocks, dst, 3),
-                    4 => task.sum::<F, 4>(blocks, dst, 4),
-                    _ if ch % 4 == 0 => task.sum::<F, 4>(blocks, dst, ch),
-                    _ => task.sum::<F, 1>(blocks, dst, ch),
+                    1 => sum_slab::<F, D, 1>(&task, blocks, dst, 1),
+                    2 => sum_slab::<F, D, 2>(&task, blocks, dst, 2),
+                    3 => sum_slab::<F, D, 3>(&task, blocks, dst, 3),
+                    4 => sum_slab::<F, D, 4>(&task, blocks, dst, 4),
+                    _ if ch % 4 == 0 => sum_slab::<F, D, 4>(&task, blocks, dst, ch),
+                    _ => sum_slab::<F, D, 1>(&task, blocks, dst, ch),
                 }
             }
         });
@@ -252,22 +252,15 @@ struct SlabTask<'a, const D: usize> {
     tiles: Tiles,
 }
 
-impl<const D: usize> SlabTask<'_, D> {
-    /// Adds the slab's terms, tile by tile, to `dst`: the f64 sums from the slab's first node
-    /// layer on; `ch` channels per row in groups of `G` (`G` divides `ch`).
-    #[inline(always)]
-    fn sum<F: Float, const G: usize>(&self, blocks: &[Sorted<F>], dst: &mut [f64], ch: usize) {
-        sum_slab::<F, D, G>(self, blocks, dst, ch);
-    }
-}
-
 /// Records whose corner rows are requested from memory before the first of them is summed:
 /// a tile's sums are read and written at scattered places, and one record at a time waits on
 /// each of them in turn. The sums are still added record by record, in order.
 const BATCH: usize = 16;
 
-/// [`SlabTask::sum`], compiled for the vector units this machine has (the products and sums
-/// are separate operations, as in the baseline build, so the values do not depend on it).
+/// Adds the slab's terms, tile by tile, to `dst`: the f64 sums from the slab's first node
+/// layer on; `ch` channels per row in groups of `G` (`G` divides `ch`). Compiled for the
+/// vector units this machine has (the products and sums are separate operations, as in the
+/// baseline build, so the values do not depend on it).
 #[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
 fn sum_slab<F: Float, const D: usize, const G: usize>(
     task: &SlabTask<'_, D>,

@@ -104,6 +104,21 @@ fn keep<F: Float>(config: &RunConfig, result: FitResult<F>, slice_pixels: usize)
     })
 }
 
+/// Fits `data` with `fit_config` in the precision of `config` (whose method and sampling
+/// `fit_config` is expected to carry), and keeps what the report shows of the fit.
+pub(crate) fn run_config(
+    data: &Dataset,
+    config: &RunConfig,
+    fit_config: &FitConfig,
+    slice_pixels: usize,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<ConfigRun, ReportError> {
+    match config.precision {
+        Precision::F32 => keep(config, fit::<f32>(data, fit_config, progress)?, slice_pixels),
+        Precision::F64 => keep(config, fit::<f64>(data, fit_config, progress)?, slice_pixels),
+    }
+}
+
 /// Fits every configuration of `options` to `data` in turn; `progress` hears the index of the
 /// configuration running and its fit's progress.
 ///
@@ -123,19 +138,13 @@ pub fn run_configs(
             ..options.fit
         };
         let mut report = |p| progress(i, p);
-        let run = match config.precision {
-            Precision::F32 => keep(
-                config,
-                fit::<f32>(data, &fit_config, &mut report)?,
-                options.slice_pixels,
-            )?,
-            Precision::F64 => keep(
-                config,
-                fit::<f64>(data, &fit_config, &mut report)?,
-                options.slice_pixels,
-            )?,
-        };
-        runs.push(run);
+        runs.push(run_config(
+            data,
+            config,
+            &fit_config,
+            options.slice_pixels,
+            &mut report,
+        )?);
     }
     Ok(runs)
 }

@@ -9,15 +9,14 @@
 //! each with its schedule over those steps, the two end at the same PSNR up to rounding: the
 //! ratio of their training seconds is the speed-up to that PSNR.
 
-use fogray::tape::Float;
 use serde::Serialize;
 
 use crate::dataset::Dataset;
-use crate::fit::{fit, Budget, FitConfig, Progress};
+use crate::fit::{Budget, FitConfig, Progress};
 use crate::model::Method;
 
-use super::configuration::{Precision, RunConfig};
-use super::run::{ConfigRun, ReportOptions};
+use super::configuration::RunConfig;
+use super::run::{run_config, ConfigRun, ReportOptions};
 use super::ReportError;
 
 /// Test evaluations of an extra run: only its final PSNR is reported (evaluations are off the
@@ -59,19 +58,6 @@ pub struct SameSteps {
     pub taped: StepsRun,
     /// Taped seconds over fused seconds; `None` if the fused run took no time.
     pub speedup: Option<f64>,
-}
-
-fn steps_run<F: Float>(
-    data: &Dataset,
-    config: &FitConfig,
-    progress: &mut dyn FnMut(Progress),
-) -> Result<StepsRun, ReportError> {
-    let result = fit::<F>(data, config, progress)?;
-    Ok(StepsRun {
-        steps: result.log.last().map_or(0, |e| e.step),
-        seconds: result.seconds,
-        final_test_psnr: result.final_test_psnr,
-    })
 }
 
 /// Fused against taped over the same steps for every sampling and precision that `options`
@@ -133,10 +119,8 @@ pub fn same_steps(
                     };
                     let label = format!("{config}, {} steps", taped.steps);
                     let mut report = |p| progress(&label, p);
-                    match config.precision {
-                        Precision::F32 => steps_run::<f32>(data, &fit_config, &mut report),
-                        Precision::F64 => steps_run::<f64>(data, &fit_config, &mut report),
-                    }
+                    let run = run_config(data, config, &fit_config, options.slice_pixels, &mut report)?;
+                    Ok(StepsRun::of(&run))
                 };
                 let taped_run = run(&taped_config)?;
                 (run(fused_config)?, taped_run, true)
