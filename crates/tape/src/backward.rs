@@ -1,5 +1,7 @@
 //! The reverse sweep: one loop over the records in reverse creation order, no recursion.
 
+use std::time::Instant;
+
 use ndarray::{ArrayD, ArrayViewD};
 
 use crate::error::{Result, TapeError};
@@ -86,6 +88,7 @@ impl<F: Float> Tape<F> {
                 .map(|&i| self.values[i as usize].needs_grad)
                 .collect();
             let name = record.op.name();
+            let started = self.profile.is_some().then(Instant::now);
             let returned = record
                 .op
                 .backward(&inputs, &outputs, &needs, &grad_views)
@@ -113,6 +116,9 @@ impl<F: Float> Tape<F> {
                 if let (Some(g), true) = (g, needs[k]) {
                     grads.accumulate(record.inputs[k] as usize, g);
                 }
+            }
+            if let (Some(profile), Some(started)) = (&self.profile, started) {
+                profile.borrow_mut().add_backward(name, started.elapsed());
             }
             drop(grad_views);
             for g in upstream.into_iter().flatten() {

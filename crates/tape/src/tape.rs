@@ -1,6 +1,8 @@
 //! The tape: an arena of values in creation order and the records of the ops that made them.
 
+use std::cell::RefCell;
 use std::ops::Range;
+use std::time::Instant;
 
 use ndarray::{ArrayD, ArrayViewD, Dimension};
 
@@ -10,6 +12,7 @@ use crate::float::Float;
 use crate::gradients::Gradients;
 use crate::params::Lent;
 use crate::pool::{self, Home};
+use crate::profile::Profile;
 use crate::storage::Storage;
 use crate::var::{fresh_epoch, Var};
 
@@ -66,6 +69,8 @@ pub struct Tape<F: Float> {
     grad_enabled: bool,
     /// Large buffers of earlier steps, for the ops of the next ones (see [`crate::pool`]).
     pub(crate) pool: Home<F>,
+    /// Op times while profiling is on (a cell: the backward sweep takes `&self`).
+    pub(crate) profile: Option<RefCell<Profile>>,
 }
 
 impl<F: Float> Default for Tape<F> {
@@ -84,6 +89,7 @@ impl<F: Float> Tape<F> {
             lent: Vec::new(),
             grad_enabled: true,
             pool: Home::new(None),
+            profile: None,
         }
     }
 
@@ -261,22 +267,64 @@ impl<F: Float> Tape<F> {
         }
     }
 
+    /// Turns op profiling on or off (off by default). On, every successful forward and every
+    /// backward rule is timed and summed by op name (see [`Profile`]) across steps:
+    /// [`Tape::clear`] keeps the profile, [`Tape::take_profile`] hands it over and starts a new
+    /// one. Turning it off drops what was gathered. Profiling changes no value.
+    pub fn set_profiling(&mut self, on: bool) {
+        match (on, &self.profile) {
+            (true, None) => self.profile = Some(RefCell::default()),
+            (false, _) => self.profile = None,
+            (true, Some(_)) => {}
+        }
+    }
+
+    /// A copy of the op times gathered so far, or `None` with profiling off.
+    pub fn profile(&self) -> Option<Profile> {
+        self.profile.as_ref().map(|p| p.borrow().clone())
+    }
+
+    /// The op times gathered so far, with the count started again from nothing (profiling
+    /// stays on); `None` with profiling off.
+    pub fn take_profile(&mut self) -> Option<Profile> {
+        self.profile.as_mut().map(|p| std::mem::take(p.get_mut()))
+    }
+
     /// Applies an op with any number of inputs and outputs and returns the outputs' handles.
     ///
     /// The forward runs on the input values; if it fails, or returns no output, nothing is
     /// pushed. A record for backward is kept only if recording is on and some input needs a
     /// gradient.
     pub fn apply<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var]) -> Result<Vec<Var>> {
+        self.apply_checked(op, inputs, false)
+    }
+
+    /// [`Tape::apply`] for an op with exactly one output.
+    pub fn apply1<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var]) -> Result<Var> {
+        Ok(self.apply_checked(op, inputs, true)?[0])
+    }
+
+    /// [`Tape::apply`], refusing (before anything is pushed or profiled) a forward that
+    /// returns other than one output when `one` is set.
+    fn apply_checked<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var], one: bool) -> Result<Vec<Var>> {
         let ids = inputs.iter().map(|&v| self.check(v)).collect::<Result<Vec<_>>>()?;
+        let started = self.profile.is_some().then(Instant::now);
         let (outputs, saved) = {
             let views: Vec<ArrayViewD<'_, F>> = ids.iter().map(|&i| self.values[i].data.view()).collect();
             let _pooled = pool::install(&self.pool);
             op.forward(&views).map_err(|e| TapeError::from_op(op.name(), e))?
         };
+        let forward_time = started.map(|s| s.elapsed());
         if outputs.is_empty() {
             return Err(TapeError::InvalidArgument {
                 op: op.name(),
                 reason: "forward returned no output".into(),
+            });
+        }
+        if one && outputs.len() != 1 {
+            return Err(TapeError::InvalidArgument {
+                op: op.name(),
+                reason: format!("apply1 needs one output, the op returned {}", outputs.len()),
             });
         }
         let needs_grad = self.grad_enabled && ids.iter().any(|&i| self.values[i].needs_grad);
@@ -296,6 +344,9 @@ impl<F: Float> Tape<F> {
                 is_leaf: false,
             });
         }
+        if let (Some(profile), Some(time)) = (&mut self.profile, forward_time) {
+            profile.get_mut().add_forward(op.name(), time);
+        }
         if needs_grad {
             self.records.push(Record {
                 inputs: ids.iter().map(|&i| i as u32).collect(),
@@ -304,31 +355,6 @@ impl<F: Float> Tape<F> {
             });
         }
         Ok((first..first + count).map(|i| self.handle(i)).collect())
-    }
-
-    /// [`Tape::apply`] for an op with exactly one output.
-    pub fn apply1<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var]) -> Result<Var> {
-        let name = op.name();
-        let outs = self.apply(op, inputs)?;
-        match outs.as_slice() {
-            [one] => Ok(*one),
-            _ => {
-                // Undo the push so that a failed call leaves the tape unchanged.
-                self.truncate_to(outs[0].index as usize);
-                Err(TapeError::InvalidArgument {
-                    op: name,
-                    reason: format!("apply1 needs one output, the op returned {}", outs.len()),
-                })
-            }
-        }
-    }
-
-    /// Removes every value from index `len` on, and the records that produced them.
-    fn truncate_to(&mut self, len: usize) {
-        self.values.truncate(len);
-        while self.records.last().is_some_and(|r| r.outputs.start as usize >= len) {
-            self.records.pop();
-        }
     }
 
     /// The arena index of `v`, or `StaleVar` if the handle is not from this tape's epoch.
