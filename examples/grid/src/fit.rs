@@ -36,6 +36,7 @@ use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
 use crate::images::{psnr, ImageError};
 use crate::model::{GridModel, Method, BOUNDS};
+use crate::profile::StepProfile;
 use crate::state::{Start, TrainingState};
 
 /// Why a fit could not run.
@@ -208,6 +209,8 @@ pub struct FitResult<F: Float> {
     pub interrupted: bool,
     /// The final occupancy grid, with occupancy sampling.
     pub occupancy: Option<OccupancyGrid>,
+    /// Where this call's training time went, phase by phase and op by op.
+    pub profile: StepProfile,
 }
 
 /// Progress reported after every step.
@@ -429,6 +432,9 @@ pub fn fit_from<F: Float>(
     let first_step = step;
     let mut interrupted = false;
     let mut tape = Tape::<F>::new();
+    // A few clock reads a step: nothing beside a step's milliseconds.
+    tape.set_profiling(true);
+    let mut phases = crate::profile::Phases::default();
     let table = TrainingTable::<F>::new(data);
     let pixels = table.pixels();
     let (mut loss, mut samples_total) = (f64::NAN, 0usize);
@@ -461,10 +467,18 @@ pub fn fit_from<F: Float>(
             next_stage += 1;
         }
         adam.set_lr(learning_rate(config, fraction(step, seconds)))?;
+        let mut clock = Instant::now();
+        let mut lap = |phase: &mut std::time::Duration| {
+            let now = Instant::now();
+            *phase += now - clock;
+            clock = now;
+        };
         let rows: Vec<usize> = (0..config.batch).map(|_| rng.gen_range(0..pixels)).collect();
         let batch = table.gather(&rows)?;
+        lap(&mut phases.batch);
         let samples = sample_rays(sampler.occupancy(), &batch.rays, model.voxel() / 2.0)?;
         samples_total += samples.len();
+        lap(&mut phases.sample);
         let target = tape.constant(batch.colors);
         let grid = tape.param_from(model.params(), model.grid_id())?;
         let color = model.render_grid(&mut tape, grid, samples, data.background, config.method)?;
@@ -478,10 +492,13 @@ pub fn fit_from<F: Float>(
         } else {
             mse
         };
+        lap(&mut phases.forward);
         let grads = tape.backward(objective)?;
+        lap(&mut phases.backward);
         tape.clear();
         adam.step(model.params_mut(), &grads)?;
         tape.recycle(grads);
+        lap(&mut phases.optimiser);
         step += 1;
         if let Sampler::Occupancy(grid) = &mut sampler {
             if step >= OCCUPANCY_WARMUP && step % OCCUPANCY_EVERY == 0 {
@@ -489,6 +506,7 @@ pub fn fit_from<F: Float>(
                 grid.update(|p| m.densities(p), CellPoints::CentreAndRandom { seed: step as u64 })?;
             }
         }
+        lap(&mut phases.occupancy);
         seconds += start.elapsed().as_secs_f64();
         progress(Progress {
             step,
@@ -525,5 +543,10 @@ pub fn fit_from<F: Float>(
         training,
         interrupted,
         occupancy,
+        profile: StepProfile {
+            steps: step - first_step,
+            phases,
+            ops: tape.take_profile().unwrap_or_default(),
+        },
     })
 }

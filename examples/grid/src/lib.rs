@@ -47,6 +47,7 @@ pub mod images;
 pub mod model;
 pub mod photographs;
 pub mod plots;
+pub mod profile;
 pub mod render;
 pub mod report;
 pub mod ring;

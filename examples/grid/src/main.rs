@@ -192,6 +192,10 @@ struct FitArgs {
     /// Print one JSON object (the log and the final figures) instead of text.
     #[arg(long)]
     json: bool,
+    /// Also print where the training time went, in milliseconds a step: each phase of a step
+    /// and the tape's ops, forward and backward (with --json, as "profile").
+    #[arg(long)]
+    profile: bool,
     /// Directory for the pictures: each test view's photograph, render and |error| x 4
     /// (test-view-NNN.png), and test PSNR against training seconds (psnr.svg, psnr.png).
     #[arg(long)]
@@ -420,6 +424,9 @@ struct FitSummary<'a> {
     seconds: f64,
     samples_per_ray_mean: f64,
     occupied_fraction: f64,
+    /// With --profile.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    profile: Option<fogray_grid::profile::ProfileTable>,
 }
 
 /// What a fit resumes from: the file and its metadata.
@@ -665,6 +672,7 @@ fn report_fit<F: fogray::tape::Float>(
         seconds: result.seconds,
         samples_per_ray_mean: result.samples_per_ray_mean,
         occupied_fraction: result.occupied_fraction,
+        profile: args.profile.then(|| result.profile.table()),
     };
     if args.json {
         return write_stdout(|w| Ok(serde_json::to_writer(w, &summary)?));
@@ -682,6 +690,9 @@ fn report_fit<F: fogray::tape::Float>(
         result.samples_per_ray_mean,
         100.0 * result.occupied_fraction
     );
+    if let Some(table) = &summary.profile {
+        print!("{table}");
+    }
     Ok(())
 }
 

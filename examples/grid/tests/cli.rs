@@ -139,6 +139,7 @@ fn fit_prints_its_log_and_writes_renders_and_pictures() {
     assert!(v["seconds"].as_f64().unwrap() > 0.0);
     assert!(v["samples_per_ray_mean"].as_f64().unwrap() > 1.0);
     assert_eq!(v["occupied_fraction"], 1.0);
+    assert!(v.get("profile").is_none(), "only with --profile");
     // 10 views in all, e = 5, test views 2 and 7: [view][row][column][channel].
     let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&renders).unwrap()).unwrap();
     let images = r["images"].as_array().unwrap();
@@ -214,4 +215,54 @@ fn bad_input_exits_2_with_one_line() {
         assert!(err.starts_with("fogray-grid: error: "), "{args:?}: {err}");
     }
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn fit_profile_prints_the_phases_and_the_ops_a_step() {
+    let args = [
+        "fit",
+        "--views",
+        "6",
+        "--test-views",
+        "1",
+        "--size",
+        "6",
+        "--grid",
+        "6",
+        "--steps",
+        "3",
+        "--batch",
+        "32",
+    ];
+    let out = ok(&[&args[..], &["--json", "--profile"]].concat());
+    let v: serde_json::Value = serde_json::from_str(&out).unwrap();
+    let p = &v["profile"];
+    assert_eq!(p["steps"], 3);
+    let phases: Vec<&str> = p["phases"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r["name"].as_str().unwrap())
+        .collect();
+    assert_eq!(
+        phases,
+        ["batch", "sample", "forward", "backward", "optimiser", "occupancy"]
+    );
+    let composite = p["ops"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|r| r["name"] == "composite")
+        .expect("the fused composite");
+    assert_eq!(composite["calls_per_step"], 1.0);
+    // As text: the tables follow the final line.
+    let text = ok(&[&args[..], &["--profile"]].concat());
+    assert!(
+        text.contains("where a step went (ms a step, mean over 3 steps):"),
+        "{text}"
+    );
+    assert!(
+        text.lines().any(|l| l.trim_start().starts_with("grid_field ")),
+        "{text}"
+    );
 }

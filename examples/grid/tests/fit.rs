@@ -201,3 +201,44 @@ fn the_learning_rate_anneals_geometrically_over_the_end_of_the_budget() {
         assert!(e.to_string().contains("must be finite and positive"), "{e}");
     }
 }
+
+#[test]
+fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
+    let ring = Ring::new(6, 1, 8).unwrap();
+    let scene = Scene::default();
+    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap();
+    for method in [Method::Fused, Method::Taped] {
+        let config = FitConfig {
+            grid: 8,
+            batch: 64,
+            budget: Budget::Steps(7),
+            method,
+            evaluations: 1,
+            ..FitConfig::default()
+        };
+        let result = fit::<f32>(&data, &config, &mut |_| {}).unwrap();
+        let profile = &result.profile;
+        assert_eq!(profile.steps, 7);
+        let calls = |name: &str| profile.ops.get(name).map(|t| (t.forward_calls, t.backward_calls));
+        // One render, loss and prior a step; the prior and the loss are the same ops either way.
+        assert_eq!(calls("total_variation"), Some((7, 7)), "{method:?}");
+        assert_eq!(calls("mean"), Some((7, 7)), "{method:?}");
+        let fused_ops = [calls("grid_field"), calls("composite"), calls("density_color")];
+        match method {
+            Method::Fused => assert_eq!(fused_ops, [Some((7, 7)); 3]),
+            Method::Taped => assert_eq!(fused_ops, [None; 3], "the twins are built of taped ops"),
+        }
+        // The phases are parts of the training clock.
+        let p = profile.phases;
+        let phases = p.batch + p.sample + p.forward + p.backward + p.optimiser + p.occupancy;
+        assert!(
+            phases.as_secs_f64() <= result.seconds,
+            "{phases:?} > {} s",
+            result.seconds
+        );
+        let table = profile.table();
+        assert_eq!(table.phases.len(), 6);
+        assert_eq!(table.ops.len(), profile.ops.iter().count());
+        assert!(table.ops.iter().all(|r| r.forward_ms >= 0.0 && r.backward_ms >= 0.0));
+    }
+}
