@@ -26,7 +26,8 @@ pub struct Phases {
     pub occupancy: Duration,
 }
 
-/// A fit's step profile.
+/// A fit's step profile. The training seconds also hold what no phase does: the learning
+/// rate's update and, at the growth stages, the grid's resampling.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct StepProfile {
     /// Steps profiled.
@@ -73,13 +74,9 @@ pub struct ProfileTable {
 impl StepProfile {
     /// Means per step in milliseconds (zeros when no step was taken).
     pub fn table(&self) -> ProfileTable {
-        let per_step = |d: Duration| {
-            if self.steps == 0 {
-                0.0
-            } else {
-                1e3 * d.as_secs_f64() / self.steps as f64
-            }
-        };
+        // With no step every sum is zero, and so is every mean.
+        let steps = self.steps.max(1) as f64;
+        let per_step = |d: Duration| 1e3 * d.as_secs_f64() / steps;
         let p = &self.phases;
         let phase = |name, d| PhaseRow { name, ms: per_step(d) };
         ProfileTable {
@@ -98,11 +95,7 @@ impl StepProfile {
                 .into_iter()
                 .map(|(name, t)| OpRow {
                     name,
-                    calls_per_step: if self.steps == 0 {
-                        0.0
-                    } else {
-                        t.forward_calls as f64 / self.steps as f64
-                    },
+                    calls_per_step: t.forward_calls as f64 / steps,
                     forward_ms: per_step(t.forward),
                     backward_ms: per_step(t.backward),
                 })
