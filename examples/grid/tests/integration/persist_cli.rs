@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use fogray_grid::checkpoint::{load, read_info};
 
-mod common;
+use crate::common;
 use common::{grid, ok, temp_dir};
 
 const TINY: [&str; 10] = [

@@ -5,7 +5,7 @@ use fogray_grid::photographs::photographs;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
-mod common;
+use crate::common;
 use common::{grid, ok, temp_dir};
 
 #[test]

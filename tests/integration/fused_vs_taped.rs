@@ -5,7 +5,7 @@
 // Index loops mirror the formulas' subscripts in these tests.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
+use crate::common;
 
 use common::{assert_close_scaled, grad_scale, run, worst_scaled, Method, Rays};
 use fogray::ops::{twins, Background, Composite, CompositeInputs};

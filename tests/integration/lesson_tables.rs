@@ -6,7 +6,7 @@
 // Index loops mirror the formulas' subscripts in these tests.
 #![allow(clippy::needless_range_loop)]
 
-mod common;
+use crate::common;
 
 use common::{run, Method, Rays, Run};
 

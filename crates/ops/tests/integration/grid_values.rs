@@ -2,7 +2,7 @@
 //! trilinear interpolation reproduces exactly), a plain-loop oracle, and one-sided differences
 //! on cell faces; out-of-box positions; bad input.
 
-mod grid_common;
+use crate::grid_common;
 
 use fogray_ops::{GridBox, GridError, GridField, GridWanted};
 use fogray_tape::{Tape, TapeError};

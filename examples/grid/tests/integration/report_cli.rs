@@ -1,7 +1,7 @@
 //! `fogray-grid report` as a user runs it: on a tiny problem budgeted by steps it writes its
 //! files and prints one line per configuration; bad input exits 2 with one line on stderr.
 
-mod common;
+use crate::common;
 use common::grid;
 
 #[test]

@@ -2,7 +2,7 @@
 //! as the allocating calls with every value overwritten, each gradient only where its buffer
 //! is given, and on bad input an error with every buffer unchanged.
 
-mod grid_common;
+use crate::grid_common;
 
 use fogray_ops::{GridError, GridField, GridGradientBuffers, GridWanted};
 use grid_common::random_field;

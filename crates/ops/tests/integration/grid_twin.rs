@@ -1,7 +1,7 @@
 //! The fused grid field against its taped twin (f64, 1e-12 element by element, outputs and
 //! both gradients) and both against central finite differences.
 
-mod grid_common;
+use crate::grid_common;
 
 use fogray_ops::grid::twin;
 use fogray_ops::GridField;

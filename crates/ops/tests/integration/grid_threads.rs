@@ -1,7 +1,7 @@
 //! The grid field's results do not depend on the number of threads (bitwise), and its grid
 //! gradient sums long runs of terms in f64.
 
-mod grid_common;
+use crate::grid_common;
 
 use fogray_ops::{GridBox, GridField, GridGradientBuffers, GridWanted};
 use grid_common::random_field;

@@ -1,7 +1,7 @@
 //! Hard numerical cases: every one must give finite, accurate outputs and gradients. Where a
 //! numerics choice is tested, the naive form is shown failing on the same case.
 
-mod common;
+use crate::common;
 
 use common::{all_finite, assert_close_scaled, grad_scale, run, run_with, worst_scaled, Method, Rays};
 use fogray::ops::{Background, Composite, CompositeError, CompositeInputs};

@@ -1,0 +1,7 @@
+//! The integration tests, one binary: each module is what was one test file, so that the
+//! library's generic kernels are compiled once for all of them.
+
+mod cli;
+mod figures;
+mod gradient;
+mod report;
