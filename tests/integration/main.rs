@@ -1,5 +1,6 @@
-//! The integration tests, one binary: each module is what was one test file, so that the
-//! library's generic kernels are compiled once for all of them.
+//! The integration tests, one module per topic, in one binary: every test file would be a
+//! crate of its own that compiles the libraries' generic kernels again (add a module here,
+//! not a file beside this one).
 
 mod cli;
 mod common;
