@@ -36,7 +36,7 @@ use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
 use crate::images::{psnr, ImageError};
 use crate::model::{GridModel, Method, BOUNDS};
-use crate::profile::StepProfile;
+use crate::profile::{Phases, StepProfile};
 use crate::state::{Start, TrainingState};
 
 /// Why a fit could not run.
@@ -434,7 +434,7 @@ pub fn fit_from<F: Float>(
     let mut tape = Tape::<F>::new();
     // A few clock reads a step: nothing beside a step's milliseconds.
     tape.set_profiling(true);
-    let mut phases = crate::profile::Phases::default();
+    let mut phases = Phases::default();
     let table = TrainingTable::<F>::new(data);
     let pixels = table.pixels();
     let (mut loss, mut samples_total) = (f64::NAN, 0usize);

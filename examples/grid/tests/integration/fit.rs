@@ -1,15 +1,13 @@
 //! The whole pipeline: its gradient against central differences, the fused ops against their
 //! taped twins, and a tiny fit that must learn.
 
+use crate::common::default_scene_data;
 use fogray::ops::rays::{Aabb, RayBatch};
 use fogray::ops::sample::{Spacing, Uniform};
 use fogray::tape::{gradcheck, GradcheckOptions, Tape, Var};
-use fogray_grid::dataset::Dataset;
 use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
 use fogray_grid::model::{GridModel, Method};
-use fogray_grid::photographs::photographs;
 use fogray_grid::ring::Ring;
-use fogray_grid::scene::Scene;
 use ndarray::{arr2, Array2, Array4, ArrayD};
 
 /// Three rays crossing a 3^3 grid, sampled every 0.4, and a target colour per ray.
@@ -82,8 +80,7 @@ fn fused_and_taped_give_the_same_loss_and_gradient() {
 #[test]
 fn a_tiny_fit_raises_the_test_psnr_by_5_db() {
     let ring = Ring::new(12, 2, 12).unwrap();
-    let scene = Scene::default();
-    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap();
+    let data = default_scene_data(&ring);
     for sampling in [Sampling::Uniform, Sampling::Occupancy] {
         let config = FitConfig {
             grid: 12,
@@ -185,11 +182,7 @@ fn the_learning_rate_anneals_geometrically_over_the_end_of_the_budget() {
     };
     assert_eq!(learning_rate(&constant, 0.9), 0.2);
     // Bad rates are refused before any step.
-    let data = {
-        let ring = Ring::new(4, 1, 4).unwrap();
-        let scene = Scene::default();
-        Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap()
-    };
+    let data = default_scene_data(&Ring::new(4, 1, 4).unwrap());
     for bad in [
         FitConfig {
             lr_final: 0.0,
@@ -204,9 +197,7 @@ fn the_learning_rate_anneals_geometrically_over_the_end_of_the_budget() {
 
 #[test]
 fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
-    let ring = Ring::new(6, 1, 8).unwrap();
-    let scene = Scene::default();
-    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap();
+    let data = default_scene_data(&Ring::new(6, 1, 8).unwrap());
     for method in [Method::Fused, Method::Taped] {
         let config = FitConfig {
             grid: 8,

@@ -3,6 +3,7 @@
 //! the same steps, bit for bit, as one never stopped; the depth of a homogeneous box against
 //! its closed form; and every kind of bad file refused with a typed error.
 
+use crate::common::default_scene_data;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -14,7 +15,6 @@ use fogray_grid::fit::{
     fit_from, render_test_views, Budget, FitConfig, FitResult, Sampling, OCCUPANCY_EVERY, OCCUPANCY_WARMUP,
 };
 use fogray_grid::model::{GridModel, Method};
-use fogray_grid::photographs::photographs;
 use fogray_grid::render::{render_view, BACKGROUND_OPACITY};
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
@@ -30,9 +30,7 @@ const CAMERAS: Cameras = Cameras {
 };
 
 fn data() -> Dataset {
-    let ring = CAMERAS.ring().unwrap();
-    let scene = Scene::default();
-    Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap()
+    default_scene_data(&CAMERAS.ring().unwrap())
 }
 
 fn temp(name: &str) -> PathBuf {

@@ -1,9 +1,9 @@
 //! The report end to end on a tiny problem budgeted by steps: the fits it runs are the fits
 //! `fit` runs, its tables read their logs, and its files are there.
 
+use crate::common::default_scene_data;
 use fogray_grid::dataset::Dataset;
 use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
-use fogray_grid::photographs::photographs;
 use fogray_grid::report::anchor::{Anchor, AnchorPoint};
 use fogray_grid::report::configuration::DEFAULT_CONFIGS;
 use fogray_grid::report::markdown::fused_vs_taped_rows;
@@ -15,9 +15,8 @@ use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
 fn tiny() -> (Scene, Dataset, FitConfig) {
-    let ring = Ring::new(6, 1, 10).unwrap();
     let scene = Scene::default();
-    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background).unwrap();
+    let data = default_scene_data(&Ring::new(6, 1, 10).unwrap());
     let config = FitConfig {
         grid: 10,
         batch: 128,

@@ -1,8 +1,14 @@
-//! Running the `fogray-grid` binary from the CLI tests.
+//! Helpers of the tests: running the `fogray-grid` binary, temporary directories, datasets.
 #![allow(dead_code)] // each test file uses the helpers it needs
 
 use std::path::PathBuf;
 use std::process::Command;
+use std::sync::atomic::{AtomicUsize, Ordering};
+
+use fogray_grid::dataset::Dataset;
+use fogray_grid::photographs::photographs;
+use fogray_grid::ring::Ring;
+use fogray_grid::scene::Scene;
 
 /// Runs the binary with `args`: its exit status, stdout and stderr.
 pub fn grid(args: &[&str]) -> (i32, String, String) {
@@ -24,9 +30,18 @@ pub fn ok(args: &[&str]) -> String {
     out
 }
 
-/// A fresh directory for this test process and `name`.
+/// A fresh directory for this call: the tests share one process and run in parallel, so two
+/// calls never share a directory, whatever their `name`.
 pub fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fogray-grid-tests-{}-{name}", std::process::id()));
+    static CALLS: AtomicUsize = AtomicUsize::new(0);
+    let call = CALLS.fetch_add(1, Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("fogray-grid-tests-{}-{call}-{name}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir
+}
+
+/// The exact photographs of the built-in scene from `ring`'s cameras.
+pub fn default_scene_data(ring: &Ring) -> Dataset {
+    let scene = Scene::default();
+    Dataset::new(ring, &photographs(&scene, ring), scene.background).unwrap()
 }
