@@ -227,9 +227,37 @@ fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
             "{phases:?} > {} s",
             result.seconds
         );
+        // The ops run inside the step's forward and backward phases.
+        assert!(
+            profile.ops.forward() <= p.forward,
+            "{:?} > {:?}",
+            profile.ops.forward(),
+            p.forward
+        );
+        assert!(
+            profile.ops.backward() <= p.backward,
+            "{:?} > {:?}",
+            profile.ops.backward(),
+            p.backward
+        );
+        // The table holds the same figures as means per step, in the profile's order.
         let table = profile.table();
-        assert_eq!(table.phases.len(), 6);
+        let ms = |d: std::time::Duration| 1e3 * d.as_secs_f64() / 7.0;
+        let names: Vec<_> = table.phases.iter().map(|r| r.name).collect();
+        assert_eq!(
+            names,
+            ["batch", "sample", "forward", "backward", "optimiser", "occupancy"]
+        );
+        assert_eq!(table.phases[2].ms, ms(p.forward));
         assert_eq!(table.ops.len(), profile.ops.iter().count());
-        assert!(table.ops.iter().all(|r| r.forward_ms >= 0.0 && r.backward_ms >= 0.0));
+        for (row, (name, t)) in table.ops.iter().zip(profile.ops.by_time()) {
+            assert_eq!(row.name, name);
+            assert_eq!(row.calls_per_step, t.forward_calls as f64 / 7.0, "{name}");
+            assert_eq!(
+                (row.forward_ms, row.backward_ms),
+                (ms(t.forward), ms(t.backward)),
+                "{name}"
+            );
+        }
     }
 }
