@@ -59,8 +59,9 @@
 //!   memory is its outputs and gradients alone; the price is two vectorised exponentials per
 //!   sample more (`fogray bench` measures what that costs against the one-pass call).
 //! - The colour loops are compiled for 1 to 4 channels with the count a constant and sum in
-//!   four interleaved chains; the one sequential chain of the backward carries one fused
-//!   multiply-add per four samples.
+//!   four interleaved chains; for three channels on AVX2 with FMA they run four samples' twelve
+//!   values in three vector registers (`rows_x86`, every result bitwise the scalar loop's); the
+//!   one sequential chain of the backward carries one fused multiply-add per four samples.
 //! - With [`Composite::pack_rays`], equal-length neighbours go eight at a time across the
 //!   vector lanes (`lanes`), every value bitwise the per-ray one; off by default, as it was
 //!   slower on AVX2 (`docs/performance.md`).
@@ -92,6 +93,8 @@ mod pack_attenuation;
 mod pack_backward;
 mod pack_forward;
 mod rows;
+#[cfg(target_arch = "x86_64")]
+mod rows_x86;
 mod suffix;
 mod tape_order;
 

@@ -4,6 +4,9 @@
 
 use fogray_tape::Float;
 
+#[cfg(target_arch = "x86_64")]
+use super::rows_x86;
+
 /// Calls `$body` with `$n` a `const` channel count when `$ch` is 1 to 4, else with `0`, which
 /// the generic functions read as "use the run-time count".
 macro_rules! by_channels {
@@ -59,10 +62,25 @@ fn column_sums<F: Float, const CH: usize>(color: &[F], w: &[f64], acc: &mut [f64
         return;
     }
     let mut part = [[0.0f64; 4]; LANES];
-    for (rows, wk) in color.chunks_exact(LANES * ch).zip(w[..full].chunks_exact(LANES)) {
-        for (i, p) in part.iter_mut().enumerate() {
-            for c in 0..ch {
-                p[c] = wk[i].mul_add(rows[i * ch + c].as_f64(), p[c]);
+    #[cfg(target_arch = "x86_64")]
+    let vectorised = CH == 3 && rows_x86::available();
+    #[cfg(not(target_arch = "x86_64"))]
+    let vectorised = false;
+    if vectorised {
+        #[cfg(target_arch = "x86_64")]
+        {
+            // SAFETY: `available` has checked that this CPU runs the kernel.
+            let flat = unsafe { rows_x86::column_sums3(color, w, full / LANES) };
+            for (i, p) in part.iter_mut().enumerate() {
+                p[..3].copy_from_slice(&flat[i * 3..i * 3 + 3]);
+            }
+        }
+    } else {
+        for (rows, wk) in color.chunks_exact(LANES * ch).zip(w[..full].chunks_exact(LANES)) {
+            for (i, p) in part.iter_mut().enumerate() {
+                for c in 0..ch {
+                    p[c] = wk[i].mul_add(rows[i * ch + c].as_f64(), p[c]);
+                }
             }
         }
     }
@@ -88,7 +106,14 @@ fn row_dots<F: Float, const CH: usize>(color: &[F], g: &[f64], out: &mut [f64]) 
     if ch == 0 {
         return;
     }
-    for (o, row) in out.iter_mut().zip(color.chunks_exact(ch)) {
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if CH == 3 && rows_x86::available() {
+        done = out.len() - out.len() % 4;
+        // SAFETY: `available` has checked that this CPU runs the kernel.
+        unsafe { rows_x86::row_dots3(color, [g[0], g[1], g[2]], out, done / 4) };
+    }
+    for (o, row) in out[done..].iter_mut().zip(color[done * ch..].chunks_exact(ch)) {
         let mut s = 0.0;
         for c in 0..ch {
             s += g[c] * row[c].as_f64();
@@ -109,7 +134,14 @@ fn outer<F: Float, const CH: usize>(w: &[f64], g: &[f64], out: &mut [F]) {
     if ch == 0 {
         return;
     }
-    for (row, &wk) in out.chunks_exact_mut(ch).zip(w) {
+    let mut done = 0;
+    #[cfg(target_arch = "x86_64")]
+    if CH == 3 && rows_x86::available() {
+        done = w.len() - w.len() % 4;
+        // SAFETY: `available` has checked that this CPU runs the kernel.
+        unsafe { rows_x86::outer3(w, [g[0], g[1], g[2]], out, done / 4) };
+    }
+    for (row, &wk) in out[done * ch..].chunks_exact_mut(ch).zip(&w[done..]) {
         for c in 0..ch {
             row[c] = F::lit(wk * g[c]);
         }
