@@ -62,25 +62,21 @@ fn column_sums<F: Float, const CH: usize>(color: &[F], w: &[f64], acc: &mut [f64
         return;
     }
     let mut part = [[0.0f64; 4]; LANES];
+    let mut done = 0;
     #[cfg(target_arch = "x86_64")]
-    let vectorised = CH == 3 && rows_x86::available();
-    #[cfg(not(target_arch = "x86_64"))]
-    let vectorised = false;
-    if vectorised {
-        #[cfg(target_arch = "x86_64")]
-        {
-            // SAFETY: `available` has checked that this CPU runs the kernel.
-            let flat = unsafe { rows_x86::column_sums3(color, w, full / LANES) };
-            for (i, p) in part.iter_mut().enumerate() {
-                p[..3].copy_from_slice(&flat[i * 3..i * 3 + 3]);
-            }
+    if CH == 3 && rows_x86::available() {
+        // SAFETY: `available` has checked that this CPU runs the kernel.
+        let flat = unsafe { rows_x86::column_sums3(color, w, full / LANES) };
+        for (i, p) in part.iter_mut().enumerate() {
+            p[..3].copy_from_slice(&flat[i * 3..i * 3 + 3]);
         }
-    } else {
-        for (rows, wk) in color.chunks_exact(LANES * ch).zip(w[..full].chunks_exact(LANES)) {
-            for (i, p) in part.iter_mut().enumerate() {
-                for c in 0..ch {
-                    p[c] = wk[i].mul_add(rows[i * ch + c].as_f64(), p[c]);
-                }
+        done = full;
+    }
+    let groups = color[done * ch..full * ch].chunks_exact(LANES * ch);
+    for (rows, wk) in groups.zip(w[done..full].chunks_exact(LANES)) {
+        for (i, p) in part.iter_mut().enumerate() {
+            for c in 0..ch {
+                p[c] = wk[i].mul_add(rows[i * ch + c].as_f64(), p[c]);
             }
         }
     }
