@@ -8,6 +8,7 @@
 pub use fogray_ops as ops;
 pub use fogray_tape as tape;
 
+pub mod machine;
 pub mod stamp;
 
 /// The README's examples, compiled and run as doctests so that the front page stays true.

@@ -283,7 +283,9 @@ fn run_report(args: ReportArgs) -> Result<()> {
     use fogray_grid::report::configuration::RunConfig;
     use fogray_grid::report::run::{run_configs, ReportOptions};
     use fogray_grid::report::same_steps::same_steps;
-    use fogray_grid::report::write::{write_report, ReportSetup};
+    use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
+    /// Timed passes of each bandwidth measurement (the best is kept).
+    const TRIAD_PASSES: usize = 5;
 
     let configs = args
         .configs
@@ -325,6 +327,8 @@ fn run_report(args: ReportArgs) -> Result<()> {
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!("step {}", p.step));
     };
+    // The machine's state around the timed runs (about a second each).
+    let before = fogray::machine::triad(TRIAD_PASSES);
     let runs = run_configs(&data, &options, &mut |i, p| {
         show(format!("{} ({}/{})", names[i], i + 1, names.len()), p)
     })?;
@@ -332,6 +336,10 @@ fn run_report(args: ReportArgs) -> Result<()> {
     // second pair of runs; the bar names them).
     let pairs = same_steps(&data, &options, &runs, &mut |label, p| show(label.to_string(), p))?;
     bar.finish_and_clear();
+    let bandwidth = MachineBandwidth {
+        before,
+        after: fogray::machine::triad(TRIAD_PASSES),
+    };
     let problem = format!(
         "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",
         g = args.training.grid,
@@ -354,6 +362,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
         evaluations: args.evaluations,
         anchor: anchor.as_ref(),
         same_steps: &pairs,
+        bandwidth: Some(bandwidth),
     };
     let md = write_report(&args.out, &runs, &data, &scene, &setup)?;
     for r in &runs {
@@ -372,6 +381,12 @@ fn run_report(args: ReportArgs) -> Result<()> {
             pair.taped.final_test_psnr
         );
     }
+    println!(
+        "memory bandwidth (STREAM triad, {} threads): {:.1} GB/s before the runs, {:.1} GB/s after",
+        bandwidth.before.threads,
+        bandwidth.before.bytes_per_sec / 1e9,
+        bandwidth.after.bytes_per_sec / 1e9
+    );
     println!("written: {}", md.display());
     Ok(())
 }

@@ -12,6 +12,7 @@ use super::compare::{
 use super::reach::psnr_at;
 use super::run::ConfigRun;
 use super::same_steps::SameSteps;
+use super::write::MachineBandwidth;
 use super::ReportError;
 
 /// The training times the table reads the PSNR at: a quarter, half and all of a budget of
@@ -157,6 +158,20 @@ pub struct ReportContext<'a> {
     pub fused_vs_taped: &'a [(String, FusedVsTaped)],
     /// Occupancy against uniform, as [`occupancy_vs_uniform_rows`] gives them.
     pub occupancy_vs_uniform: &'a [(String, OccupancyVsUniform)],
+    /// The machine's memory bandwidth before and after the runs, if measured.
+    pub bandwidth: Option<MachineBandwidth>,
+}
+
+/// One sentence on the machine's bandwidth around the runs, in GB/s (10^9 bytes a second).
+pub fn bandwidth_sentence(b: &MachineBandwidth) -> String {
+    format!(
+        "The machine's memory bandwidth (a STREAM triad, {} threads) was {:.1} GB/s just before the \
+         first run and {:.1} GB/s just after the last; on a shared machine it moves from hour to hour, \
+         and the timed figures with it: compare reports measured at about the same bandwidth.",
+        b.before.threads,
+        b.before.bytes_per_sec / 1e9,
+        b.after.bytes_per_sec / 1e9
+    )
 }
 
 fn same_steps_section(pairs: &[(String, SameSteps)]) -> String {
@@ -236,6 +251,9 @@ pub fn report(runs: &[ConfigRun], ctx: &ReportContext<'_>) -> Result<String, Rep
         ctx.reproduce
     );
     md += &format!("{}\n\n", ctx.stamp.markdown());
+    if let Some(b) = &ctx.bandwidth {
+        md += &format!("{}\n\n", bandwidth_sentence(b));
+    }
     let budget = match ctx.budget {
         Budget::Seconds(s) => format!("{s} training seconds"),
         Budget::Steps(n) => format!("{n} steps"),

@@ -3,6 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fogray::machine::Bandwidth;
 use fogray::stamp::Stamp;
 use serde::Serialize;
 
@@ -46,6 +47,19 @@ pub struct ReportSetup<'a> {
     /// Fused against taped over the same steps, as
     /// [`same_steps`](super::same_steps::same_steps) gives them (empty for none).
     pub same_steps: &'a [(String, SameSteps)],
+    /// The machine's memory bandwidth before and after the runs, if measured.
+    pub bandwidth: Option<MachineBandwidth>,
+}
+
+/// The machine's memory bandwidth ([`fogray::machine::triad`]) measured just before the first
+/// run and just after the last: on a shared machine it moves from hour to hour, and the
+/// timed figures with it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MachineBandwidth {
+    /// Before the first run.
+    pub before: Bandwidth,
+    /// After the last run.
+    pub after: Bandwidth,
 }
 
 #[derive(Serialize)]
@@ -68,6 +82,8 @@ struct ReportJson<'a> {
     occupancy_vs_uniform: Vec<Named<OccupancyVsUniform>>,
     #[serde(skip_serializing_if = "Option::is_none")]
     anchor: Option<AnchorJson<'a>>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    machine_bandwidth: Option<MachineBandwidth>,
 }
 
 #[derive(Serialize)]
@@ -185,8 +201,8 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
 /// Writes into `dir` (created if missing): `psnr-vs-seconds.svg/.png` and
 /// `psnr-vs-steps.svg/.png` (one curve per run), with an anchor `psnr-vs-seconds-log.svg/.png`
 /// (the runs and the anchor, log-scaled seconds; without one, an earlier report's such plot is
-/// removed), `report.md`, `report.json` (every run's log and figures, the comparisons and the
-/// stamp), and pictures of the best run: each test view's photograph, render and error
+/// removed), `report.md`, `report.json` (every run's log and figures, the comparisons, the
+/// stamp and the machine's bandwidth), and pictures of the best run: each test view's photograph, render and error
 /// (`test-view-NNN.png`), `density-slices.png` and, where a run sampled with an occupancy
 /// grid, `occupancy-slices.png`. Returns `report.md`'s path.
 ///
@@ -248,6 +264,7 @@ pub fn write_report(
         anchor: setup.anchor.zip(against_anchor.as_deref()),
         pictures: &pictures,
         same_steps: setup.same_steps,
+        bandwidth: setup.bandwidth,
         fused_vs_taped: &fused_vs_taped,
         occupancy_vs_uniform: &occupancy_vs_uniform,
     };
@@ -271,6 +288,7 @@ pub fn write_report(
             anchor,
             against: named(&rows),
         }),
+        machine_bandwidth: setup.bandwidth,
     };
     let text = serde_json::to_string_pretty(&json).map_err(|e| ReportError::Write {
         path: dir.join("report.json"),

@@ -2,6 +2,7 @@
 //! `fit` runs, its tables read their logs, and its files are there.
 
 use crate::common::default_scene_data;
+use fogray::machine::Bandwidth;
 use fogray_grid::dataset::Dataset;
 use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
 use fogray_grid::report::anchor::{Anchor, AnchorPoint};
@@ -9,7 +10,7 @@ use fogray_grid::report::configuration::DEFAULT_CONFIGS;
 use fogray_grid::report::markdown::fused_vs_taped_rows;
 use fogray_grid::report::run::{run_configs, ReportOptions};
 use fogray_grid::report::same_steps::same_steps;
-use fogray_grid::report::write::{write_report, ReportSetup};
+use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
 use fogray_grid::report::ReportError;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
@@ -110,6 +111,17 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
 
     let dir = std::env::temp_dir().join(format!("fogray-grid-report-{}", std::process::id()));
     let stamp = fogray::stamp::Stamp::now("fogray-grid report --steps 70");
+    // Set by hand: what is tested here is how the report writes them.
+    let bandwidth = MachineBandwidth {
+        before: Bandwidth {
+            threads: 2,
+            bytes_per_sec: 44.04e9,
+        },
+        after: Bandwidth {
+            threads: 2,
+            bytes_per_sec: 46.16e9,
+        },
+    };
     let setup = ReportSetup {
         stamp: &stamp,
         reproduce: "cargo run --release -p fogray-grid -- report --steps 70",
@@ -119,6 +131,7 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
         evaluations: config.evaluations,
         anchor: None,
         same_steps: &pairs,
+        bandwidth: Some(bandwidth),
     };
     let md = write_report(&dir, &runs, &data, &scene, &setup).unwrap();
     let text = std::fs::read_to_string(&md).unwrap();
@@ -132,6 +145,12 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     );
     assert!(text.contains("`cargo run --release -p fogray-grid -- report --steps 70`"));
     assert!(text.contains("(5 per run, evenly spaced"), "{text}");
+    assert!(
+        text.contains(
+            "(a STREAM triad, 2 threads) was 44.0 GB/s just before the first run and 46.2 GB/s just after the last"
+        ),
+        "{text}"
+    );
     for row in ["| fused-uniform |", "| taped-occupancy |", "| uniform |", "| fused |"] {
         assert!(text.contains(row), "{row} missing from\n{text}");
     }
@@ -190,6 +209,11 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     assert!(dir.join("psnr-vs-seconds-log.png").exists() && dir.join("psnr-vs-seconds-log.svg").exists());
     let json: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("report.json")).unwrap()).unwrap();
+    assert_eq!(
+        json["machine_bandwidth"]["before"]["bytes_per_sec"].as_f64(),
+        Some(44.04e9)
+    );
+    assert_eq!(json["machine_bandwidth"]["after"]["threads"].as_u64(), Some(2));
     let against = json["anchor"]["against"].as_array().unwrap();
     assert_eq!(json["anchor"]["name"], "slow twin");
     assert_eq!(against.len(), 4);

@@ -45,14 +45,19 @@ fn report_writes_its_files_and_names_its_command() {
     let (code, stdout, err) = grid(&args);
     assert_eq!(code, 0, "{err}");
     let lines: Vec<&str> = stdout.lines().collect();
-    assert_eq!(lines.len(), 3, "{stdout}");
+    assert_eq!(lines.len(), 4, "{stdout}");
     assert!(
         lines[0].starts_with("fused-uniform ") && lines[0].contains("6 steps"),
         "{stdout}"
     );
     assert!(lines[1].starts_with("fused-occupancy-f64 "), "{stdout}");
-    assert!(lines[2].ends_with("report.md"), "{stdout}");
+    assert!(
+        lines[2].starts_with("memory bandwidth (STREAM triad, ") && lines[2].ends_with(" GB/s after"),
+        "{stdout}"
+    );
+    assert!(lines[3].ends_with("report.md"), "{stdout}");
     let md = std::fs::read_to_string(out.join("report.md")).unwrap();
+    assert!(md.contains(" GB/s just before the first run and "), "{md}");
     let given = args[1..].join(" ");
     assert!(
         md.contains(&format!("`cargo run --release -p fogray-grid -- report {given}`")),
