@@ -6,13 +6,22 @@
 //! contiguous f64 scratch, so that each function runs as one straight loop over a slice
 //! (which the compiler vectorises: the math kernels have no branch and no table), and the
 //! results are scattered back, rounded once to the data's precision.
+//!
+//! The forward may keep every value's decay `exp(-|x|)` (its one exponential) for the
+//! backward, which then computes no exponential at all: the same f64 values go into the same
+//! forms, so the gradients are bitwise those computed from the raw values alone. The kept
+//! decays are f64, laid out chunk by chunk as the scratch is: a chunk of `r` rows starting at
+//! row `i` holds values `i k .. (i + r) k`, its `r` density decays first, then its colour
+//! decays row by row.
 
 use fogray_tape::Float;
 use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::math::exp::single_tier;
-use crate::math::logistic::{sigmoid, sigmoid_slope, softplus};
+use crate::math::logistic::{
+    decay, sigmoid, sigmoid_decayed, sigmoid_slope, sigmoid_slope_decayed, softplus, softplus_decayed,
+};
 
 /// Rows per parallel task: enough to amortise a task, few enough that the scratch of one
 /// chunk (8 bytes a value) stays in the core's cache.
@@ -34,6 +43,13 @@ impl Scratch {
             *d = row[0].as_f64() + shift;
         }
         &mut self.density
+    }
+
+    /// `len` values of colour scratch, whatever they hold (to be written whole).
+    #[inline(always)]
+    fn color_room(&mut self, len: usize) -> &mut [f64] {
+        self.color.resize(len, 0.0);
+        &mut self.color
     }
 
     /// Gathers `raw[., 1..k]` of the chunk's rows, row-major.
@@ -64,26 +80,44 @@ pub(crate) fn density<F: Float>(shift: f64, k: usize, raw: &[F], sigma: &mut [F]
         .par_chunks_mut(CHUNK)
         .zip(raw.par_chunks(CHUNK * k))
         .for_each_init(Scratch::default, |scratch, (sigma, raw)| {
-            density_chunk(shift, k, raw, sigma, scratch)
+            density_chunk(shift, k, raw, sigma, scratch, None)
         });
 }
 
 /// `sigma[i] = softplus(raw[i, 0] + shift)`, `color[i, c] = sigmoid(raw[i, c + 1])`; `raw`
-/// is `[n, k]`, `sigma` `[n]`, `color` `[n, k - 1]`, all row-major.
-pub(crate) fn forward<F: Float>(shift: f64, k: usize, raw: &[F], sigma: &mut [F], color: &mut [F]) {
-    sigma
+/// is `[n, k]`, `sigma` `[n]`, `color` `[n, k - 1]`, all row-major; with `kept` (`n k` values)
+/// each value's decay is written there too (see the module's docs for its layout).
+pub(crate) fn forward<F: Float>(
+    shift: f64,
+    k: usize,
+    raw: &[F],
+    sigma: &mut [F],
+    color: &mut [F],
+    kept: Option<&mut [f64]>,
+) {
+    let chunks = sigma
         .par_chunks_mut(CHUNK)
         .zip(color.par_chunks_mut(CHUNK * (k - 1)))
-        .zip(raw.par_chunks(CHUNK * k))
-        .for_each_init(Scratch::default, |scratch, ((sigma, color), raw)| {
-            density_chunk(shift, k, raw, sigma, scratch);
-            color_chunk(k, raw, color, scratch);
-        });
+        .zip(raw.par_chunks(CHUNK * k));
+    match kept {
+        Some(kept) => chunks.zip(kept.par_chunks_mut(CHUNK * k)).for_each_init(
+            Scratch::default,
+            |scratch, (((sigma, color), raw), kept)| {
+                let (density_kept, color_kept) = kept.split_at_mut(sigma.len());
+                density_chunk(shift, k, raw, sigma, scratch, Some(density_kept));
+                color_chunk(k, raw, color, scratch, Some(color_kept));
+            },
+        ),
+        None => chunks.for_each_init(Scratch::default, |scratch, ((sigma, color), raw)| {
+            density_chunk(shift, k, raw, sigma, scratch, None);
+            color_chunk(k, raw, color, scratch, None);
+        }),
+    }
 }
 
 /// `g_raw[i, 0] = g_sigma[i] sigmoid(raw[i, 0] + shift)`, `g_raw[i, c + 1] = g_color[i, c]
 /// sigmoid'(raw[i, c + 1])`, zero where an upstream gradient is `None`; shapes as
-/// [`forward`], `g_raw` as `raw`.
+/// [`forward`], `g_raw` as `raw`; `kept`, the decays the forward kept, if it did.
 pub(crate) fn backward<F: Float>(
     shift: f64,
     k: usize,
@@ -91,6 +125,7 @@ pub(crate) fn backward<F: Float>(
     g_sigma: Option<&[F]>,
     g_color: Option<&[F]>,
     g_raw: &mut [F],
+    kept: Option<&[f64]>,
 ) {
     g_raw
         .par_chunks_mut(CHUNK * k)
@@ -101,48 +136,128 @@ pub(crate) fn backward<F: Float>(
             let start = chunk * CHUNK;
             let g_sigma = g_sigma.map(|g| &g[start..start + rows]);
             let g_color = g_color.map(|g| &g[start * (k - 1)..(start + rows) * (k - 1)]);
-            backward_chunk(shift, k, raw, g_sigma, g_color, g_raw, scratch);
+            let kept = kept.map(|d| d[start * k..(start + rows) * k].split_at(rows));
+            backward_chunk(shift, k, raw, g_sigma, g_color, g_raw, scratch, kept);
         });
 }
 
-/// One chunk's densities. Compiled for the vector units this machine has (chosen at run
-/// time); the values do not depend on which: every fused multiply-add is written as one.
+/// One chunk's densities, and their decays into `kept` if given. Compiled for the vector
+/// units this machine has (chosen at run time); the values do not depend on which: every
+/// fused multiply-add is written as one.
 #[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
-fn density_chunk<F: Float>(shift: f64, k: usize, raw: &[F], sigma: &mut [F], scratch: &mut Scratch) {
+fn density_chunk<F: Float>(
+    shift: f64,
+    k: usize,
+    raw: &[F],
+    sigma: &mut [F],
+    scratch: &mut Scratch,
+    kept: Option<&mut [f64]>,
+) {
     let x = scratch.gather_density(raw, k, shift);
     if single_tier::<F>() {
-        for v in x.iter_mut() {
-            *v = softplus::<true>(*v);
-        }
+        densities::<true>(x, kept);
     } else {
-        for v in x.iter_mut() {
-            *v = softplus::<false>(*v);
-        }
+        densities::<false>(x, kept);
     }
     for (o, &v) in sigma.iter_mut().zip(x.iter()) {
         *o = F::lit(v);
     }
 }
 
+/// `x[i] = softplus(x[i])`, keeping the decays in `kept` if given. (Functions, not closures,
+/// so that the loops are compiled with their vectorised callers' features.)
+#[inline(always)]
+fn densities<const SINGLE: bool>(x: &mut [f64], kept: Option<&mut [f64]>) {
+    match kept {
+        Some(kept) => {
+            for (e, &v) in kept.iter_mut().zip(x.iter()) {
+                *e = decay::<SINGLE>(v);
+            }
+            for (v, &e) in x.iter_mut().zip(kept.iter()) {
+                *v = softplus_decayed::<SINGLE>(*v, e);
+            }
+        }
+        None => {
+            for v in x.iter_mut() {
+                *v = softplus::<SINGLE>(*v);
+            }
+        }
+    }
+}
+
 /// One chunk's colours (as [`density_chunk`]).
 #[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
-fn color_chunk<F: Float>(k: usize, raw: &[F], color: &mut [F], scratch: &mut Scratch) {
+fn color_chunk<F: Float>(k: usize, raw: &[F], color: &mut [F], scratch: &mut Scratch, kept: Option<&mut [f64]>) {
     let x = scratch.gather_color(raw, k);
     if single_tier::<F>() {
-        for v in x.iter_mut() {
-            *v = sigmoid::<true>(*v);
-        }
+        colors::<true>(x, kept);
     } else {
-        for v in x.iter_mut() {
-            *v = sigmoid::<false>(*v);
-        }
+        colors::<false>(x, kept);
     }
     for (o, &v) in color.iter_mut().zip(x.iter()) {
         *o = F::lit(v);
     }
 }
 
-/// One chunk's gradient (as [`density_chunk`]); products in f64, rounded once.
+/// `x[i] = sigmoid(x[i])`, keeping the decays in `kept` if given.
+#[inline(always)]
+fn colors<const SINGLE: bool>(x: &mut [f64], kept: Option<&mut [f64]>) {
+    match kept {
+        Some(kept) => {
+            for (e, &v) in kept.iter_mut().zip(x.iter()) {
+                *e = decay::<SINGLE>(v);
+            }
+            for (v, &e) in x.iter_mut().zip(kept.iter()) {
+                *v = sigmoid_decayed::<SINGLE>(*v, e);
+            }
+        }
+        None => {
+            for v in x.iter_mut() {
+                *v = sigmoid::<SINGLE>(*v);
+            }
+        }
+    }
+}
+
+/// `x[i] = g[i] softplus'(x[i])`, from the kept decays if given.
+#[inline(always)]
+fn density_slopes<F: Float, const SINGLE: bool>(x: &mut [f64], g: &[F], kept: Option<&[f64]>) {
+    // softplus' = sigmoid.
+    match kept {
+        Some(kept) => {
+            for ((v, &g), &e) in x.iter_mut().zip(g).zip(kept) {
+                *v = g.as_f64() * sigmoid_decayed::<SINGLE>(*v, e);
+            }
+        }
+        None => {
+            for (v, &g) in x.iter_mut().zip(g) {
+                *v = g.as_f64() * sigmoid::<SINGLE>(*v);
+            }
+        }
+    }
+}
+
+/// `out[i] = g[i] sigmoid'(x)`, from the kept decays (`out` is then written whole) or from
+/// `out[i] = x` on entry.
+#[inline(always)]
+fn color_slopes<F: Float, const SINGLE: bool>(out: &mut [f64], g: &[F], kept: Option<&[f64]>) {
+    match kept {
+        Some(kept) => {
+            for ((v, &g), &e) in out.iter_mut().zip(g).zip(kept) {
+                *v = g.as_f64() * sigmoid_slope_decayed::<SINGLE>(e);
+            }
+        }
+        None => {
+            for (v, &g) in out.iter_mut().zip(g) {
+                *v = g.as_f64() * sigmoid_slope::<SINGLE>(*v);
+            }
+        }
+    }
+}
+
+/// One chunk's gradient (as [`density_chunk`]); products in f64, rounded once. `kept`: the
+/// chunk's density decays and colour decays, if the forward kept them.
+#[allow(clippy::too_many_arguments)]
 #[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
 fn backward_chunk<F: Float>(
     shift: f64,
@@ -152,19 +267,16 @@ fn backward_chunk<F: Float>(
     g_color: Option<&[F]>,
     g_raw: &mut [F],
     scratch: &mut Scratch,
+    kept: Option<(&[f64], &[f64])>,
 ) {
     match g_sigma {
         Some(g) => {
             let x = scratch.gather_density(raw, k, shift);
-            // softplus' = sigmoid.
+            let kept = kept.map(|(density, _)| density);
             if single_tier::<F>() {
-                for (v, &g) in x.iter_mut().zip(g) {
-                    *v = g.as_f64() * sigmoid::<true>(*v);
-                }
+                density_slopes::<F, true>(x, g, kept);
             } else {
-                for (v, &g) in x.iter_mut().zip(g) {
-                    *v = g.as_f64() * sigmoid::<false>(*v);
-                }
+                density_slopes::<F, false>(x, g, kept);
             }
             for (row, &v) in g_raw.chunks_exact_mut(k).zip(x.iter()) {
                 row[0] = F::lit(v);
@@ -178,15 +290,16 @@ fn backward_chunk<F: Float>(
     }
     match g_color {
         Some(g) => {
-            let x = scratch.gather_color(raw, k);
+            let kept = kept.map(|(_, color)| color);
+            // With the decays the raw colours are not needed: only room for the results.
+            let x = match kept {
+                Some(_) => scratch.color_room(raw.len() / k * (k - 1)),
+                None => scratch.gather_color(raw, k),
+            };
             if single_tier::<F>() {
-                for (v, &g) in x.iter_mut().zip(g) {
-                    *v = g.as_f64() * sigmoid_slope::<true>(*v);
-                }
+                color_slopes::<F, true>(x, g, kept);
             } else {
-                for (v, &g) in x.iter_mut().zip(g) {
-                    *v = g.as_f64() * sigmoid_slope::<false>(*v);
-                }
+                color_slopes::<F, false>(x, g, kept);
             }
             if k == 4 {
                 for (row, v) in g_raw.chunks_exact_mut(4).zip(x.chunks_exact(3)) {

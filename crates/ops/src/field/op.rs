@@ -9,6 +9,7 @@ use ndarray::{Array1, Array2, ArrayD, ArrayView2, ArrayViewD, ArrayViewMut2, Ix1
 use rayon::prelude::*;
 
 use super::config::{Activated, ActivatedGrads, ActivatedMut, DensityColor};
+use super::kept::KeptDecays;
 use super::kernel::{self, CHUNK};
 use crate::error::FieldError;
 
@@ -82,7 +83,7 @@ impl DensityColor {
     /// ([`FieldError::NanRaw`], the first one).
     pub fn evaluate<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Activated<F>, FieldError> {
         let (n, k) = check_raw(&raw)?;
-        let (sigma, color) = self.forward_flat(&flat(&raw), n, k);
+        let (sigma, color) = self.forward_flat(&flat(&raw), n, k, None);
         Ok(Activated {
             sigma: Array1::from_vec(sigma),
             color: matrix("color", n, k - 1, color)?,
@@ -105,9 +106,9 @@ impl DensityColor {
         }
         let raw = flat(&raw);
         match (sigma.as_slice_mut(), color.as_slice_mut()) {
-            (Some(s), Some(c)) => kernel::forward(self.shift(), k, &raw, s, c),
+            (Some(s), Some(c)) => kernel::forward(self.shift(), k, &raw, s, c, None),
             _ => {
-                let (s, c) = self.forward_flat(&raw, n, k);
+                let (s, c) = self.forward_flat(&raw, n, k, None);
                 sigma.assign(&Array1::from_vec(s));
                 for (o, v) in color.iter_mut().zip(c) {
                     *o = v;
@@ -148,7 +149,7 @@ impl DensityColor {
     ) -> Result<Array2<F>, FieldError> {
         let (n, k) = check_raw(&raw)?;
         check_upstream(upstream, n, k)?;
-        let g = self.backward_flat(&flat(&raw), k, upstream);
+        let g = self.backward_flat(&flat(&raw), k, upstream, None);
         matrix("raw gradient", n, k, g)
     }
 
@@ -171,9 +172,9 @@ impl DensityColor {
         let g_sigma = upstream.sigma.as_ref().map(flat);
         let g_color = upstream.color.as_ref().map(flat);
         match g_raw.as_slice_mut() {
-            Some(out) => kernel::backward(self.shift(), k, &raw, g_sigma.as_deref(), g_color.as_deref(), out),
+            Some(out) => kernel::backward(self.shift(), k, &raw, g_sigma.as_deref(), g_color.as_deref(), out, None),
             None => {
-                let g = self.backward_flat(&raw, k, upstream);
+                let g = self.backward_flat(&raw, k, upstream, None);
                 for (o, v) in g_raw.iter_mut().zip(g) {
                     *o = v;
                 }
@@ -182,20 +183,36 @@ impl DensityColor {
         Ok(())
     }
 
-    /// The forward on checked flat input: `(sigma, color)`.
-    fn forward_flat<F: Float>(&self, raw: &[F], n: usize, k: usize) -> (Vec<F>, Vec<F>) {
+    /// The forward on checked flat input: `(sigma, color)`, with every value's decay written
+    /// into `kept` (`n k` values) if given.
+    fn forward_flat<F: Float>(&self, raw: &[F], n: usize, k: usize, kept: Option<&mut [f64]>) -> (Vec<F>, Vec<F>) {
         // The kernel writes every value: no zeros first.
         let (mut sigma, mut color) = (scratch(n), scratch(n * (k - 1)));
-        kernel::forward(self.shift(), k, raw, &mut sigma, &mut color);
+        kernel::forward(self.shift(), k, raw, &mut sigma, &mut color, kept);
         (sigma, color)
     }
 
-    /// The backward on checked flat input and checked upstream gradients.
-    fn backward_flat<F: Float>(&self, raw: &[F], k: usize, upstream: &ActivatedGrads<'_, F>) -> Vec<F> {
+    /// The backward on checked flat input and checked upstream gradients, from the forward's
+    /// kept decays if given.
+    fn backward_flat<F: Float>(
+        &self,
+        raw: &[F],
+        k: usize,
+        upstream: &ActivatedGrads<'_, F>,
+        kept: Option<&[f64]>,
+    ) -> Vec<F> {
         let g_sigma = upstream.sigma.as_ref().map(flat);
         let g_color = upstream.color.as_ref().map(flat);
         let mut g = scratch(raw.len());
-        kernel::backward(self.shift(), k, raw, g_sigma.as_deref(), g_color.as_deref(), &mut g);
+        kernel::backward(
+            self.shift(),
+            k,
+            raw,
+            g_sigma.as_deref(),
+            g_color.as_deref(),
+            &mut g,
+            kept,
+        );
         g
     }
 }
@@ -217,26 +234,33 @@ fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, OpError> 
 }
 
 impl<F: Float> CustomOp<F> for DensityColor {
-    /// Nothing: the backward recomputes `exp(-|x|)` from the raw values the tape keeps anyway.
-    type Saved = ();
+    /// Every value's decay `exp(-|x|)`, in f64 (8 bytes a raw value): the backward then needs
+    /// no exponential, and its gradients are bitwise those recomputed from the raw values.
+    type Saved = KeptDecays;
 
     fn name(&self) -> &'static str {
         "density_color"
     }
 
-    fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
+    fn saved_bytes(&self, saved: &KeptDecays) -> usize {
+        saved.bytes()
+    }
+
+    fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, KeptDecays), OpError> {
         let [raw] = inputs else {
             return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
         };
         let raw = two_d(raw)?;
         let (n, k) = check_raw(&raw).map_err(op_error)?;
-        let (sigma, color) = self.forward_flat(&flat(&raw), n, k);
-        Ok((vec![array(&[n], sigma)?, array(&[n, k - 1], color)?], ()))
+        // Every value is written by the kernel.
+        let mut kept = KeptDecays::with_len(n * k);
+        let (sigma, color) = self.forward_flat(&flat(&raw), n, k, Some(kept.values_mut()));
+        Ok((vec![array(&[n], sigma)?, array(&[n, k - 1], color)?], kept))
     }
 
     fn backward(
         &self,
-        ctx: &BackwardCtx<'_, F, ()>,
+        ctx: &BackwardCtx<'_, F, KeptDecays>,
         grads: &[Option<ArrayViewD<'_, F>>],
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         if !ctx.needs_input_grad(0) || grads.iter().all(Option::is_none) {
@@ -265,7 +289,7 @@ impl<F: Float> CustomOp<F> for DensityColor {
         };
         let upstream = ActivatedGrads { sigma, color };
         check_upstream(&upstream, n, k).map_err(op_error)?;
-        let g = self.backward_flat(&flat(&raw), k, &upstream);
+        let g = self.backward_flat(&flat(&raw), k, &upstream, Some(ctx.saved().values()));
         Ok(vec![Some(array(&[n, k], g)?)])
     }
 }

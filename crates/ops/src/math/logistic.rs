@@ -104,22 +104,34 @@ fn reciprocal_one_plus<const SINGLE: bool>(e: f64) -> (f64, f64) {
     (inv, (residual - inv * d_err) * inv)
 }
 
-/// `exp(-|x|)`; infinities give 0.
+/// `exp(-|x|)`, the decay every form below is built on; infinities give 0. Its callers may
+/// keep it and pass it to the `_decayed` forms, which then need no exponential.
 #[inline(always)]
-fn decay<const SINGLE: bool>(x: f64) -> f64 {
+pub(crate) fn decay<const SINGLE: bool>(x: f64) -> f64 {
     exp_neg::<SINGLE>(x.abs())
 }
 
 /// `ln(1 + exp(x))` (NaN gives a meaningless value: the callers validate).
 #[inline(always)]
 pub(crate) fn softplus<const SINGLE: bool>(x: f64) -> f64 {
-    x.max(0.0) + ln_1p_unit::<SINGLE>(decay::<SINGLE>(x))
+    softplus_decayed::<SINGLE>(x, decay::<SINGLE>(x))
+}
+
+/// [`softplus`] from `x` and its [`decay`] `e`.
+#[inline(always)]
+pub(crate) fn softplus_decayed<const SINGLE: bool>(x: f64, e: f64) -> f64 {
+    x.max(0.0) + ln_1p_unit::<SINGLE>(e)
 }
 
 /// `1 / (1 + exp(-x))`, exactly 0 or 1 where saturated.
 #[inline(always)]
 pub(crate) fn sigmoid<const SINGLE: bool>(x: f64) -> f64 {
-    let e = decay::<SINGLE>(x);
+    sigmoid_decayed::<SINGLE>(x, decay::<SINGLE>(x))
+}
+
+/// [`sigmoid`] from `x` and its [`decay`] `e`.
+#[inline(always)]
+pub(crate) fn sigmoid_decayed<const SINGLE: bool>(x: f64, e: f64) -> f64 {
     let (inv, inv_lo) = reciprocal_one_plus::<SINGLE>(e);
     let numerator = if x >= 0.0 { 1.0 } else { e };
     numerator.mul_add(inv, numerator * inv_lo)
@@ -128,7 +140,12 @@ pub(crate) fn sigmoid<const SINGLE: bool>(x: f64) -> f64 {
 /// `sigmoid'(x) = e / (1 + e)^2` with `e = exp(-|x|)` (the slope is even in `x`).
 #[inline(always)]
 pub(crate) fn sigmoid_slope<const SINGLE: bool>(x: f64) -> f64 {
-    let e = decay::<SINGLE>(x);
+    sigmoid_slope_decayed::<SINGLE>(decay::<SINGLE>(x))
+}
+
+/// [`sigmoid_slope`] from the [`decay`] `e` of its argument alone.
+#[inline(always)]
+pub(crate) fn sigmoid_slope_decayed<const SINGLE: bool>(e: f64) -> f64 {
     let (inv, inv_lo) = reciprocal_one_plus::<SINGLE>(e);
     let square = inv * inv;
     if SINGLE {

@@ -241,6 +241,66 @@ fn results_are_bitwise_the_same_on_1_2_and_3_threads() {
     assert_eq!(run(3), one);
 }
 
+/// The op on a tape (whose backward reads the decays its forward kept) and its stateless `vjp`
+/// (which recomputes them from the raw values) give bitwise the same gradients, for `F`, over
+/// several chunks of rows, the general channel count and a missing upstream gradient.
+fn kept_decays_give_the_recomputed_gradients<F: fogray_tape::Float>() {
+    let op = DensityColor::new(-4.0).unwrap();
+    for (k, n) in [(4, 2 * 2048 + 5), (2, 300), (6, 2048 + 1)] {
+        let mut x = raw(21, n, k, 30.0);
+        // Saturated tails, exact zeros and infinities, in both columns.
+        x.row_mut(0).fill(0.0);
+        x[[1, 0]] = f64::INFINITY;
+        x[[1, 1]] = f64::NEG_INFINITY;
+        x[[2, 0]] = -800.0;
+        x[[2, k - 1]] = 745.5;
+        let x = x.mapv(F::lit);
+        let gs = raw(22, n, 1, 2.0).index_axis(Axis(1), 0).mapv(F::lit);
+        let gc = raw(23, n, k - 1, 2.0).mapv(F::lit);
+        for (with_sigma, with_color) in [(true, true), (false, true), (true, false)] {
+            let mut tape = Tape::<F>::new();
+            let r = tape.param(x.clone());
+            let out = op.apply(&mut tape, r).unwrap();
+            // d(sum(ws sigma) + sum(wc color)) / d(sigma, color) = (ws, wc), exactly.
+            let mut terms = Vec::new();
+            if with_sigma {
+                let w = tape.constant(gs.clone());
+                let p = tape.mul(out.sigma, w).unwrap();
+                terms.push(tape.sum(p).unwrap());
+            }
+            if with_color {
+                let w = tape.constant(gc.clone());
+                let p = tape.mul(out.color, w).unwrap();
+                terms.push(tape.sum(p).unwrap());
+            }
+            let loss = match terms[..] {
+                [a, b] => tape.add(a, b).unwrap(),
+                [a] => a,
+                _ => unreachable!(),
+            };
+            let taped = tape.backward(loss).unwrap().get(r).unwrap().to_owned();
+            let upstream = ActivatedGrads {
+                sigma: with_sigma.then(|| gs.view()),
+                color: with_color.then(|| gc.view()),
+            };
+            let recomputed = op.vjp(x.view(), &upstream).unwrap();
+            let bits = |a: &mut dyn Iterator<Item = F>| a.map(|v| v.as_f64().to_bits()).collect::<Vec<u64>>();
+            assert_eq!(
+                bits(&mut taped.iter().copied()),
+                bits(&mut recomputed.iter().copied()),
+                "{} k = {k}, sigma {with_sigma}, colour {with_color}",
+                F::NAME
+            );
+        }
+    }
+}
+
+#[test]
+fn the_tape_backward_from_kept_decays_is_bitwise_the_recomputed_one() {
+    kept_decays_give_the_recomputed_gradients::<f32>();
+    kept_decays_give_the_recomputed_gradients::<f64>();
+}
+
 #[test]
 fn the_into_forms_write_strided_buffers_and_zero_the_missing_gradients() {
     let op = DensityColor::new(0.3).unwrap();
