@@ -19,9 +19,7 @@ use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::math::exp::single_tier;
-use crate::math::logistic::{
-    decay, sigmoid, sigmoid_decayed, sigmoid_slope, sigmoid_slope_decayed, softplus, softplus_decayed,
-};
+use crate::math::logistic::{decay, sigmoid, sigmoid_decayed, sigmoid_slope, sigmoid_slope_decayed, softplus_decayed};
 
 /// Rows per parallel task: enough to amortise a task, few enough that the scratch of one
 /// chunk (8 bytes a value) stays in the core's cache.
@@ -155,31 +153,32 @@ fn density_chunk<F: Float>(
 ) {
     let x = scratch.gather_density(raw, k, shift);
     if single_tier::<F>() {
-        densities::<true>(x, kept);
+        activate::<true>(x, kept, softplus_decayed::<true>);
     } else {
-        densities::<false>(x, kept);
+        activate::<false>(x, kept, softplus_decayed::<false>);
     }
     for (o, &v) in sigma.iter_mut().zip(x.iter()) {
         *o = F::lit(v);
     }
 }
 
-/// `x[i] = softplus(x[i])`, keeping the decays in `kept` if given. (Functions, not closures,
-/// so that the loops are compiled with their vectorised callers' features.)
+/// `x[i] = form(x[i], decay(x[i]))` (softplus or sigmoid from their decays), keeping the
+/// decays in `kept` if given. `form` is passed as a function item, not a closure, so that
+/// the loops are compiled with their vectorised callers' features.
 #[inline(always)]
-fn densities<const SINGLE: bool>(x: &mut [f64], kept: Option<&mut [f64]>) {
+fn activate<const SINGLE: bool>(x: &mut [f64], kept: Option<&mut [f64]>, form: impl Fn(f64, f64) -> f64) {
     match kept {
         Some(kept) => {
             for (e, &v) in kept.iter_mut().zip(x.iter()) {
                 *e = decay::<SINGLE>(v);
             }
             for (v, &e) in x.iter_mut().zip(kept.iter()) {
-                *v = softplus_decayed::<SINGLE>(*v, e);
+                *v = form(*v, e);
             }
         }
         None => {
             for v in x.iter_mut() {
-                *v = softplus::<SINGLE>(*v);
+                *v = form(*v, decay::<SINGLE>(*v));
             }
         }
     }
@@ -190,32 +189,12 @@ fn densities<const SINGLE: bool>(x: &mut [f64], kept: Option<&mut [f64]>) {
 fn color_chunk<F: Float>(k: usize, raw: &[F], color: &mut [F], scratch: &mut Scratch, kept: Option<&mut [f64]>) {
     let x = scratch.gather_color(raw, k);
     if single_tier::<F>() {
-        colors::<true>(x, kept);
+        activate::<true>(x, kept, sigmoid_decayed::<true>);
     } else {
-        colors::<false>(x, kept);
+        activate::<false>(x, kept, sigmoid_decayed::<false>);
     }
     for (o, &v) in color.iter_mut().zip(x.iter()) {
         *o = F::lit(v);
-    }
-}
-
-/// `x[i] = sigmoid(x[i])`, keeping the decays in `kept` if given.
-#[inline(always)]
-fn colors<const SINGLE: bool>(x: &mut [f64], kept: Option<&mut [f64]>) {
-    match kept {
-        Some(kept) => {
-            for (e, &v) in kept.iter_mut().zip(x.iter()) {
-                *e = decay::<SINGLE>(v);
-            }
-            for (v, &e) in x.iter_mut().zip(kept.iter()) {
-                *v = sigmoid_decayed::<SINGLE>(*v, e);
-            }
-        }
-        None => {
-            for v in x.iter_mut() {
-                *v = sigmoid::<SINGLE>(*v);
-            }
-        }
     }
 }
 
