@@ -19,7 +19,7 @@ use multiversion::multiversion;
 use rayon::prelude::*;
 
 use crate::math::exp::single_tier;
-use crate::math::logistic::{decay, sigmoid, sigmoid_decayed, sigmoid_slope, sigmoid_slope_decayed, softplus_decayed};
+use crate::math::logistic::{decay, sigmoid_decayed, sigmoid_slope_decayed, softplus_decayed};
 
 /// Rows per parallel task: enough to amortise a task, few enough that the scratch of one
 /// chunk (8 bytes a value) stays in the core's cache.
@@ -198,40 +198,29 @@ fn color_chunk<F: Float>(k: usize, raw: &[F], color: &mut [F], scratch: &mut Scr
     }
 }
 
-/// `x[i] = g[i] softplus'(x[i])`, from the kept decays if given.
+/// `x[i] = g[i] slope(x[i], decay(x[i]))`, the decays read from `kept` if given (then `x`
+/// may hold anything for a `slope` that reads only the decay). `slope` is a function item, as
+/// in [`activate`].
 #[inline(always)]
-fn density_slopes<F: Float, const SINGLE: bool>(x: &mut [f64], g: &[F], kept: Option<&[f64]>) {
-    // softplus' = sigmoid.
+fn slopes<F: Float, const SINGLE: bool>(x: &mut [f64], g: &[F], kept: Option<&[f64]>, slope: impl Fn(f64, f64) -> f64) {
     match kept {
         Some(kept) => {
             for ((v, &g), &e) in x.iter_mut().zip(g).zip(kept) {
-                *v = g.as_f64() * sigmoid_decayed::<SINGLE>(*v, e);
+                *v = g.as_f64() * slope(*v, e);
             }
         }
         None => {
             for (v, &g) in x.iter_mut().zip(g) {
-                *v = g.as_f64() * sigmoid::<SINGLE>(*v);
+                *v = g.as_f64() * slope(*v, decay::<SINGLE>(*v));
             }
         }
     }
 }
 
-/// `out[i] = g[i] sigmoid'(x)`, from the kept decays (`out` is then written whole) or from
-/// `out[i] = x` on entry.
+/// `sigmoid'` from the decay alone, in the shape [`slopes`] takes.
 #[inline(always)]
-fn color_slopes<F: Float, const SINGLE: bool>(out: &mut [f64], g: &[F], kept: Option<&[f64]>) {
-    match kept {
-        Some(kept) => {
-            for ((v, &g), &e) in out.iter_mut().zip(g).zip(kept) {
-                *v = g.as_f64() * sigmoid_slope_decayed::<SINGLE>(e);
-            }
-        }
-        None => {
-            for (v, &g) in out.iter_mut().zip(g) {
-                *v = g.as_f64() * sigmoid_slope::<SINGLE>(*v);
-            }
-        }
-    }
+fn color_slope<const SINGLE: bool>(_x: f64, e: f64) -> f64 {
+    sigmoid_slope_decayed::<SINGLE>(e)
 }
 
 /// One chunk's gradient (as [`density_chunk`]); products in f64, rounded once. `kept`: the
@@ -252,10 +241,11 @@ fn backward_chunk<F: Float>(
         Some(g) => {
             let x = scratch.gather_density(raw, k, shift);
             let kept = kept.map(|(density, _)| density);
+            // softplus' = sigmoid.
             if single_tier::<F>() {
-                density_slopes::<F, true>(x, g, kept);
+                slopes::<F, true>(x, g, kept, sigmoid_decayed::<true>);
             } else {
-                density_slopes::<F, false>(x, g, kept);
+                slopes::<F, false>(x, g, kept, sigmoid_decayed::<false>);
             }
             for (row, &v) in g_raw.chunks_exact_mut(k).zip(x.iter()) {
                 row[0] = F::lit(v);
@@ -276,9 +266,9 @@ fn backward_chunk<F: Float>(
                 None => scratch.gather_color(raw, k),
             };
             if single_tier::<F>() {
-                color_slopes::<F, true>(x, g, kept);
+                slopes::<F, true>(x, g, kept, color_slope::<true>);
             } else {
-                color_slopes::<F, false>(x, g, kept);
+                slopes::<F, false>(x, g, kept, color_slope::<false>);
             }
             if k == 4 {
                 for (row, v) in g_raw.chunks_exact_mut(4).zip(x.chunks_exact(3)) {
