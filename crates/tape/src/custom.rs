@@ -61,6 +61,16 @@ pub trait CustomOp<F: Float>: Debug + Send + 'static {
     /// An `Err` here leaves the tape unchanged.
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, Self::Saved), OpError>;
 
+    /// Computes the outputs alone, for an application the tape keeps no record of (recording
+    /// is off, or no input needs a gradient): no backward will read residuals, so an op whose
+    /// residuals cost time or memory to make can skip them here. The outputs must be those
+    /// [`CustomOp::forward`] computes, bit for bit, and its errors the same.
+    ///
+    /// Defaults to [`CustomOp::forward`] with its residuals dropped.
+    fn forward_only(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<Vec<ArrayD<F>>, OpError> {
+        self.forward(inputs).map(|(outputs, _)| outputs)
+    }
+
     /// Maps the upstream gradients to gradients of the inputs (a vector-Jacobian product).
     ///
     /// `grads[j]` is `None` when output `j` reached nothing that needs a gradient; at least one

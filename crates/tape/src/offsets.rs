@@ -52,7 +52,10 @@ pub enum OffsetsError {
     },
 }
 
-/// A validated packing of rows into segments (see the [module docs](self)).
+/// A validated packing of rows into segments: `R + 1` offsets, segment `r` owning rows
+/// `offsets[r]..offsets[r+1]` (at least one entry, starting at 0, never decreasing). The one
+/// layout of packed rays: a ray's samples are consecutive rows of flat arrays. Cloning it
+/// copies a pointer.
 ///
 /// It dereferences to the offsets as a slice.
 #[derive(Debug, Clone, PartialEq, Eq, Hash)]

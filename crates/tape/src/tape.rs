@@ -294,7 +294,7 @@ impl<F: Float> Tape<F> {
     ///
     /// The forward runs on the input values; if it fails, or returns no output, nothing is
     /// pushed. A record for backward is kept only if recording is on and some input needs a
-    /// gradient.
+    /// gradient; otherwise the op computes its outputs alone ([`CustomOp::forward_only`]).
     pub fn apply<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var]) -> Result<Vec<Var>> {
         self.apply_checked(op, inputs, false)
     }
@@ -308,11 +308,18 @@ impl<F: Float> Tape<F> {
     /// returns other than one output when `one` is set.
     fn apply_checked<O: CustomOp<F>>(&mut self, op: O, inputs: &[Var], one: bool) -> Result<Vec<Var>> {
         let ids = inputs.iter().map(|&v| self.check(v)).collect::<Result<Vec<_>>>()?;
+        let needs_grad = self.grad_enabled && ids.iter().any(|&i| self.values[i].needs_grad);
         let started = self.profile.is_some().then(Instant::now);
         let (outputs, saved) = {
             let views: Vec<ArrayViewD<'_, F>> = ids.iter().map(|&i| self.values[i].data.view()).collect();
             let _pooled = pool::install(&self.pool);
-            op.forward(&views).map_err(|e| TapeError::from_op(op.name(), e))?
+            let computed = if needs_grad {
+                op.forward(&views).map(|(outputs, saved)| (outputs, Some(saved)))
+            } else {
+                // No record will be kept: the op need not make residuals.
+                op.forward_only(&views).map(|outputs| (outputs, None))
+            };
+            computed.map_err(|e| TapeError::from_op(op.name(), e))?
         };
         let forward_time = started.map(|s| s.elapsed());
         if outputs.is_empty() {
@@ -327,7 +334,6 @@ impl<F: Float> Tape<F> {
                 reason: format!("apply1 needs one output, the op returned {}", outputs.len()),
             });
         }
-        let needs_grad = self.grad_enabled && ids.iter().any(|&i| self.values[i].needs_grad);
         let first = self.values.len();
         let count = outputs.len();
         if first + count > u32::MAX as usize {
@@ -347,7 +353,7 @@ impl<F: Float> Tape<F> {
         if let (Some(profile), Some(time)) = (&mut self.profile, forward_time) {
             profile.get_mut().add_forward(op.name(), time);
         }
-        if needs_grad {
+        if let Some(saved) = saved {
             self.records.push(Record {
                 inputs: ids.iter().map(|&i| i as u32).collect(),
                 outputs: first as u32..(first + count) as u32,

@@ -290,6 +290,8 @@ fn render_rays<F: Float>(
     let n = origins.nrows();
     let mut out = Array2::zeros((n, 3));
     let mut tape = Tape::<F>::new();
+    // No backward: the ops keep no record and no residuals.
+    tape.set_grad_enabled(false);
     for start in (0..n).step_by(CHUNK) {
         let rows: Vec<usize> = (start..(start + CHUNK).min(n)).collect();
         let rays = batch_of::<F>(origins, directions, &rows)?;

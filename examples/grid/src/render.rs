@@ -95,6 +95,8 @@ pub fn render_view<F: Float>(
     let bounds = Aabb::new(BOUNDS.0, BOUNDS.1)?;
     let sampler = Uniform::new(Spacing::Step(model.voxel() / 2.0))?;
     let mut tape = Tape::<F>::new();
+    // No backward: the ops keep no record and no residuals.
+    tape.set_grad_enabled(false);
     for start in (0..rays.len()).step_by(CHUNK) {
         let chunk = &rays[start..(start + CHUNK).min(rays.len())];
         let origins = Array2::from_shape_fn((chunk.len(), 3), |(i, k)| F::lit(chunk[i].origin[k]));

@@ -7,7 +7,7 @@
 //! - [`compare`]: fused against taped, occupancy against uniform, each against the anchor;
 //! - [`same_steps`]: fused against taped over the same steps (the time to the same PSNR);
 //! - [`configuration`]: the configurations and their names;
-//! - [`run`]: running the fits; [`markdown`] and [`write`]: the report's files.
+//! - [`run`]: running the fits; [`markdown`] and [`mod@write`]: the report's files.
 //!
 //! ```
 //! use fogray_grid::fit::LogEntry;

@@ -68,8 +68,19 @@ impl DensityColor {
         self.shift
     }
 
+    /// Drops the decay buffer the calling thread keeps for the next forward on a tape (see
+    /// [`KeptDecays`](super::KeptDecays)); the next forward there allocates one again. The
+    /// buffer belongs to the thread, shared by every activation that runs on it, not to
+    /// `self`.
+    pub fn release_buffers(&self) {
+        super::kept::release_spare();
+    }
+
     /// Records the activation of `raw` (`[n, k]`, `k >= 2`) on `tape` as one op through the
     /// tape's public custom-op interface; its backward gives `dL/draw` where the tape needs it.
+    /// It keeps every value's decay for that backward ([`KeptDecays`](super::KeptDecays), 8
+    /// bytes a raw value) only when the tape keeps a record of it: not under
+    /// [`Tape::no_grad`], nor on a value that needs no gradient.
     ///
     /// Errors (the tape is unchanged): `raw` not `[n, k]` with `k >= 2`, or a NaN raw value
     /// (the [`FieldError`] itself inside [`TapeError::Op`], read back with

@@ -12,7 +12,8 @@ thread_local! {
 /// The residuals of [`DensityColor`](super::DensityColor) on a tape: every raw value's decay,
 /// in f64, 8 bytes a raw value. When the tape lets them go (at `clear`, or when it is
 /// dropped), the buffer is kept on that thread, one buffer at most (the largest), for the next
-/// forward of the activation there.
+/// forward of the activation there, until
+/// [`DensityColor::release_buffers`](super::DensityColor::release_buffers) drops it.
 #[derive(Debug)]
 pub struct KeptDecays(Vec<f64>);
 
@@ -45,6 +46,17 @@ impl KeptDecays {
     }
 }
 
+/// Drops this thread's spare buffer, if it has one.
+pub(crate) fn release_spare() {
+    let _ = SPARE.try_with(|s| s.borrow_mut().take());
+}
+
+/// The capacity of this thread's spare buffer (0 without one).
+#[cfg(test)]
+pub(crate) fn spare_capacity() -> usize {
+    SPARE.with(|s| s.borrow().as_ref().map_or(0, Vec::capacity))
+}
+
 impl Drop for KeptDecays {
     fn drop(&mut self) {
         let v = std::mem::take(&mut self.0);
@@ -61,6 +73,35 @@ impl Drop for KeptDecays {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::field::DensityColor;
+    use fogray_tape::Tape;
+    use ndarray::Array2;
+
+    #[test]
+    fn decays_are_kept_only_for_a_recorded_application_and_released_on_request() {
+        // A thread of its own: its spare buffer starts empty.
+        std::thread::spawn(|| {
+            let op = DensityColor::new(-1.0).unwrap();
+            let raw = Array2::from_shape_fn((1000, 4), |(i, c)| (i as f64 - 500.0) / 50.0 + c as f64);
+            let mut tape = Tape::<f64>::new();
+            let x = tape.param(raw.clone());
+            let c = tape.constant(raw);
+            tape.no_grad(|t| op.apply(t, x)).unwrap();
+            op.apply(&mut tape, c).unwrap();
+            assert_eq!(tape.stats().saved_bytes, 0);
+            tape.clear();
+            assert_eq!(spare_capacity(), 0, "no record, no decays");
+            let x = tape.param(Array2::zeros((1000, 4)));
+            op.apply(&mut tape, x).unwrap();
+            assert_eq!(tape.stats().saved_bytes, 1000 * 4 * 8);
+            tape.clear();
+            assert!(spare_capacity() >= 4000, "the recorded decays' buffer is kept");
+            op.release_buffers();
+            assert_eq!(spare_capacity(), 0);
+        })
+        .join()
+        .unwrap();
+    }
 
     #[test]
     fn a_dropped_buffer_is_reused_by_the_next_request_that_fits() {

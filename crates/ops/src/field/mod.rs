@@ -32,10 +32,12 @@
 //! within 0.51 f32 ulp of the exact values. The loops run over contiguous f64 columns so that
 //! they vectorise (compiled for AVX-512, AVX2+FMA and the baseline, chosen at run time, with
 //! the same values); chunks of rows run in parallel, and every value depends on its own row
-//! alone, so the results are bitwise the same for any number of threads. On a tape the
-//! forward keeps every value's `e` (in f64, [`KeptDecays`]) and the backward computes from it
-//! with no exponential, bitwise the gradients [`DensityColor::vjp`] recomputes from the raw
-//! values; the buffer is kept on its thread between steps.
+//! alone, so the results are bitwise the same for any number of threads. On a tape that
+//! records it the forward keeps every value's `e` (in f64, [`KeptDecays`]) and the backward
+//! computes from it with no exponential, bitwise the gradients [`DensityColor::vjp`]
+//! recomputes from the raw values; the buffer is kept on its thread between steps (until
+//! [`DensityColor::release_buffers`]). Under [`Tape::no_grad`](fogray_tape::Tape::no_grad),
+//! or on a constant, nothing is kept.
 //!
 //! ```
 //! use fogray_ops::field::DensityColor;

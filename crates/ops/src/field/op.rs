@@ -258,6 +258,17 @@ impl<F: Float> CustomOp<F> for DensityColor {
         Ok((vec![array(&[n], sigma)?, array(&[n, k - 1], color)?], kept))
     }
 
+    /// The same outputs, bit for bit, without keeping the decays: no backward will read them.
+    fn forward_only(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<Vec<ArrayD<F>>, OpError> {
+        let [raw] = inputs else {
+            return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
+        };
+        let raw = two_d(raw)?;
+        let (n, k) = check_raw(&raw).map_err(op_error)?;
+        let (sigma, color) = self.forward_flat(&flat(&raw), n, k, None);
+        Ok(vec![array(&[n], sigma)?, array(&[n, k - 1], color)?])
+    }
+
     fn backward(
         &self,
         ctx: &BackwardCtx<'_, F, KeptDecays>,

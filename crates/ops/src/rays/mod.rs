@@ -33,7 +33,7 @@
 
 mod aabb;
 pub(crate) mod batch;
-mod camera;
+pub mod camera;
 #[cfg(test)]
 mod camera_tests;
 mod frame;

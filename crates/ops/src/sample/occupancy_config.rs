@@ -93,7 +93,7 @@ impl OccupancyConfig {
     }
 }
 
-/// Where in each cell the density is evaluated by [`OccupancyGrid::update`].
+/// Where in each cell the density is evaluated by [`OccupancyGrid::update`](super::OccupancyGrid::update).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum CellPoints {
     /// The cell centre. Matter that does not reach a cell's centre (the rim of a ball, a

@@ -301,6 +301,63 @@ fn the_tape_backward_from_kept_decays_is_bitwise_the_recomputed_one() {
     kept_decays_give_the_recomputed_gradients::<f64>();
 }
 
+/// Under `no_grad` (or on a constant) the activation keeps no decays; its outputs must be the
+/// recorded application's, bit for bit, and a NaN the same typed error.
+fn unrecorded_outputs_are_the_recorded_ones<F: fogray_tape::Float>() {
+    let op = DensityColor::new(-2.0).unwrap();
+    let bits = |t: &Tape<F>, v: Var| {
+        t.value(v)
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().to_bits())
+            .collect::<Vec<u64>>()
+    };
+    for (k, n) in [(4, 2 * 2048 + 5), (2, 300)] {
+        let mut x = raw(24, n, k, 30.0);
+        x[[1, 0]] = f64::INFINITY;
+        x[[2, k - 1]] = -800.0;
+        let x = x.mapv(F::lit);
+        let mut tape = Tape::<F>::new();
+        let r = tape.param(x.clone());
+        let recorded = op.apply(&mut tape, r).unwrap();
+        let c = tape.constant(x.clone());
+        let unrecorded = [
+            tape.no_grad(|t| op.apply(t, r)).unwrap(),
+            op.apply(&mut tape, c).unwrap(),
+        ];
+        assert_eq!(tape.stats().records, 1, "{} k = {k}", F::NAME);
+        for out in unrecorded {
+            assert_eq!(
+                bits(&tape, out.sigma),
+                bits(&tape, recorded.sigma),
+                "{} k = {k}",
+                F::NAME
+            );
+            assert_eq!(
+                bits(&tape, out.color),
+                bits(&tape, recorded.color),
+                "{} k = {k}",
+                F::NAME
+            );
+        }
+        let mut bad = x;
+        bad[[n - 1, 1]] = F::lit(f64::NAN);
+        let b = tape.param(bad);
+        let e = tape.no_grad(|t| op.apply(t, b)).unwrap_err();
+        assert_eq!(
+            e.downcast_ref::<FieldError>(),
+            Some(&FieldError::NanRaw { row: n - 1, channel: 1 }),
+            "{e}"
+        );
+    }
+}
+
+#[test]
+fn an_unrecorded_application_gives_the_recorded_outputs_and_errors() {
+    unrecorded_outputs_are_the_recorded_ones::<f32>();
+    unrecorded_outputs_are_the_recorded_ones::<f64>();
+}
+
 #[test]
 fn the_into_forms_write_strided_buffers_and_zero_the_missing_gradients() {
     let op = DensityColor::new(0.3).unwrap();

@@ -290,3 +290,105 @@ fn the_tape_is_send() {
     is_send::<Tape<f32>>();
     is_send::<Tape<f64>>();
 }
+
+/// Doubles its input; its forward (the one that makes residuals) and its outputs-alone
+/// forward mark different outputs, so that a test sees which one ran.
+#[derive(Debug)]
+struct Marked;
+
+impl CustomOp<f64> for Marked {
+    type Saved = Vec<f64>;
+    fn name(&self) -> &'static str {
+        "marked"
+    }
+    fn forward(&self, inputs: &[ArrayViewD<'_, f64>]) -> Result<(Vec<ArrayD<f64>>, Vec<f64>), OpError> {
+        let y = inputs[0].mapv(|x| 2.0 * x);
+        Ok((vec![y, ArrayD::from_elem(vec![1], 1.0)], vec![7.0]))
+    }
+    fn forward_only(&self, inputs: &[ArrayViewD<'_, f64>]) -> Result<Vec<ArrayD<f64>>, OpError> {
+        let y = inputs[0].mapv(|x| 2.0 * x);
+        Ok(vec![y, ArrayD::from_elem(vec![1], 0.0)])
+    }
+    fn backward(
+        &self,
+        ctx: &BackwardCtx<'_, f64, Vec<f64>>,
+        grads: &[Option<ArrayViewD<'_, f64>>],
+    ) -> Result<Vec<Option<ArrayD<f64>>>, OpError> {
+        assert_eq!(ctx.saved(), &[7.0], "the residuals of `forward`");
+        Ok(vec![grads[0].as_ref().map(|g| g.mapv(|g| 2.0 * g))])
+    }
+}
+
+#[test]
+fn an_application_without_a_record_runs_the_outputs_alone_forward() {
+    // 1 in the marker output: `forward` ran (its residuals kept); 0: `forward_only` ran.
+    let marker = |t: &Tape<f64>, outputs: &[fogray_tape::Var]| t.value(outputs[1]).unwrap()[[0]];
+    let mut t = Tape::<f64>::new();
+    let x = t.param(arr1(&[1.5, -2.0]));
+    let recorded = t.apply(Marked, &[x]).unwrap();
+    assert_eq!((marker(&t, &recorded), t.stats().records), (1.0, 1));
+    let s = t.sum(recorded[0]).unwrap();
+    let g = t.backward(s).unwrap();
+    assert_eq!(g.get(x).unwrap().iter().copied().collect::<Vec<_>>(), vec![2.0, 2.0]);
+
+    for (case, outputs) in [
+        ("under no_grad", t.no_grad(|t| t.apply(Marked, &[x])).unwrap()),
+        ("on a constant", {
+            let c = t.constant(arr1(&[1.5, -2.0]));
+            t.apply(Marked, &[c]).unwrap()
+        }),
+        ("on a detached value", {
+            let d = t.detach(x).unwrap();
+            t.apply(Marked, &[d]).unwrap()
+        }),
+    ] {
+        assert_eq!(marker(&t, &outputs), 0.0, "{case}");
+        assert_eq!(
+            t.value(outputs[0]).unwrap().iter().copied().collect::<Vec<_>>(),
+            vec![3.0, -4.0],
+            "{case}"
+        );
+    }
+    // Only the first application (and the sum) left a record.
+    assert_eq!(t.stats().records, 2);
+}
+
+/// An op that overrides nothing but `forward`: without a record its outputs are `forward`'s.
+#[derive(Debug)]
+struct Plain;
+
+impl CustomOp<f64> for Plain {
+    type Saved = ();
+    fn name(&self) -> &'static str {
+        "plain"
+    }
+    fn forward(&self, inputs: &[ArrayViewD<'_, f64>]) -> Result<(Vec<ArrayD<f64>>, ()), OpError> {
+        if inputs[0].iter().any(|x| x.is_nan()) {
+            return Err(OpError::InvalidArgument("NaN input".into()));
+        }
+        Ok((vec![inputs[0].mapv(|x| x + 1.0)], ()))
+    }
+    fn backward(
+        &self,
+        _ctx: &BackwardCtx<'_, f64, ()>,
+        grads: &[Option<ArrayViewD<'_, f64>>],
+    ) -> Result<Vec<Option<ArrayD<f64>>>, OpError> {
+        Ok(vec![grads[0].as_ref().map(|g| g.to_owned())])
+    }
+}
+
+#[test]
+fn the_default_outputs_alone_forward_is_the_forward_with_its_errors() {
+    let mut t = Tape::<f64>::new();
+    let x = t.param(arr1(&[1.0, 2.0]));
+    let y = t.no_grad(|t| t.apply1(Plain, &[x])).unwrap();
+    assert_eq!(t.value(y).unwrap().iter().copied().collect::<Vec<_>>(), vec![2.0, 3.0]);
+    let before = t.len();
+    let bad = t.constant(arr1(&[f64::NAN]));
+    let e = t.no_grad(|t| t.apply1(Plain, &[bad])).unwrap_err();
+    assert!(
+        e.to_string().contains("plain") && e.to_string().contains("NaN input"),
+        "{e}"
+    );
+    assert_eq!(t.len(), before + 1, "a failed forward pushes nothing");
+}

@@ -83,7 +83,7 @@ impl SameSteps {
 ///
 /// With a budget of steps the report's own runs are the pairs. With a budget of seconds, each
 /// pair trains again (fused, taped, then fused again: see the module docs) for the steps the
-/// taped run made, with [`EXTRA_RUN_EVALUATIONS`] evaluations; `progress` hears each extra
+/// taped run made, with one evaluation (at its end); `progress` hears each extra
 /// run's name (such as `"taped-occupancy, 826 steps"`, and `"fused-occupancy, 826 steps,
 /// again"`) and its fit's progress. A taped run that made no step gives no pair.
 ///
