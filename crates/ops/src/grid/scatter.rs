@@ -194,31 +194,30 @@ pub(crate) fn grid_gradient<F: Float, const D: usize>(
         .zip(upstream.par_chunks(BLOCK * ch))
         .for_each(|((sorted, p), g)| sort_block(sorted, layout, tiles, &tile_of, p, g, ch));
     // The sums go to kept f64 zeros, are rounded once into `out` (which therefore needs no
-    // zeros of its own: one pass over it, in either precision) and cleared for the next call.
+    // zeros of its own, in either precision) and cleared for the next call.
     let mut acc = scratch.take_zeros(out.len());
-    sum_slabs(layout, tiles, &blocks, ch, &mut acc);
-    out.par_chunks_mut(1 << 16)
-        .zip(acc.par_chunks_mut(1 << 16))
-        .for_each(|(o, a)| {
-            for (o, a) in o.iter_mut().zip(a) {
-                *o = F::lit(*a);
-                *a = 0.0;
-            }
-        });
+    sum_slabs(layout, tiles, &blocks, ch, &mut acc, out);
     scratch.give_zeros(acc);
     scratch.give_blocks(blocks);
 }
 
 /// Sums every tile's terms into `acc` (the grid's shape, f64, zeros on entry): the even
-/// slabs in parallel, then the odd ones.
+/// slabs in parallel, then the odd ones; rounds the sums into `out` and leaves `acc` zeros.
+///
+/// An odd slab's window (its node layers up to the next odd slab's) is final once that slab
+/// is summed, the even slabs being done: its task rounds and clears the window while the
+/// sums are still in its core's cache, instead of a pass over the whole grid afterwards.
 fn sum_slabs<F: Float, const D: usize>(
     layout: &Layout<D>,
     tiles: Tiles,
     blocks: &[Sorted<F>],
     ch: usize,
     acc: &mut [f64],
+    out: &mut [F],
 ) {
     let window = 2 * tiles.thickness * tiles.layer;
+    // The node layers before the first odd slab, which only even slab 0 touches.
+    let head = (tiles.thickness * tiles.layer).min(acc.len());
     for parity in 0..2 {
         // Slab j = 2 i + parity starts at node layer j T; its window runs to the next slab of
         // the same parity, which covers its nodes jT ..= (j+1)T since T >= 1.
@@ -226,7 +225,10 @@ fn sum_slabs<F: Float, const D: usize>(
         if first >= acc.len() {
             break;
         }
-        acc[first..].par_chunks_mut(window).enumerate().for_each(|(i, dst)| {
+        let tasks = acc[first..]
+            .par_chunks_mut(window)
+            .zip(out[first..].par_chunks_mut(window));
+        tasks.enumerate().for_each(|(i, (dst, out))| {
             let j = 2 * i + parity;
             if j < tiles.slabs {
                 let task = SlabTask { layout, slab: j, tiles };
@@ -241,7 +243,19 @@ fn sum_slabs<F: Float, const D: usize>(
                     _ => sum_slab::<F, D, 1>(&task, blocks, dst, ch),
                 }
             }
+            if parity == 1 {
+                round_and_clear(dst, out);
+            }
         });
+    }
+    round_and_clear(&mut acc[..head], &mut out[..head]);
+}
+
+/// `out = sums` rounded to the data's precision, and `sums` cleared.
+fn round_and_clear<F: Float>(sums: &mut [f64], out: &mut [F]) {
+    for (o, a) in out.iter_mut().zip(sums) {
+        *o = F::lit(*a);
+        *a = 0.0;
     }
 }
 
