@@ -631,46 +631,25 @@ fn invalid_input_is_an_error_naming_ray_and_sample_and_changes_nothing() {
     let dv = t.param(arr1(&[0.1f32, 0.1]));
     let cv = t.param(arr2(&[[0.5f32, 0.5]]));
     let bv = t.param(arr1(&[0.0f32, 0.0]));
-    let err = Composite::new(&[0, 2])
-        .unwrap()
-        .apply(
-            &mut t,
-            &CompositeInputs {
-                sigma: sv,
-                delta: dv,
-                color: cv,
-                background: Some(bv),
-                t: None,
-            },
-        )
-        .unwrap_err();
-    assert!(err.to_string().contains("color"), "{err}");
-    let err = Composite::new(&[0, 3])
-        .unwrap()
-        .apply(
-            &mut t,
-            &CompositeInputs {
-                sigma: sv,
-                delta: dv,
-                color: cv,
-                background: Some(bv),
-                t: None,
-            },
-        )
-        .unwrap_err();
-    assert!(err.to_string().contains("sigma"), "{err}");
-    let err = Composite::new(&[0, 2])
-        .unwrap()
-        .apply(
-            &mut t,
-            &CompositeInputs {
-                sigma: sv,
-                delta: dv,
-                color: cv,
-                background: None,
-                t: None,
-            },
-        )
-        .unwrap_err();
-    assert!(err.to_string().contains("background"), "{err}");
+    // The error of applying an op over `offsets`, with or without the background.
+    let mut err = |offsets: &[usize], background: Option<_>| {
+        let inputs = CompositeInputs {
+            sigma: sv,
+            delta: dv,
+            color: cv,
+            background,
+            t: None,
+        };
+        let op = Composite::new(offsets).unwrap();
+        op.apply(&mut t, &inputs).unwrap_err().to_string()
+    };
+    // Colour rows against samples, sigma against the offsets, a missing background.
+    for (offsets, background, named) in [
+        (&[0, 2][..], Some(bv), "color"),
+        (&[0, 3][..], Some(bv), "sigma"),
+        (&[0, 2][..], None, "background"),
+    ] {
+        let e = err(offsets, background);
+        assert!(e.contains(named), "{e}");
+    }
 }
