@@ -229,6 +229,16 @@ fn two_d<'a, F: Float>(x: &ArrayViewD<'a, F>) -> Result<ArrayView2<'a, F>, OpErr
         .map_err(|_| op_error(shape_error("raw values", "[n, k] with k >= 2".into(), x.shape())))
 }
 
+/// The op's one input as `[n, k]` raw values, checked, with `n` and `k`.
+fn checked_input<'a, F: Float>(inputs: &[ArrayViewD<'a, F>]) -> Result<(ArrayView2<'a, F>, usize, usize), OpError> {
+    let [raw] = inputs else {
+        return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
+    };
+    let raw = two_d(raw)?;
+    let (n, k) = check_raw(&raw).map_err(op_error)?;
+    Ok((raw, n, k))
+}
+
 fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, OpError> {
     ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| OpError::InvalidArgument(e.to_string()))
 }
@@ -247,11 +257,7 @@ impl<F: Float> CustomOp<F> for DensityColor {
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, KeptDecays), OpError> {
-        let [raw] = inputs else {
-            return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
-        };
-        let raw = two_d(raw)?;
-        let (n, k) = check_raw(&raw).map_err(op_error)?;
+        let (raw, n, k) = checked_input(inputs)?;
         // Every value is written by the kernel.
         let mut kept = KeptDecays::with_len(n * k);
         let (sigma, color) = self.forward_flat(&flat(&raw), n, k, Some(kept.values_mut()));
@@ -260,11 +266,7 @@ impl<F: Float> CustomOp<F> for DensityColor {
 
     /// The same outputs, bit for bit, without keeping the decays: no backward will read them.
     fn forward_only(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<Vec<ArrayD<F>>, OpError> {
-        let [raw] = inputs else {
-            return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
-        };
-        let raw = two_d(raw)?;
-        let (n, k) = check_raw(&raw).map_err(op_error)?;
+        let (raw, n, k) = checked_input(inputs)?;
         let (sigma, color) = self.forward_flat(&flat(&raw), n, k, None);
         Ok(vec![array(&[n], sigma)?, array(&[n, k - 1], color)?])
     }
