@@ -244,6 +244,11 @@ fn results_are_bitwise_the_same_on_1_2_and_3_threads() {
 /// The op on a tape (whose backward reads the decays its forward kept) and its stateless `vjp`
 /// (which recomputes them from the raw values) give bitwise the same gradients, for `F`, over
 /// several chunks of rows, the general channel count and a missing upstream gradient.
+/// The values' bits, as f64 (exact for f32), in order.
+fn bits<'a, F: fogray_tape::Float>(values: impl IntoIterator<Item = &'a F>) -> Vec<u64> {
+    values.into_iter().map(|v| v.as_f64().to_bits()).collect()
+}
+
 fn kept_decays_give_the_recomputed_gradients<F: fogray_tape::Float>() {
     let op = DensityColor::new(-4.0).unwrap();
     for (k, n) in [(4, 2 * 2048 + 5), (2, 300), (6, 2048 + 1)] {
@@ -284,10 +289,9 @@ fn kept_decays_give_the_recomputed_gradients<F: fogray_tape::Float>() {
                 color: with_color.then(|| gc.view()),
             };
             let recomputed = op.vjp(x.view(), &upstream).unwrap();
-            let bits = |a: &mut dyn Iterator<Item = F>| a.map(|v| v.as_f64().to_bits()).collect::<Vec<u64>>();
             assert_eq!(
-                bits(&mut taped.iter().copied()),
-                bits(&mut recomputed.iter().copied()),
+                bits(&taped),
+                bits(&recomputed),
                 "{} k = {k}, sigma {with_sigma}, colour {with_color}",
                 F::NAME
             );
@@ -305,13 +309,7 @@ fn the_tape_backward_from_kept_decays_is_bitwise_the_recomputed_one() {
 /// recorded application's, bit for bit, and a NaN the same typed error.
 fn unrecorded_outputs_are_the_recorded_ones<F: fogray_tape::Float>() {
     let op = DensityColor::new(-2.0).unwrap();
-    let bits = |t: &Tape<F>, v: Var| {
-        t.value(v)
-            .unwrap()
-            .iter()
-            .map(|x| x.as_f64().to_bits())
-            .collect::<Vec<u64>>()
-    };
+    let value_bits = |t: &Tape<F>, v: Var| bits(t.value(v).unwrap());
     for (k, n) in [(4, 2 * 2048 + 5), (2, 300)] {
         let mut x = raw(24, n, k, 30.0);
         x[[1, 0]] = f64::INFINITY;
@@ -328,14 +326,14 @@ fn unrecorded_outputs_are_the_recorded_ones<F: fogray_tape::Float>() {
         assert_eq!(tape.stats().records, 1, "{} k = {k}", F::NAME);
         for out in unrecorded {
             assert_eq!(
-                bits(&tape, out.sigma),
-                bits(&tape, recorded.sigma),
+                value_bits(&tape, out.sigma),
+                value_bits(&tape, recorded.sigma),
                 "{} k = {k}",
                 F::NAME
             );
             assert_eq!(
-                bits(&tape, out.color),
-                bits(&tape, recorded.color),
+                value_bits(&tape, out.color),
+                value_bits(&tape, recorded.color),
                 "{} k = {k}",
                 F::NAME
             );
