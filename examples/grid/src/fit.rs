@@ -483,10 +483,7 @@ pub fn fit_from<F: Float>(
         lap(&mut phases.sample);
         let target = tape.constant(batch.colors);
         let grid = tape.param_from(model.params(), model.grid_id())?;
-        let color = model.render_grid(&mut tape, grid, samples, data.background, config.method)?;
-        let residual = tape.sub(color, target)?;
-        let squared = tape.square(residual)?;
-        let mse = tape.mean(squared)?;
+        let mse = model.photometric_loss(&mut tape, grid, samples, data.background, target, config.method)?;
         loss = tape.value(mse)?.iter().next().map_or(f64::NAN, |v| v.as_f64());
         let objective = if config.smoothness > 0.0 {
             let smooth = prior.apply(&mut tape, grid)?;

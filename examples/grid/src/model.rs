@@ -180,6 +180,53 @@ impl<F: Float> GridModel<F> {
         background: [f64; 3],
         method: Method,
     ) -> Result<Var, TapeError> {
+        let (op, inputs) = self.composite_inputs(tape, grid, samples, background, method)?;
+        let out = match method {
+            Method::Fused => op.apply(tape, &inputs)?,
+            Method::Taped => twins::stable(tape, &op, &inputs)?,
+        };
+        Ok(out.color)
+    }
+
+    /// Records the photometric loss of a training step: the render of `samples` from the raw
+    /// grid `grid` (as [`GridModel::render_grid`]) and its mean squared error against `target`
+    /// (`[R, 3]`), `mean((C - target)^2)`, a 0-d value. The fused method records the composite
+    /// and the loss as one op ([`Composite::apply_mse`], one pass per ray for forward and
+    /// backward); the taped one the stable twin, then `sub`, `square` and `mean`. Both give the
+    /// same numbers up to the twins' rounding.
+    ///
+    /// Errors: as [`GridModel::render_grid`], and a target of the wrong shape.
+    pub fn photometric_loss(
+        &self,
+        tape: &mut Tape<F>,
+        grid: Var,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        target: Var,
+        method: Method,
+    ) -> Result<Var, TapeError> {
+        let (op, inputs) = self.composite_inputs(tape, grid, samples, background, method)?;
+        match method {
+            Method::Fused => op.apply_mse(tape, &inputs, target),
+            Method::Taped => {
+                let color = twins::stable(tape, &op, &inputs)?.color;
+                let residual = tape.sub(color, target)?;
+                let squared = tape.square(residual)?;
+                tape.mean(squared)
+            }
+        }
+    }
+
+    /// Records the lookup of `samples` in `grid` and the activation, and returns the composite
+    /// over the samples' rays with its inputs (the background `background`, shared).
+    fn composite_inputs(
+        &self,
+        tape: &mut Tape<F>,
+        grid: Var,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+    ) -> Result<(Composite, CompositeInputs), TapeError> {
         let (vars, offsets) = samples.into_tape(tape);
         let raw = match method {
             Method::Fused => self.field.apply(tape, grid, vars.positions)?,
@@ -189,7 +236,6 @@ impl<F: Float> GridModel<F> {
             Method::Fused => self.activation.apply(tape, raw)?,
             Method::Taped => twin::density_color(tape, &self.activation, raw)?,
         };
-        let op = Composite::packed(offsets);
         let inputs = CompositeInputs {
             sigma: activated.sigma,
             delta: vars.delta,
@@ -197,11 +243,7 @@ impl<F: Float> GridModel<F> {
             background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
             t: None,
         };
-        let out = match method {
-            Method::Fused => op.apply(tape, &inputs)?,
-            Method::Taped => twins::stable(tape, &op, &inputs)?,
-        };
-        Ok(out.color)
+        Ok((Composite::packed(offsets), inputs))
     }
 
     /// Records the render of `samples` with the fused ops, as [`GridModel::render`] does, and

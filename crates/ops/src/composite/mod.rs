@@ -85,6 +85,7 @@ mod forward;
 mod gradients;
 mod lanes;
 mod layout;
+mod mse;
 
 pub(crate) use layout::validate;
 mod one_pass;

@@ -2,6 +2,7 @@
 //! crate of its own that compiles the libraries' generic kernels again (add a module here,
 //! not a file beside this one).
 
+mod composite_mse;
 mod composite_packs;
 mod field;
 mod grid_common;

@@ -252,8 +252,8 @@ fn fit_profile_prints_the_phases_and_the_ops_a_step() {
         .as_array()
         .unwrap()
         .iter()
-        .find(|r| r["name"] == "composite")
-        .expect("the fused composite");
+        .find(|r| r["name"] == "composite_mse")
+        .expect("the fused composite and loss");
     assert_eq!(composite["calls_per_step"], 1.0);
     // As text: the tables follow the final line.
     let text = ok(&[&args[..], &["--profile"]].concat());

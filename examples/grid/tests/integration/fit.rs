@@ -32,11 +32,8 @@ fn raw_grid() -> ArrayD<f64> {
 
 fn loss(tape: &mut Tape<f64>, grid: Var, method: Method) -> Result<Var, fogray::tape::TapeError> {
     let (model, samples, target) = setup();
-    let color = model.render_grid(tape, grid, samples, [1.0, 0.95, 0.9], method)?;
     let target = tape.constant(target);
-    let r = tape.sub(color, target)?;
-    let sq = tape.square(r)?;
-    tape.mean(sq)
+    model.photometric_loss(tape, grid, samples, [1.0, 0.95, 0.9], target, method)
 }
 
 #[test]
@@ -211,13 +208,19 @@ fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
         let profile = &result.profile;
         assert_eq!(profile.steps, 7);
         let calls = |name: &str| profile.ops.get(name).map(|t| (t.forward_calls, t.backward_calls));
-        // One render, loss and prior a step; the prior and the loss are the same ops either way.
+        // One render, loss and prior a step; the prior is the same op either way. The fused
+        // method composites and takes the loss in one op, the taped one through `mean`.
         assert_eq!(calls("total_variation"), Some((7, 7)), "{method:?}");
-        assert_eq!(calls("mean"), Some((7, 7)), "{method:?}");
-        let fused_ops = [calls("grid_field"), calls("composite"), calls("density_color")];
+        let fused_ops = [calls("grid_field"), calls("composite_mse"), calls("density_color")];
         match method {
-            Method::Fused => assert_eq!(fused_ops, [Some((7, 7)); 3]),
-            Method::Taped => assert_eq!(fused_ops, [None; 3], "the twins are built of taped ops"),
+            Method::Fused => {
+                assert_eq!(fused_ops, [Some((7, 7)); 3]);
+                assert_eq!((calls("mean"), calls("composite")), (None, None));
+            }
+            Method::Taped => {
+                assert_eq!(fused_ops, [None; 3], "the twins are built of taped ops");
+                assert_eq!(calls("mean"), Some((7, 7)));
+            }
         }
         // The phases are parts of the training clock.
         let p = profile.phases;
