@@ -4,7 +4,9 @@
 //! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
 //! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them, each
 //! also `-packed` (rays eight at a time across the vector lanes, `Composite::pack_rays`); `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
-//! each time, its buffer pool reused). `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
+//! each time, its buffer pool reused). `fused-tape-mse` and `fused-tape-chain` are a training
+//! step's composite and mean squared error on a kept tape, forward and backward: one op
+//! (`Composite::apply_mse`) against `apply`, `sub`, `square` and `mean`. `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
 //! selects. `fogray bench` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
@@ -131,6 +133,32 @@ fn fused_one_pass<F: Float>(op: &Composite, x: &Inputs<F>, b: &mut Buffers<F>) {
     .unwrap();
 }
 
+/// A training step's composite and loss, `mean((C - target)^2)` with the fused op, forward and
+/// backward on `tape` (cleared first, its pool reused): as one op (`apply_mse`, one pass per
+/// ray) or as the chain `apply`, `sub`, `square`, `mean` (the same bits).
+fn fused_loss<F: Float>(x: &Inputs<F>, one_op: bool, tape: &mut Tape<F>) {
+    tape.clear();
+    let inputs = CompositeInputs {
+        sigma: tape.param(x.sigma.clone()),
+        delta: tape.constant(x.delta.clone()),
+        color: tape.param(x.color.clone()),
+        background: Some(tape.constant(x.background.clone())),
+        t: None,
+    };
+    let target = tape.constant(x.grad.clone());
+    let loss = if one_op {
+        x.op.apply_mse(tape, &inputs, target).unwrap()
+    } else {
+        let color = x.op.apply(tape, &inputs).unwrap().color;
+        let error = tape.sub(color, target).unwrap();
+        let squared = tape.square(error).unwrap();
+        tape.mean(squared).unwrap()
+    };
+    let g = tape.backward(loss).unwrap();
+    black_box(g.get(inputs.sigma));
+    tape.recycle(g);
+}
+
 /// One forward and backward of a taped twin on `tape`, which is cleared first; its gradients
 /// go back to it. With a new tape each time that is a one-shot use; with one tape kept, a
 /// training loop's (its pool lends the ops the buffers of the iteration before).
@@ -177,6 +205,12 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
             });
             group.bench_with_input(BenchmarkId::new(format!("fused-one-pass{suffix}"), &id), &x, |b, x| {
                 b.iter(|| fused_one_pass(op, x, &mut buffers))
+            });
+        }
+        for (name, one_op) in [("fused-tape-mse", true), ("fused-tape-chain", false)] {
+            let mut kept = Tape::new();
+            group.bench_with_input(BenchmarkId::new(name, &id), &x, |b, x| {
+                b.iter(|| fused_loss(x, one_op, &mut kept))
             });
         }
         for (name, naive) in [("taped", false), ("taped-naive", true)] {
