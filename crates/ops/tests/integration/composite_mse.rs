@@ -179,7 +179,7 @@ fn other_upstream_gradients_and_a_second_sweep_give_the_chains_bits_too() {
     let second = gradient_bits(&tape.backward(loss).unwrap(), &r);
     assert_eq!(first, expected);
     assert_eq!(second, expected);
-    // Weighted by 2.5 (and through a sum with a weight of 1): the chain's bits in each case.
+    // Weighted by 2.5 and by 1, after the sweeps above: the chain's bits in each case.
     for weight in [2.5f32, 1.0] {
         let weighted = tape.mul_scalar(loss, weight).unwrap();
         let chain_weighted = tape.mul_scalar(want, weight).unwrap();
