@@ -39,6 +39,18 @@ impl<F: Float> Inputs<F> {
         )
         .with_background(self.background.view().into_dyn())
     }
+
+    /// The op's inputs on `tape`: sigma and colour as parameters (gradients wanted), delta and
+    /// the background as constants.
+    fn on_tape(&self, tape: &mut Tape<F>) -> CompositeInputs {
+        CompositeInputs {
+            sigma: tape.param(self.sigma.clone()),
+            delta: tape.constant(self.delta.clone()),
+            color: tape.param(self.color.clone()),
+            background: Some(tape.constant(self.background.clone())),
+            t: None,
+        }
+    }
 }
 
 /// sigma ~ U[0, 5], delta = 2 / samples (total optical depth ~5), RGB in [0, 1].
@@ -138,13 +150,7 @@ fn fused_one_pass<F: Float>(op: &Composite, x: &Inputs<F>, b: &mut Buffers<F>) {
 /// ray) or as the chain `apply`, `sub`, `square`, `mean` (the same bits).
 fn fused_loss<F: Float>(x: &Inputs<F>, one_op: bool, tape: &mut Tape<F>) {
     tape.clear();
-    let inputs = CompositeInputs {
-        sigma: tape.param(x.sigma.clone()),
-        delta: tape.constant(x.delta.clone()),
-        color: tape.param(x.color.clone()),
-        background: Some(tape.constant(x.background.clone())),
-        t: None,
-    };
+    let inputs = x.on_tape(tape);
     let target = tape.constant(x.grad.clone());
     let loss = if one_op {
         x.op.apply_mse(tape, &inputs, target).unwrap()
@@ -164,13 +170,7 @@ fn fused_loss<F: Float>(x: &Inputs<F>, one_op: bool, tape: &mut Tape<F>) {
 /// training loop's (its pool lends the ops the buffers of the iteration before).
 fn taped<F: Float>(x: &Inputs<F>, naive: bool, tape: &mut Tape<F>) {
     tape.clear();
-    let inputs = CompositeInputs {
-        sigma: tape.param(x.sigma.clone()),
-        delta: tape.constant(x.delta.clone()),
-        color: tape.param(x.color.clone()),
-        background: Some(tape.constant(x.background.clone())),
-        t: None,
-    };
+    let inputs = x.on_tape(tape);
     let out = if naive {
         twins::naive(tape, &x.op, &inputs)
     } else {
