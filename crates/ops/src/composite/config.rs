@@ -157,13 +157,11 @@ impl Composite {
         &self.offsets
     }
 
-    /// Records the composite on `tape` through the tape's public custom-op interface.
-    ///
-    /// Errors: an input missing or superfluous for this configuration, shapes that do not fit
-    /// the packing, or invalid values (each names the ray and sample); the tape is unchanged.
-    pub fn apply<F: Float>(&self, tape: &mut Tape<F>, inputs: &CompositeInputs) -> Result<CompositeVars, TapeError> {
+    /// Checks that `inputs` hold a background exactly when the op has one and `t` exactly
+    /// with depth; the error names the tape op `op` that was to be recorded.
+    pub(super) fn check_tape_inputs(&self, op: &'static str, inputs: &CompositeInputs) -> Result<(), TapeError> {
         let misfit = |reason: &str| TapeError::InvalidArgument {
-            op: "composite",
+            op,
             reason: reason.into(),
         };
         match (self.background, inputs.background) {
@@ -172,10 +170,18 @@ impl Composite {
             _ => {}
         }
         match (self.depth, inputs.t) {
-            (true, None) => return Err(misfit("depth needs the t input")),
-            (false, Some(_)) => return Err(misfit("t was given but depth was not requested")),
-            _ => {}
+            (true, None) => Err(misfit("depth needs the t input")),
+            (false, Some(_)) => Err(misfit("t was given but depth was not requested")),
+            _ => Ok(()),
         }
+    }
+
+    /// Records the composite on `tape` through the tape's public custom-op interface.
+    ///
+    /// Errors: an input missing or superfluous for this configuration, shapes that do not fit
+    /// the packing, or invalid values (each names the ray and sample); the tape is unchanged.
+    pub fn apply<F: Float>(&self, tape: &mut Tape<F>, inputs: &CompositeInputs) -> Result<CompositeVars, TapeError> {
+        self.check_tape_inputs("composite", inputs)?;
         let vars = ByInput {
             sigma: inputs.sigma,
             delta: inputs.delta,

@@ -18,9 +18,9 @@ use fogray_tape::{BackwardCtx, CustomOp, Float, OpError, Tape, TapeError, Var};
 use ndarray::{ArrayD, ArrayViewD, IxDyn, Zip};
 
 use super::arrays::{CompositeArrays, CompositeOutputBuffers};
-use super::config::{Background, Composite, CompositeInputs};
+use super::config::{Composite, CompositeInputs};
 use super::gradients::{CompositeGradients, CompositeUpstream, CompositeWanted};
-use super::tape_order;
+use super::tape_order::{self, ByInput};
 use crate::error::CompositeError;
 
 /// The op on the tape: the composite, and the gradients its forward computes.
@@ -105,42 +105,49 @@ impl Composite {
                 "the loss reads the colour alone: build the op without depth, weights or transmittance",
             ));
         }
-        if inputs.t.is_some() {
-            return Err(config_error("t was given but the loss has no depth"));
-        }
-        let background = match (self.background, inputs.background) {
-            (Background::None, Some(_)) => {
-                return Err(config_error("a background was given to an op built without one"))
-            }
-            (Background::Shared | Background::PerRay, None) => {
-                return Err(config_error("the op needs a background input"))
-            }
-            (_, b) => b,
-        };
+        self.check_tape_inputs("composite_mse", inputs)?;
         let needs = |v: Option<Var>| v.map_or(Ok(false), |v| tape.needs_grad(v));
         let wanted = CompositeWanted {
             sigma: needs(Some(inputs.sigma))?,
             delta: needs(Some(inputs.delta))?,
             color: needs(Some(inputs.color))?,
-            background: needs(background)?,
+            background: needs(inputs.background)?,
             t: false,
         };
         let op = CompositeMse {
             composite: self.clone(),
             wanted,
         };
-        let mut vars = vec![inputs.sigma, inputs.delta, inputs.color];
-        vars.extend(background);
+        let mut vars = ByInput {
+            sigma: inputs.sigma,
+            delta: inputs.delta,
+            color: inputs.color,
+            background: inputs.background,
+            t: None,
+        }
+        .into_tape();
         vars.push(target);
         tape.apply1(op, &vars)
     }
 }
 
-/// `dL/dC` for the loss's upstream gradient `g`, as the tape's `mean`, `square` and `sub`
-/// backwards make it: `(g / m) (x + x)` (0 where `g / m` is 0, their strong-zero product).
+/// `dL/dC` of one colour value with residual `x = C - target`, given `scale = g / m` (the
+/// loss's upstream gradient over the number of colour values), as the tape's `mean`, `square`
+/// and `sub` backwards make it: `scale (x + x)`, 0 where `scale` is 0 (their strong-zero
+/// product).
+#[inline(always)]
+fn color_gradient<F: Float>(scale: F, x: F) -> F {
+    if scale == F::zero() {
+        F::zero()
+    } else {
+        scale * (x + x)
+    }
+}
+
+/// [`color_gradient`] of every residual for the loss's upstream gradient `g`.
 fn color_upstream<F: Float>(residual: &ArrayD<F>, g: F) -> ArrayD<F> {
     let scale = g / F::lit(residual.len() as f64);
-    residual.mapv(|x| if scale == F::zero() { F::zero() } else { scale * (x + x) })
+    residual.mapv(|x| color_gradient(scale, x))
 }
 
 impl CompositeMse {
@@ -180,14 +187,12 @@ impl CompositeMse {
     }
 
     /// The gradients the tape wants, by recomputing the composite's forward and backward for
-    /// the loss's upstream gradient `g`.
+    /// the upstream colour gradient `d_color`.
     fn recompute<F: Float>(
         &self,
         arrays: &CompositeArrays<'_, F>,
-        residual: &ArrayD<F>,
-        g: F,
+        d_color: &ArrayD<F>,
     ) -> Result<CompositeGradients<F>, CompositeError> {
-        let d_color = color_upstream(residual, g);
         let (_, res) = self.composite.evaluate(arrays)?;
         self.composite
             .vjp(arrays, &res, &CompositeUpstream::color(d_color.view()), self.wanted)
@@ -208,8 +213,7 @@ impl<F: Float> CustomOp<F> for CompositeMse {
         let scale = F::one() / F::lit((rays * ch) as f64);
         let upstream = |ray: usize, c: &[F], d: &mut [F]| {
             for ((d, &c), &t) in d.iter_mut().zip(c).zip(&target_values[ray * ch..(ray + 1) * ch]) {
-                let x = c - t;
-                *d = scale * (x + x);
+                *d = color_gradient(scale, c - t);
             }
         };
         // Every value of the outputs and of the wanted gradients is written.
@@ -267,20 +271,24 @@ impl<F: Float> CustomOp<F> for CompositeMse {
         } else {
             None
         };
+        // dL/dC, computed once if the recomputation or the target's gradient reads it.
+        let mut d_color = None;
         let gradients = match made {
             Some(gradients) => gradients,
             None => {
+                let d = d_color.insert(color_upstream(&saved.residual, g));
                 let inputs: Vec<ArrayViewD<'_, F>> = (0..n).map(|i| ctx.input(i)).collect();
                 let (arrays, _) = self.split(&inputs)?;
-                self.recompute(&arrays, &saved.residual, g)?
+                self.recompute(&arrays, d)?
             }
         };
         let mut out = tape_order::gradients_in_order(&self.composite, gradients);
         // The target's gradient, as the tape's `sub` gives it: the negated dL/dC.
-        out.push(
-            ctx.needs_input_grad(n - 1)
-                .then(|| color_upstream(&saved.residual, g).mapv(|d| -d)),
-        );
+        out.push(ctx.needs_input_grad(n - 1).then(|| {
+            d_color
+                .unwrap_or_else(|| color_upstream(&saved.residual, g))
+                .mapv(|d| -d)
+        }));
         Ok(out)
     }
 
