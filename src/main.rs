@@ -109,8 +109,9 @@ enum Command {
     /// workloads 4096x64, 65536x64, 16384x256 and 1024x4096 (RGB; sigma ~ U[0,5], total
     /// optical depth ~5), each beside its error against an independent compensated f64
     /// reference on the same rays and its peak extra memory; then the tape's own cost per
-    /// recorded op and per byte. A short STREAM triad first measures the bytes per second the
-    /// machine streams (1 thread and all); each fused row shows its two-call (`reused`) and
+    /// recorded op and per byte. A short STREAM triad after the workloads measures the bytes per
+    /// second the machine streams (1 thread and all; its arrays larger than the largest cache);
+    /// each fused row shows its two-call (`reused`) and
     /// one-pass speeds as the fraction of that bound they reach for the bytes they must move
     /// per sample.
     ///
@@ -301,8 +302,9 @@ fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> 
             );
         }
     };
+    let mut results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
     let bandwidth = cli::bench::bandwidths(quick)?;
-    let results = cli::bench::run(&workloads, quick, &Allocator, &bandwidth, &mut log)?;
+    cli::bench::attach_bounds(&mut results, &bandwidth);
     let tape = cli::tape_cost::run(quick)?;
     let tables = cli::bench::bandwidth_table(&bandwidth) + &cli::bench::table(&results) + &cli::tape_cost::table(&tape);
     publish.write(
