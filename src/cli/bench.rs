@@ -501,8 +501,8 @@ pub fn bandwidths(quick: bool) -> Result<Vec<Bandwidth>, CliError> {
 
 /// Gives each fused row its fraction of the memory bound on its thread count, from `bandwidth`
 /// (see [`bandwidths`]). The triad runs after the workloads: run before them, it left the
-/// fused rows on all threads about a fifth slower on a 2-core instance, whichever the triad's
-/// size (the cause was not found; the slowdown is not the op's).
+/// fused rows on all threads 5-20 % slower on a 2-core instance, whichever the triad's size
+/// (the cause was not found; the slowdown is not the op's).
 pub fn attach_bounds(results: &mut [Measurement], bandwidth: &[Bandwidth]) {
     for m in results {
         let bw = bandwidth.iter().find(|b| b.threads == m.threads);
