@@ -76,8 +76,8 @@ fn triad_pass(a: &mut [f64], b: &[f64], c: &[f64], s: f64) {
 /// Measures the triad on the current rayon pool (run it inside `pool.install` for another):
 /// the arrays are written once (so that their pages exist), then the best of `runs` timed
 /// passes (at least one) is kept, as STREAM does: the machine's capacity, not its average
-/// under other load. Its three arrays take 96 MiB while it runs, or three times the largest
-/// cache where that is larger (see [`triad_len`]); a pass moves them once.
+/// under other load. Its three arrays take 96 MiB while it runs, or three to six times the
+/// largest cache where that is larger (see [`triad_len`]); a pass moves them once.
 pub fn triad(runs: usize) -> Bandwidth {
     let threads = rayon::current_num_threads();
     let len = triad_len(largest_cache_bytes());

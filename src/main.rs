@@ -111,9 +111,8 @@ enum Command {
     /// reference on the same rays and its peak extra memory; then the tape's own cost per
     /// recorded op and per byte. A short STREAM triad after the workloads measures the bytes per
     /// second the machine streams (1 thread and all; its arrays larger than the largest cache);
-    /// each fused row shows its two-call (`reused`) and
-    /// one-pass speeds as the fraction of that bound they reach for the bytes they must move
-    /// per sample.
+    /// each fused row shows its two-call (`reused`) and one-pass speeds as the fraction of that
+    /// bound they reach for the bytes they must move per sample.
     ///
     /// With --op grid: lookups per second of the fused trilinear grid field (1 thread and all)
     /// and of its taped twin (1 thread, a quarter of the lookups), forward + backward into the
