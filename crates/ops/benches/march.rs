@@ -4,7 +4,9 @@
 //! learns it; batches of 8192 random (camera, pixel) rays from 32 cameras on a sphere of
 //! radius 3 looking at the origin (64x64 pixels, 40 degrees); half-voxel steps (1/63).
 //! Also the same rays through a grid with every cell occupied (nothing to skip) and one with
-//! none. The occupied share and samples per ray are printed first.
+//! none. Each case twice: the march (cell by cell, `march`) and the midpoint sampler (each
+//! uniform piece tested, `midpoints`). The occupied share and samples per ray are printed
+//! first.
 //!
 //! `cargo bench -p fogray-ops --bench march -- --warm-up-time 1 --measurement-time 3`
 
@@ -77,17 +79,22 @@ fn march(c: &mut Criterion) {
     ];
     for (name, g) in &cases {
         let s = g.march(&rays, &clip, STEP, Jitter::None).unwrap();
+        let m = g.march_midpoints(&rays, &clip, STEP, Jitter::None).unwrap();
         println!(
-            "{name}: {CELLS}^3 cells, {:.1} % occupied, {:.1} samples per ray",
+            "{name}: {CELLS}^3 cells, {:.1} % occupied, {:.1} samples per ray marched, {:.1} by midpoints",
             100.0 * g.occupied_fraction(),
-            s.samples_per_ray()
+            s.samples_per_ray(),
+            m.samples_per_ray()
         );
     }
     let mut group = c.benchmark_group("march");
     group.throughput(Throughput::Elements(RAYS as u64));
     for (name, g) in &cases {
-        group.bench_function(format!("{CELLS}^3-{name}"), |b| {
+        group.bench_function(format!("{CELLS}^3-{name}-march"), |b| {
             b.iter(|| g.march(black_box(&rays), &clip, STEP, Jitter::None).unwrap())
+        });
+        group.bench_function(format!("{CELLS}^3-{name}-midpoints"), |b| {
+            b.iter(|| g.march_midpoints(black_box(&rays), &clip, STEP, Jitter::None).unwrap())
         });
     }
     group.finish();

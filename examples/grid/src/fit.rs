@@ -237,7 +237,9 @@ impl Sampler {
     }
 }
 
-/// Samples `rays` every `step` across the box, or only in the occupied cells of `occupancy`.
+/// Samples `rays` every `step` across the box, or keeps only the samples whose midpoints lie in
+/// occupied cells of `occupancy` (its midpoint sampler: the march's pieces, less up to two at
+/// each run of occupied cells, tested in vector lanes instead of a walk through every cell).
 fn sample_rays<F: Float>(
     occupancy: Option<&OccupancyGrid>,
     rays: &RayBatch<F>,
@@ -246,7 +248,7 @@ fn sample_rays<F: Float>(
     let clip = Aabb::new(BOUNDS.0, BOUNDS.1)?.clip(rays);
     Ok(match occupancy {
         None => Uniform::new(Spacing::Step(step))?.sample(rays, &clip)?,
-        Some(g) => g.march(rays, &clip, step, Jitter::None)?,
+        Some(g) => g.march_midpoints(rays, &clip, step, Jitter::None)?,
     })
 }
 

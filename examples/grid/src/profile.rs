@@ -14,7 +14,7 @@ use serde::Serialize;
 pub struct Phases {
     /// Drawing the batch and gathering its rays and colours.
     pub batch: Duration,
-    /// Placing the samples along the rays (uniform or the occupancy grid's march).
+    /// Placing the samples along the rays (uniform, or the occupancy grid's midpoint sampler).
     pub sample: Duration,
     /// The render, the loss and the prior, recorded on the tape.
     pub forward: Duration,

@@ -105,7 +105,7 @@ pub fn render_view<F: Float>(
         let clip = bounds.clip(&batch);
         let samples = match occupancy {
             None => sampler.sample(&batch, &clip)?,
-            Some(g) => g.march(&batch, &clip, model.voxel() / 2.0, Jitter::None)?,
+            Some(g) => g.march_midpoints(&batch, &clip, model.voxel() / 2.0, Jitter::None)?,
         };
         let out = model.render_with_depth(&mut tape, samples, background)?;
         let (c, o) = (tape.value(out.color)?, tape.value(out.opacity)?);

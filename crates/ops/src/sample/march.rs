@@ -3,6 +3,7 @@
 
 use fogray_tape::Float;
 
+use super::midpoints::check_step;
 use super::occupancy::OccupancyGrid;
 use super::packed::{check_lengths, pack_chunks, PackedSamples, Piece};
 use super::stratified::{Jitter, RayJitter};
@@ -152,6 +153,15 @@ impl Walk {
 }
 
 impl OccupancyGrid {
+    /// The part `[lo, hi]` (with `hi > lo`) of the ray `o + t d`'s interval `interval` that
+    /// lies in the grid's box, or `None` (a miss, no interval, or an empty part).
+    pub(crate) fn box_segment(&self, o: [f64; 3], d: [f64; 3], interval: Option<(f64, f64)>) -> Option<(f64, f64)> {
+        let (near, far) = interval?;
+        let (box_near, box_far) = self.bounds.clip_ray(o, d)?;
+        let (lo, hi) = (near.max(box_near), far.min(box_far));
+        (hi > lo).then_some((lo, hi))
+    }
+
     /// Calls `run(a, b)` for each part `[a, b]` of `[lo, hi]` on the ray `o + t d` that lies
     /// in occupied cells, as maximal runs in increasing `t`.
     ///
@@ -230,20 +240,12 @@ impl OccupancyGrid {
         jitter: Jitter,
     ) -> Result<PackedSamples<F>, SampleError> {
         check_lengths(rays, intervals)?;
-        if !(step.is_finite() && step > 0.0) {
-            return Err(SampleError::Config {
-                what: "step",
-                value: step,
-                rule: "must be finite and positive",
-            });
-        }
+        check_step(step)?;
         // A ray's part of the grid's box within its interval.
         let segment = |r: usize| -> Option<Segment> {
             let (o, d) = rays.ray(r);
-            let (near, far) = intervals.segment(r)?;
-            let (box_near, box_far) = self.bounds.clip_ray(o, d)?;
-            let (lo, hi) = (near.max(box_near), far.min(box_far));
-            (hi > lo).then_some((o, d, lo, hi))
+            let (lo, hi) = self.box_segment(o, d, intervals.segment(r))?;
+            Some((o, d, lo, hi))
         };
         // One ray walked alone, its pieces and their count appended.
         let single = |r: usize, seg: Option<Segment>, counts: &mut Vec<usize>, pieces: &mut Vec<Piece>| {

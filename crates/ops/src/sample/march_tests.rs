@@ -8,12 +8,12 @@ use crate::SampleError;
 use ndarray::{arr2, Array1, ArrayView2};
 use rand::{Rng, SeedableRng};
 
-fn cube() -> Aabb {
+pub(super) fn cube() -> Aabb {
     Aabb::new([-1.0; 3], [1.0; 3]).unwrap()
 }
 
 /// Four views of the cube from distance 3, 12x12 pixels, 40 degrees.
-fn camera_rays() -> RayBatch<f64> {
+pub(super) fn camera_rays() -> RayBatch<f64> {
     let k = Intrinsics::from_vertical_fov(12, 12, 40f64.to_radians()).unwrap();
     let eyes: [[f64; 3]; 4] = [[0.0, -3.0, 0.0], [2.1, 2.1, 0.3], [0.0, 0.5, 2.9], [-1.0, 0.4, -2.8]];
     let cams: Vec<RayBatch<f64>> = eyes
@@ -31,7 +31,7 @@ fn camera_rays() -> RayBatch<f64> {
 }
 
 /// Density 10 inside three balls of radius 0.3, 0 elsewhere.
-fn balls(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
+pub(super) fn balls(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
     let centres = [[0.3, -0.2, 0.1], [-0.5, 0.5, -0.4], [0.6, 0.6, 0.6]];
     Ok(Array1::from_iter(p.rows().into_iter().map(|q| {
         let inside = centres

@@ -4,8 +4,10 @@
 //! Every sampler cuts each ray's segment into pieces and puts one sample at each piece's
 //! midpoint with `delta` its length: [`Uniform`] (a fixed step or count), [`Stratified`]
 //! (the same pieces with seeded random edges), [`Importance`] (pieces of equal probability
-//! under a previous pass's weights) and the [`OccupancyGrid`]'s marcher (the uniform pieces
-//! of the occupied parts only).
+//! under a previous pass's weights) and the [`OccupancyGrid`]'s two samplers of the occupied
+//! parts only: [`OccupancyGrid::march`] (the uniform pieces of the occupied runs, cut at their
+//! faces) and [`OccupancyGrid::march_midpoints`] (the uniform pieces whose midpoint is
+//! occupied, tested in vector lanes).
 //!
 //! ```
 //! use fogray_ops::rays::{Aabb, Intrinsics, PinholeCamera};
@@ -47,6 +49,9 @@ mod march;
 mod march_tests;
 #[cfg(test)]
 mod march_walk_tests;
+mod midpoints;
+#[cfg(test)]
+mod midpoints_tests;
 mod occupancy;
 mod occupancy_config;
 #[cfg(test)]

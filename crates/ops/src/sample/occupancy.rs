@@ -112,6 +112,12 @@ impl OccupancyGrid {
         self.is_occupied_linear(self.index(c))
     }
 
+    /// The occupancy bits, cell `i` (linear index, x slowest, z fastest) at bit `i % 64` of
+    /// word `i / 64`; no bit set past the last cell.
+    pub(crate) fn bits(&self) -> &[u64] {
+        &self.bits
+    }
+
     /// Whether the cell at linear index `i` is occupied. Panics if `i >= r^3`.
     pub(crate) fn is_occupied_linear(&self, i: usize) -> bool {
         self.bits[i / 64] >> (i % 64) & 1 == 1
