@@ -59,8 +59,8 @@ impl<'a> CellMap<'a> {
 /// `flags[k] = 1` where the midpoint of `pieces[k]` lies in an occupied cell, else 0.
 ///
 /// Each coordinate is floored and clamped to the grid (a midpoint a rounding error outside
-/// the box reads its nearest cell), so the linear index is an integer in `[0, cells)` and its
-/// word is within `bits`. Compiled for the vector units this machine has.
+/// the box reads its nearest cell, a NaN coordinate cell 0), so the linear index is an integer
+/// in `[0, cells)` and its word is within `bits`. Compiled for the vector units this machine has.
 #[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
 fn occupied_flags<'a>(map: &CellMap<'a>, ray: &CellRay, pieces: &[Piece], flags: &mut [u8]) {
     let Some(last_word) = map.bits.len().checked_sub(1) else {
@@ -71,11 +71,13 @@ fn occupied_flags<'a>(map: &CellMap<'a>, ray: &CellRay, pieces: &[Piece], flags:
         let mid = 0.5 * (a + b);
         let mut index = 0.0f64;
         for axis in 0..3 {
-            let c = (ray.base[axis] + mid * ray.dir[axis]).floor().clamp(0.0, map.top);
+            // `max` before `min`: a NaN (from overflowing coordinates) becomes cell 0.
+            let c = (ray.base[axis] + mid * ray.dir[axis]).floor().max(0.0).min(map.top);
             index += c * map.stride[axis];
         }
         // SAFETY: `index` is an integer in [0, 2^30): each term above is a whole cell index
-        // in [0, top] times its stride, so their sum is a cell's linear index, exact in f64.
+        // in [0, top] (never NaN, see above) times its stride, so their sum is a cell's
+        // linear index, exact in f64.
         // (`to_int_unchecked` rather than `as`: the saturating cast keeps the loop scalar.)
         let i: u64 = unsafe { index.to_int_unchecked() };
         let word = ((i >> 6) as usize).min(last_word);
