@@ -116,6 +116,12 @@ fn report(rays: &RayBatch<f32>, clip: &RayIntervals) {
             cpu_ms(|| g.march(rays, clip, STEP, Jitter::None).unwrap()),
             cpu_ms(|| occupancy(r)),
         );
+        let p = g.march_midpoints(rays, clip, STEP, Jitter::None).unwrap();
+        println!(
+            "  midpoints {r}^3: {:.1} samples per ray, {:.1} ms CPU per batch",
+            p.samples_per_ray(),
+            cpu_ms(|| g.march_midpoints(rays, clip, STEP, Jitter::None).unwrap()),
+        );
     }
     report_random_updates(rays, clip, uniform.samples_per_ray());
 }
@@ -165,6 +171,13 @@ fn samplers(c: &mut Criterion) {
     });
     g.bench_function("occupancy-64-march", |b| {
         b.iter(|| grid64.march(black_box(&rays), &clip, STEP, Jitter::None).unwrap())
+    });
+    g.bench_function("occupancy-64-midpoints", |b| {
+        b.iter(|| {
+            grid64
+                .march_midpoints(black_box(&rays), &clip, STEP, Jitter::None)
+                .unwrap()
+        })
     });
     g.finish();
     let mut u = c.benchmark_group("occupancy-update");
