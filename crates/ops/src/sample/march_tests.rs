@@ -92,15 +92,10 @@ fn counts_by_hand_on_one_occupied_slab() {
     assert_eq!(u.offsets, vec![0, 10, 10, 15]);
 }
 
-#[test]
-fn matches_a_dense_march_on_random_rays() {
-    let r = 16;
-    let mut grid = OccupancyGrid::new(cube(), r, OccupancyConfig::density(1.0).unwrap()).unwrap();
-    grid.update(balls, CellPoints::Centre).unwrap();
-    let occupied = grid.occupied_fraction();
-    assert!(occupied > 0.02 && occupied < 0.2, "{occupied}");
-    let mut rng = rand::rngs::StdRng::seed_from_u64(11);
-    let n = 300;
+/// `n` random rays from `seed`: half start inside the cube, and every 25th runs along z
+/// through cell faces of power-of-two grids.
+pub(super) fn random_rays(seed: u64, n: usize) -> RayBatch<f64> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
     let mut o = ndarray::Array2::zeros((n, 3));
     let mut d = ndarray::Array2::zeros((n, 3));
     for i in 0..n {
@@ -119,7 +114,18 @@ fn matches_a_dense_march_on_random_rays() {
             o.row_mut(i).assign(&ndarray::arr1(&[0.25, -0.125, -2.0]));
         }
     }
-    let rays = RayBatch::new(o, d).unwrap();
+    RayBatch::new(o, d).unwrap()
+}
+
+#[test]
+fn matches_a_dense_march_on_random_rays() {
+    let r = 16;
+    let mut grid = OccupancyGrid::new(cube(), r, OccupancyConfig::density(1.0).unwrap()).unwrap();
+    grid.update(balls, CellPoints::Centre).unwrap();
+    let occupied = grid.occupied_fraction();
+    assert!(occupied > 0.02 && occupied < 0.2, "{occupied}");
+    let n = 300;
+    let rays = random_rays(11, n);
     let iv = cube().clip(&rays);
     let step = 0.05;
     for jitter in [Jitter::None, Jitter::PerRay { seed: 2 }, Jitter::PerSample { seed: 2 }] {

@@ -3,38 +3,14 @@
 
 use std::convert::Infallible;
 
-use super::march_tests::{balls, camera_rays, cube};
+use super::march_tests::{balls, camera_rays, cube, random_rays};
 use super::*;
 use crate::rays::RayBatch;
 use crate::SampleError;
 use fogray_tape::Offsets;
-use ndarray::{arr2, Array2, ArrayView2};
-use rand::{Rng, SeedableRng};
+use ndarray::{arr2, ArrayView2};
 
 const JITTERS: [Jitter; 3] = [Jitter::None, Jitter::PerRay { seed: 3 }, Jitter::PerSample { seed: 3 }];
-
-/// 300 random rays, half starting inside the cube, a few along an axis through cell faces.
-fn random_rays(seed: u64) -> RayBatch<f64> {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-    let n = 300;
-    let mut o = Array2::zeros((n, 3));
-    let mut d = Array2::zeros((n, 3));
-    for i in 0..n {
-        for a in 0..3 {
-            o[[i, a]] = if i % 2 == 0 {
-                rng.gen_range(-3.0..3.0)
-            } else {
-                rng.gen_range(-1.0..1.0)
-            };
-            d[[i, a]] = rng.gen_range(-1.0..1.0);
-        }
-        if i % 25 == 0 {
-            d.row_mut(i).assign(&ndarray::arr1(&[0.0, 0.0, 1.0]));
-            o.row_mut(i).assign(&ndarray::arr1(&[0.3, -0.2, -2.0]));
-        }
-    }
-    RayBatch::new(o, d).unwrap()
-}
 
 fn balls_grid(resolution: usize) -> OccupancyGrid {
     let mut grid = OccupancyGrid::new(cube(), resolution, OccupancyConfig::density(1.0).unwrap()).unwrap();
@@ -67,7 +43,7 @@ fn a_fully_occupied_grid_gives_the_uniform_and_stratified_samples() {
 fn keeps_exactly_the_stratified_samples_in_occupied_cells() {
     // The reference: every sample of the stratified sampler (same pieces), kept where the
     // grid's point test (a division per axis, not the sampler's products) says occupied.
-    let rays = RayBatch::concat(&[random_rays(17), camera_rays()]);
+    let rays = RayBatch::concat(&[random_rays(17, 300), camera_rays()]);
     let iv = cube().clip(&rays);
     for resolution in [16, 37] {
         let grid = balls_grid(resolution);
@@ -146,7 +122,7 @@ fn draws_the_march_s_pieces_less_at_most_two_per_occupied_run() {
     // march has it too (cut at the run's faces); the march's other pieces each hold one of
     // the faces, two per run. So per ray: march - 2 runs <= midpoints <= march.
     let grid = balls_grid(32);
-    let rays = RayBatch::concat(&[random_rays(23), camera_rays()]);
+    let rays = RayBatch::concat(&[random_rays(23, 300), camera_rays()]);
     let iv = cube().clip(&rays);
     let step = 1.0 / 32.0;
     let marched = grid.march(&rays, &iv, step, Jitter::None).unwrap();
@@ -175,7 +151,7 @@ fn draws_the_march_s_pieces_less_at_most_two_per_occupied_run() {
 #[test]
 fn output_does_not_depend_on_the_thread_count() {
     let grid = balls_grid(16);
-    let rays = RayBatch::concat(&[random_rays(5), camera_rays()]);
+    let rays = RayBatch::concat(&[random_rays(5, 300), camera_rays()]);
     let iv = cube().clip(&rays);
     let run = |threads: usize| {
         let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
@@ -196,7 +172,7 @@ fn bad_steps_and_intervals_are_errors() {
         let e = grid.march_midpoints(&rays, &iv, step, Jitter::None).unwrap_err();
         assert!(matches!(e, SampleError::Config { what: "step", .. }), "{e}");
     }
-    let other = cube().clip(&random_rays(1));
+    let other = cube().clip(&random_rays(1, 300));
     let e = grid.march_midpoints(&rays, &other, 0.1, Jitter::None).unwrap_err();
     assert!(matches!(e, SampleError::Shape { what: "intervals", .. }), "{e}");
 }
