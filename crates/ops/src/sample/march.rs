@@ -3,9 +3,8 @@
 
 use fogray_tape::Float;
 
-use super::midpoints::check_step;
 use super::occupancy::OccupancyGrid;
-use super::packed::{check_lengths, pack_chunks, PackedSamples, Piece};
+use super::packed::{check_lengths, check_step, pack_chunks, PackedSamples, Piece};
 use super::stratified::{Jitter, RayJitter};
 use crate::error::SampleError;
 use crate::rays::{RayBatch, RayIntervals};

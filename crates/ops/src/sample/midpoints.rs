@@ -11,7 +11,7 @@ use fogray_tape::Float;
 use multiversion::multiversion;
 
 use super::occupancy::OccupancyGrid;
-use super::packed::{check_lengths, pack_chunks, PackedSamples, Piece};
+use super::packed::{check_lengths, check_step, pack_chunks, PackedSamples, Piece};
 use super::stratified::{Jitter, RayJitter};
 use crate::error::SampleError;
 use crate::rays::{RayBatch, RayIntervals};
@@ -132,18 +132,5 @@ impl OccupancyGrid {
                 counts.push(pieces.len() - before);
             }
         }))
-    }
-}
-
-/// A sampler's step must be finite and positive.
-pub(crate) fn check_step(step: f64) -> Result<(), SampleError> {
-    if step.is_finite() && step > 0.0 {
-        Ok(())
-    } else {
-        Err(SampleError::Config {
-            what: "step",
-            value: step,
-            rule: "must be finite and positive",
-        })
     }
 }

@@ -109,6 +109,19 @@ pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayInterva
     Ok(())
 }
 
+/// A sampler's step must be finite and positive.
+pub(crate) fn check_step(step: f64) -> Result<(), SampleError> {
+    if step.is_finite() && step > 0.0 {
+        Ok(())
+    } else {
+        Err(SampleError::Config {
+            what: "step",
+            value: step,
+            rule: "must be finite and positive",
+        })
+    }
+}
+
 /// One parallel task's share of the pieces: its rays' piece counts and pieces, in order.
 struct Chunk {
     counts: Vec<usize>,
