@@ -31,7 +31,7 @@ pub(super) fn camera_rays() -> RayBatch<f64> {
 }
 
 /// Density 10 inside three balls of radius 0.3, 0 elsewhere.
-pub(super) fn balls(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
+fn balls(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
     let centres = [[0.3, -0.2, 0.1], [-0.5, 0.5, -0.4], [0.6, 0.6, 0.6]];
     Ok(Array1::from_iter(p.rows().into_iter().map(|q| {
         let inside = centres
@@ -43,6 +43,13 @@ pub(super) fn balls(p: ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> {
             0.0
         }
     })))
+}
+
+/// A grid of `resolution^3` cells over the cube marking the cells whose centre is in a ball.
+pub(super) fn balls_grid(resolution: usize) -> OccupancyGrid {
+    let mut grid = OccupancyGrid::new(cube(), resolution, OccupancyConfig::density(1.0).unwrap()).unwrap();
+    grid.update(balls, CellPoints::Centre).unwrap();
+    grid
 }
 
 #[test]
@@ -120,8 +127,7 @@ pub(super) fn random_rays(seed: u64, n: usize) -> RayBatch<f64> {
 #[test]
 fn matches_a_dense_march_on_random_rays() {
     let r = 16;
-    let mut grid = OccupancyGrid::new(cube(), r, OccupancyConfig::density(1.0).unwrap()).unwrap();
-    grid.update(balls, CellPoints::Centre).unwrap();
+    let grid = balls_grid(r);
     let occupied = grid.occupied_fraction();
     assert!(occupied > 0.02 && occupied < 0.2, "{occupied}");
     let n = 300;
@@ -231,8 +237,7 @@ fn bad_marches_are_errors() {
 #[test]
 fn rays_walked_in_pairs_sample_as_each_walked_alone() {
     let r = 16;
-    let mut grid = OccupancyGrid::new(cube(), r, OccupancyConfig::density(1.0).unwrap()).unwrap();
-    grid.update(balls, CellPoints::Centre).unwrap();
+    let grid = balls_grid(r);
     let mut rng = rand::rngs::StdRng::seed_from_u64(5);
     // More than two parallel tasks of rays, and an odd count.
     let n = 2 * super::packed::RAYS_PER_TASK + 37;

@@ -3,7 +3,7 @@
 
 use std::convert::Infallible;
 
-use super::march_tests::{balls, camera_rays, cube, random_rays};
+use super::march_tests::{balls_grid, camera_rays, cube, random_rays};
 use super::*;
 use crate::rays::RayBatch;
 use crate::SampleError;
@@ -11,12 +11,6 @@ use fogray_tape::Offsets;
 use ndarray::{arr2, ArrayView2};
 
 const JITTERS: [Jitter; 3] = [Jitter::None, Jitter::PerRay { seed: 3 }, Jitter::PerSample { seed: 3 }];
-
-fn balls_grid(resolution: usize) -> OccupancyGrid {
-    let mut grid = OccupancyGrid::new(cube(), resolution, OccupancyConfig::density(1.0).unwrap()).unwrap();
-    grid.update(balls, CellPoints::Centre).unwrap();
-    grid
-}
 
 #[test]
 fn a_fully_occupied_grid_gives_the_uniform_and_stratified_samples() {
