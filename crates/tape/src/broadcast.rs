@@ -53,9 +53,28 @@ fn sum_axis<F: Float>(g: ArrayD<F>, axis: usize) -> ArrayD<F> {
     let Ok(mut out) = ArrayD::from_shape_vec(dim, zeroed(len)) else {
         return g.sum_axis(Axis(axis)).insert_axis(Axis(axis));
     };
-    let mut acc = out.index_axis_mut(Axis(axis), 0);
-    for lane in g.axis_iter(Axis(axis)) {
-        Zip::from(&mut acc).and(&lane).for_each(|a, &x| *a += x);
+    match (g.as_slice(), out.as_slice_mut()) {
+        // Row-major: each index of the axes before `axis` owns `len * inner` consecutive
+        // values, summed lane by lane into its `inner` outputs, in the same order as below.
+        (Some(gs), Some(sums)) => {
+            let (len, inner) = (g.shape()[axis], g.shape()[axis + 1..].iter().product::<usize>());
+            for (sums, block) in sums
+                .chunks_exact_mut(inner.max(1))
+                .zip(gs.chunks_exact((len * inner).max(1)))
+            {
+                for lane in block.chunks_exact(inner.max(1)) {
+                    for (a, &x) in sums.iter_mut().zip(lane) {
+                        *a += x;
+                    }
+                }
+            }
+        }
+        _ => {
+            let mut acc = out.index_axis_mut(Axis(axis), 0);
+            for lane in g.axis_iter(Axis(axis)) {
+                Zip::from(&mut acc).and(&lane).for_each(|a, &x| *a += x);
+            }
+        }
     }
     pool::give(g.into_raw_vec_and_offset().0);
     out
@@ -64,7 +83,7 @@ fn sum_axis<F: Float>(g: ArrayD<F>, axis: usize) -> ArrayD<F> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use ndarray::{ArrayD, IxDyn};
+    use ndarray::{ArrayD, Dimension, IxDyn, ShapeBuilder};
     use proptest::prelude::*;
 
     #[test]
@@ -96,6 +115,36 @@ mod tests {
             let copies: usize = big.iter().product::<usize>() / s.iter().product::<usize>().max(1);
             let all_equal = r.iter().all(|&v| v == copies as f64);
             prop_assert!(all_equal || r.is_empty());
+        }
+
+        // Distinct integer values (exact sums in any order) against a brute-force oracle that
+        // adds every element of `g` to the operand element it was broadcast from, for a
+        // row-major `g` (the flat path) and for the same values in column-major memory (the
+        // general path).
+        #[test]
+        fn sum_to_shape_matches_a_brute_force_oracle(
+            s in proptest::collection::vec(prop_oneof![Just(1usize), 2usize..4], 0..4),
+            extra in proptest::collection::vec(1usize..4, 0..3),
+            stretch in proptest::collection::vec(1usize..4, 4),
+        ) {
+            let big: Vec<usize> = extra.iter().copied()
+                .chain(s.iter().zip(&stretch).map(|(&d, &k)| if d == 1 { k } else { d }))
+                .collect();
+            let g = ArrayD::<f64>::from_shape_fn(IxDyn(&big), |ix| {
+                (0..ix.ndim()).fold(0.0, |acc, k| acc * 7.0 + ix[k] as f64 + 1.0)
+            });
+            let mut want = ArrayD::<f64>::zeros(IxDyn(&s));
+            for (ix, &v) in g.indexed_iter() {
+                let from: Vec<usize> = (0..s.len())
+                    .map(|k| if s[k] == 1 { 0 } else { ix[k + big.len() - s.len()] })
+                    .collect();
+                want[IxDyn(&from)] += v;
+            }
+            prop_assert_eq!(&sum_to_shape(g.clone(), &s), &want);
+            // The same logical array in column-major memory.
+            let mut column_major = ArrayD::<f64>::zeros(IxDyn(&big).f());
+            column_major.assign(&g);
+            prop_assert_eq!(&sum_to_shape(column_major, &s), &want);
         }
     }
 }

@@ -7,6 +7,7 @@
 use ndarray::{ArrayD, ArrayViewD, IxDyn, Zip};
 
 use crate::broadcast::{broadcast_shape, sum_to_shape};
+use crate::buffer::scratch;
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -38,6 +39,9 @@ impl<F: Float> CustomOp<F> for Select {
                 });
             }
         }
+        if let Some(y) = select_flat(&self.0, a, b) {
+            return Ok((vec![y], ()));
+        }
         let (a, b) = (a.broadcast(IxDyn(shape)), b.broadcast(IxDyn(shape)));
         let (Some(a), Some(b)) = (a, b) else {
             return Err(OpError::InvalidArgument("operands do not broadcast to the mask".into()));
@@ -58,14 +62,61 @@ impl<F: Float> CustomOp<F> for Select {
         };
         let branch = |k: usize, on: bool| {
             ctx.needs_input_grad(k).then(|| {
-                let full = Zip::from(&self.0)
-                    .and(g)
-                    .map_collect(|&m, &g| if m == on { g } else { F::zero() });
+                let pick = |m: bool, g: F| if m == on { g } else { F::zero() };
+                let full = match (self.0.as_slice(), g.as_slice()) {
+                    (Some(mask), Some(gs)) if self.0.shape() == g.shape() => {
+                        let mut out = scratch(gs.len());
+                        for ((o, &m), &g) in out.iter_mut().zip(mask).zip(gs) {
+                            *o = pick(m, g);
+                        }
+                        ArrayD::from_shape_vec(g.raw_dim(), out).ok()
+                    }
+                    _ => None,
+                };
+                let full = full.unwrap_or_else(|| Zip::from(&self.0).and(g).map_collect(|&m, &g| pick(m, g)));
                 sum_to_shape(full, ctx.input(k).shape())
             })
         };
         Ok(vec![branch(0, true), branch(1, false)])
     }
+}
+
+/// One operand of a flat select: its elements in the mask's order, or one value for all.
+enum Operand<'a, F> {
+    Each(&'a [F]),
+    One(F),
+}
+
+impl<'a, F: Float> Operand<'a, F> {
+    /// `x` as a flat operand for a mask of shape `shape`: contiguous in that shape, or a single
+    /// element; `None` for other broadcasts.
+    fn of(x: &'a ArrayViewD<'_, F>, shape: &[usize]) -> Option<Self> {
+        if x.len() == 1 {
+            return x.iter().next().map(|&v| Operand::One(v));
+        }
+        (x.shape() == shape).then(|| x.as_slice().map(Operand::Each)).flatten()
+    }
+
+    #[inline(always)]
+    fn at(&self, i: usize) -> F {
+        match self {
+            Operand::Each(v) => v[i],
+            Operand::One(v) => *v,
+        }
+    }
+}
+
+/// The select as one loop over flat memory, when the mask is contiguous and each operand is
+/// either contiguous in its shape or a single value (the common cases); `None` otherwise.
+/// The same values as the general path, which iterates an `IxDyn` view index by index.
+fn select_flat<F: Float>(mask: &ArrayD<bool>, a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>) -> Option<ArrayD<F>> {
+    let m = mask.as_slice()?;
+    let (a, b) = (Operand::of(a, mask.shape())?, Operand::of(b, mask.shape())?);
+    let mut out = scratch(m.len());
+    for (i, (o, &m)) in out.iter_mut().zip(m).enumerate() {
+        *o = if m { a.at(i) } else { b.at(i) };
+    }
+    ArrayD::from_shape_vec(mask.raw_dim(), out).ok()
 }
 
 impl<F: Float> Tape<F> {
@@ -79,7 +130,8 @@ impl<F: Float> Tape<F> {
 mod tests {
     use super::super::test_util::assert_gradcheck;
     use crate::{Tape, TapeError};
-    use ndarray::{arr1, ArrayD};
+    use ndarray::{arr1, ArrayD, Dimension, IxDyn, ShapeBuilder};
+    use proptest::prelude::*;
 
     #[test]
     fn masked_sqrt_is_finite_at_zero() {
@@ -114,6 +166,59 @@ mod tests {
             t.select(arr1(&[true, false]).into_dyn(), c, b),
             Err(TapeError::ShapeMismatch { op: "select", .. })
         ));
+    }
+
+    proptest! {
+        // Forward and both gradients against ndarray's broadcast and element-wise choice, with
+        // each operand of the mask's shape (row- or column-major), a single value, or a row
+        // broadcast along the last axis (the general path).
+        #[test]
+        fn select_matches_an_oracle_for_every_operand_kind(
+            shape in proptest::collection::vec(1usize..4, 1..4),
+            bits in proptest::collection::vec(any::<bool>(), 64),
+            kinds in (0usize..4, 0usize..4),
+        ) {
+            let mask = ArrayD::from_shape_fn(IxDyn(&shape), |ix| {
+                bits[(0..ix.ndim()).fold(0, |acc, k| acc * 4 + ix[k]) % 64]
+            });
+            let operand = |kind: usize, base: f64| -> ArrayD<f64> {
+                let full = ArrayD::from_shape_fn(IxDyn(&shape), |ix| {
+                    base + (0..ix.ndim()).fold(0.0, |acc, k| acc * 4.0 + ix[k] as f64)
+                });
+                match kind {
+                    0 => full,
+                    1 => {
+                        let mut f = ArrayD::zeros(IxDyn(&shape).f());
+                        f.assign(&full);
+                        f
+                    }
+                    2 => ArrayD::from_elem(IxDyn(&[]), base),
+                    _ => ArrayD::from_shape_fn(IxDyn(&shape[shape.len() - 1..]), |ix| base + ix[0] as f64),
+                }
+            };
+            let (a, b) = (operand(kinds.0, 100.0), operand(kinds.1, -100.0));
+            let (ab, bb) = (a.broadcast(IxDyn(&shape)).unwrap(), b.broadcast(IxDyn(&shape)).unwrap());
+            let want = ndarray::Zip::from(&mask).and(&ab).and(&bb).map_collect(|&m, &a, &b| if m { a } else { b });
+            let upstream = ArrayD::from_shape_fn(IxDyn(&shape), |ix| 1.0 + ix[0] as f64);
+            let mut want_a = ArrayD::<f64>::zeros(a.raw_dim());
+            let mut want_b = ArrayD::<f64>::zeros(b.raw_dim());
+            for (ix, &m) in mask.indexed_iter() {
+                let g = upstream[&ix];
+                let (target, full) = if m { (&mut want_a, &a) } else { (&mut want_b, &b) };
+                let from: Vec<usize> = (0..full.ndim()).map(|k| {
+                    let axis = k + shape.len() - full.ndim();
+                    if full.shape()[k] == 1 { 0 } else { ix[axis] }
+                }).collect();
+                target[IxDyn(&from)] += g;
+            }
+            let mut t = Tape::<f64>::new();
+            let (av, bv) = (t.param(a), t.param(b));
+            let y = t.select(mask, av, bv).unwrap();
+            prop_assert_eq!(&t.value(y).unwrap().to_owned(), &want);
+            let g = t.backward_with(y, upstream).unwrap();
+            prop_assert_eq!(&g.get(av).unwrap().to_owned(), &want_a);
+            prop_assert_eq!(&g.get(bv).unwrap().to_owned(), &want_b);
+        }
     }
 
     #[test]

@@ -2,7 +2,7 @@
 
 use ndarray::{concatenate, ArrayD, ArrayViewD, Axis, Dimension, IxDyn, Slice};
 
-use crate::buffer::{map1, zeroed};
+use crate::buffer::{map1, scratch, zeroed};
 
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
@@ -64,6 +64,37 @@ impl<F: Float> CustomOp<F> for Reshape {
     }
 }
 
+/// A slice of a row-major array as runs of memory: the input is `outer` runs of `whole`
+/// elements (one index of the axes before the sliced one each), of which the slice keeps the
+/// `kept` elements after the first `skipped`. One copy per run instead of one iterator step
+/// per element, which `IxDyn` views pay dearly for when the kept part is narrow (a column).
+struct Runs {
+    outer: usize,
+    whole: usize,
+    skipped: usize,
+    kept: usize,
+}
+
+impl Runs {
+    /// `shape` is the input's; the slice must fit it (checked by the caller).
+    fn new(shape: &[usize], slice: SliceAxis) -> Self {
+        let inner: usize = shape[slice.axis + 1..].iter().product();
+        Runs {
+            outer: shape[..slice.axis].iter().product(),
+            whole: shape[slice.axis] * inner,
+            skipped: slice.start * inner,
+            kept: (slice.end - slice.start) * inner,
+        }
+    }
+}
+
+/// `values` (row-major) shaped as the slice of an input of shape `shape`.
+fn sliced_shape<F: Float>(shape: &[usize], slice: SliceAxis, values: Vec<F>) -> Result<ArrayD<F>, OpError> {
+    let mut out = shape.to_vec();
+    out[slice.axis] = slice.end - slice.start;
+    ArrayD::from_shape_vec(IxDyn(&out), values).map_err(|e| OpError::InvalidArgument(e.to_string()))
+}
+
 impl<F: Float> CustomOp<F> for SliceAxis {
     type Saved = ();
     fn name(&self) -> &'static str {
@@ -80,7 +111,21 @@ impl<F: Float> CustomOp<F> for SliceAxis {
                 x.shape()
             )));
         }
-        Ok((vec![copied(&x.slice_axis(Axis(axis), Slice::from(start..end)))], ()))
+        let y = match x.as_slice() {
+            Some(xs) => {
+                let runs = Runs::new(x.shape(), *self);
+                let mut out = scratch(runs.outer * runs.kept);
+                for (o, run) in out
+                    .chunks_exact_mut(runs.kept.max(1))
+                    .zip(xs.chunks_exact(runs.whole.max(1)))
+                {
+                    o.copy_from_slice(&run[runs.skipped..runs.skipped + runs.kept]);
+                }
+                sliced_shape(x.shape(), *self, out)?
+            }
+            None => copied(&x.slice_axis(Axis(axis), Slice::from(start..end))),
+        };
+        Ok((vec![y], ()))
     }
     fn backward(
         &self,
@@ -91,8 +136,20 @@ impl<F: Float> CustomOp<F> for SliceAxis {
         let shape = ctx.input(0).raw_dim();
         let mut gx = ArrayD::from_shape_vec(shape.clone(), zeroed(shape.size()))
             .map_err(|e| OpError::InvalidArgument(e.to_string()))?;
-        gx.slice_axis_mut(Axis(self.axis), Slice::from(self.start..self.end))
-            .assign(g);
+        match (g.as_slice(), gx.as_slice_mut()) {
+            (Some(gs), Some(out)) => {
+                let runs = Runs::new(shape.slice(), *self);
+                for (run, g) in out
+                    .chunks_exact_mut(runs.whole.max(1))
+                    .zip(gs.chunks_exact(runs.kept.max(1)))
+                {
+                    run[runs.skipped..runs.skipped + runs.kept].copy_from_slice(g);
+                }
+            }
+            _ => gx
+                .slice_axis_mut(Axis(self.axis), Slice::from(self.start..self.end))
+                .assign(g),
+        }
         Ok(vec![Some(gx)])
     }
 }
@@ -163,7 +220,8 @@ impl<F: Float> Tape<F> {
 mod tests {
     use super::super::test_util::assert_gradcheck;
     use crate::{Tape, TapeError};
-    use ndarray::{arr1, arr2, ArrayD};
+    use ndarray::{arr1, arr2, ArrayD, Axis, Dimension, IxDyn, ShapeBuilder, Slice};
+    use proptest::prelude::*;
 
     #[test]
     fn values() {
@@ -209,6 +267,38 @@ mod tests {
             Err(TapeError::InvalidArgument { op: "concat", .. })
         ));
         assert_eq!(t.len(), 2);
+    }
+
+    proptest! {
+        // Forward against ndarray's own slice, backward against zeros with the upstream
+        // assigned into the slice, for a row-major input (the runs of memory) and the same
+        // values in column-major memory (the general path).
+        #[test]
+        fn slice_matches_ndarray_in_both_layouts(
+            shape in proptest::collection::vec(0usize..4, 1..4),
+            axis_pick in 0usize..3,
+            bounds in (0usize..4, 0usize..4),
+        ) {
+            let axis = axis_pick % shape.len();
+            let (start, end) = (bounds.0.min(bounds.1).min(shape[axis]), bounds.0.max(bounds.1).min(shape[axis]));
+            let x = ArrayD::<f64>::from_shape_fn(IxDyn(&shape), |ix| {
+                (0..ix.ndim()).fold(0.0, |acc, k| acc * 5.0 + ix[k] as f64 + 1.0)
+            });
+            let mut column_major = ArrayD::<f64>::zeros(IxDyn(&shape).f());
+            column_major.assign(&x);
+            let want = x.slice_axis(Axis(axis), Slice::from(start..end)).to_owned();
+            let upstream = want.mapv(|v| -2.0 * v - 1.0);
+            let mut want_grad = ArrayD::<f64>::zeros(IxDyn(&shape));
+            want_grad.slice_axis_mut(Axis(axis), Slice::from(start..end)).assign(&upstream);
+            for input in [x.clone(), column_major] {
+                let mut t = Tape::<f64>::new();
+                let xv = t.param(input);
+                let y = t.slice(xv, axis, start, end).unwrap();
+                prop_assert_eq!(&t.value(y).unwrap().to_owned(), &want);
+                let g = t.backward_with(y, upstream.clone()).unwrap();
+                prop_assert_eq!(&g.get(xv).unwrap().to_owned(), &want_grad);
+            }
+        }
     }
 
     #[test]
