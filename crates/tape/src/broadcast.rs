@@ -56,6 +56,13 @@ fn sum_axis<F: Float>(g: ArrayD<F>, axis: usize) -> ArrayD<F> {
     match (g.as_slice(), out.as_slice_mut()) {
         // Row-major: each index of the axes before `axis` owns `len * inner` consecutive
         // values, summed lane by lane into its `inner` outputs, in the same order as below.
+        (Some(gs), Some(sums)) if g.shape()[axis + 1..].iter().product::<usize>() == 1 => {
+            // The last axis with data (`[n, c]` to `[n, 1]`): runs of `len` values to one sum.
+            let len = g.shape()[axis];
+            for (a, run) in sums.iter_mut().zip(gs.chunks_exact(len.max(1))) {
+                *a = run.iter().fold(*a, |a, &x| a + x);
+            }
+        }
         (Some(gs), Some(sums)) => {
             let (len, inner) = (g.shape()[axis], g.shape()[axis + 1..].iter().product::<usize>());
             for (sums, block) in sums

@@ -81,12 +81,8 @@ pub fn map1<F: Float>(x: &ArrayViewD<'_, F>, f: impl Fn(F) -> F) -> ArrayD<F> {
 /// when both are contiguous, otherwise `Zip` (2-D views with static dimensions, which give
 /// `Zip` a fast inner loop; `IxDyn` indexes every element).
 pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F) -> F) -> ArrayD<F> {
-    if let (Some(xs), Some(ys)) = (a.as_slice(), b.as_slice()) {
-        if a.shape() == b.shape() {
-            let mut out = scratch(xs.len());
-            for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
-                *o = f(x, y);
-            }
+    if a.shape() == b.shape() {
+        if let Some(out) = map2_flat(a, b, &f) {
             if let Ok(z) = ArrayD::from_shape_vec(a.raw_dim(), out) {
                 return z;
             }
@@ -108,6 +104,101 @@ pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F
         }
         None => Zip::from(a).and(b).map_collect(|&x, &y| f(x, y)),
     }
+}
+
+/// How a view reads row-major memory, element `i` (row-major) of it being:
+enum Flat<'a, F> {
+    /// `values[i]`: a contiguous array.
+    Each(&'a [F]),
+    /// `values[i / inner]`: an array broadcast along its trailing axes (a column `[n, 1]` or a
+    /// scalar stretched over `[n, c]`).
+    Repeat(&'a [F], usize),
+    /// `values[i % values.len()]`: an array broadcast along its leading axes (a row `[c]`
+    /// stretched over `[n, c]`).
+    Tile(&'a [F]),
+}
+
+impl<'a, F> Flat<'a, F> {
+    /// `v`'s pattern, if it is one of the three; `None` for other layouts and empty views.
+    fn of(v: &ArrayViewD<'a, F>) -> Option<Self> {
+        if let Some(values) = v.to_slice() {
+            return Some(Flat::Each(values));
+        }
+        if v.is_empty() {
+            return None;
+        }
+        // Axes that read nothing new: stride 0 (broadcast) or length 1.
+        let idle = |k: usize| v.strides()[k] == 0 || v.shape()[k] == 1;
+        let n = v.ndim();
+        let trailing = (0..n).rev().take_while(|&k| idle(k)).count();
+        if trailing > 0 {
+            let mut base = v.clone();
+            for k in (n - trailing..n).rev() {
+                base = base.index_axis_move(ndarray::Axis(k), 0);
+            }
+            if let Some(values) = base.to_slice() {
+                return Some(Flat::Repeat(values, v.shape()[n - trailing..].iter().product()));
+            }
+        }
+        let leading = (0..n).take_while(|&k| idle(k)).count();
+        if leading > 0 {
+            let mut base = v.clone();
+            for _ in 0..leading {
+                base = base.index_axis_move(ndarray::Axis(0), 0);
+            }
+            return base.to_slice().map(Flat::Tile);
+        }
+        None
+    }
+}
+
+/// `f` over two views of one shape as loops over flat memory, when each is contiguous or one
+/// of them is a [`Flat`] broadcast of a contiguous array and the other contiguous (the common
+/// cases, which `Zip` walks index by index); `None` otherwise.
+fn map2_flat<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: &impl Fn(F, F) -> F) -> Option<Vec<F>> {
+    let (x, y) = (Flat::of(a)?, Flat::of(b)?);
+    if !matches!((&x, &y), (Flat::Each(_), _) | (_, Flat::Each(_))) {
+        return None;
+    }
+    let mut out = scratch(a.len());
+    match (x, y) {
+        (Flat::Each(xs), Flat::Each(ys)) => {
+            for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
+                *o = f(x, y);
+            }
+        }
+        (Flat::Each(xs), Flat::Repeat(ys, inner)) => {
+            for ((o, x), &y) in out.chunks_exact_mut(inner).zip(xs.chunks_exact(inner)).zip(ys) {
+                for (o, &x) in o.iter_mut().zip(x) {
+                    *o = f(x, y);
+                }
+            }
+        }
+        (Flat::Repeat(xs, inner), Flat::Each(ys)) => {
+            for ((o, y), &x) in out.chunks_exact_mut(inner).zip(ys.chunks_exact(inner)).zip(xs) {
+                for (o, &y) in o.iter_mut().zip(y) {
+                    *o = f(x, y);
+                }
+            }
+        }
+        (Flat::Each(xs), Flat::Tile(ys)) => {
+            for (o, x) in out.chunks_exact_mut(ys.len()).zip(xs.chunks_exact(ys.len())) {
+                for ((o, &x), &y) in o.iter_mut().zip(x).zip(ys) {
+                    *o = f(x, y);
+                }
+            }
+        }
+        (Flat::Tile(xs), Flat::Each(ys)) => {
+            for (o, y) in out.chunks_exact_mut(xs.len()).zip(ys.chunks_exact(xs.len())) {
+                for ((o, &y), &x) in o.iter_mut().zip(y).zip(xs) {
+                    *o = f(x, y);
+                }
+            }
+        }
+        // Two broadcasts: excluded above.
+        _ => return None,
+    }
+    Some(out)
 }
 
 /// An array of `dim` in standard layout over a [`scratch`] buffer, for a caller that writes
@@ -176,7 +267,7 @@ fn advise_huge_pages<T>(_: &Vec<T>) {}
 mod tests {
     use super::*;
 
-    use ndarray::{arr2, ArrayD, IxDyn};
+    use ndarray::{arr2, ArrayD, Dimension, IxDyn, ShapeBuilder};
 
     #[test]
     fn maps_agree_with_ndarray_for_contiguous_broadcast_and_strided_views() {
@@ -194,6 +285,50 @@ mod tests {
         assert_eq!(map1(&at, |x| -x), -&a.t());
         assert_eq!(map3(&a.view(), &b.view(), &a.view(), |x, y, z| x * y + z), &a * &b + &a);
         assert_eq!(map3(&at, &bt, &at, |x, y, z| x * y + z), (&a * &b + &a).t());
+    }
+
+    proptest::proptest! {
+        // map2 against ndarray's Zip for an operand of the full shape (row- or column-major)
+        // against another that is the same, a broadcast of its trailing axes (a column, a
+        // scalar), of its leading axes (a row), or the full array reversed along every axis:
+        // every flat loop and the general paths, both argument orders, with a function that
+        // tells them apart.
+        #[test]
+        fn map2_matches_zip_for_every_broadcast_pattern(
+            shape in proptest::collection::vec(0usize..4, 1..4),
+            kind in 0usize..6,
+            split_pick in 0usize..4,
+        ) {
+            let split = split_pick % (shape.len() + 1);
+            let full = ArrayD::from_shape_fn(IxDyn(&shape), |ix| {
+                (0..ix.ndim()).fold(1.0, |acc, k| acc * 3.0 + ix[k] as f64)
+            });
+            let mut column_major = ArrayD::<f64>::zeros(IxDyn(&shape).f());
+            column_major.assign(&full);
+            // The operand before broadcasting: axes from `split` on (trailing) or before it
+            // (leading) set to 1.
+            let partial = |trailing: bool| {
+                let s: Vec<usize> = shape.iter().enumerate()
+                    .map(|(k, &d)| if (k >= split) == trailing { 1 } else { d }).collect();
+                ArrayD::from_shape_fn(IxDyn(&s), |ix| 0.5 + (0..ix.ndim()).fold(0.0, |acc, k| acc * 2.0 + ix[k] as f64))
+            };
+            let other = match kind {
+                0 => full.mapv(|v| v * 0.25),
+                1 => column_major.clone(),
+                2 => partial(true),
+                3 => partial(false),
+                4 => ArrayD::from_elem(IxDyn(&[]), 7.0),
+                _ => full.slice_each_axis(|_| ndarray::Slice::new(0, None, -1)).to_owned(),
+            };
+            let f = |x: f64, y: f64| x - 2.0 * y;
+            let b = other.broadcast(IxDyn(&shape)).unwrap();
+            for a in [full.view(), column_major.view()] {
+                let want = Zip::from(&a).and(&b).map_collect(|&x, &y| f(x, y));
+                proptest::prop_assert_eq!(&map2(&a, &b, f), &want);
+                let want = Zip::from(&b).and(&a).map_collect(|&x, &y| f(x, y));
+                proptest::prop_assert_eq!(&map2(&b, &a, f), &want);
+            }
+        }
     }
 
     #[test]
