@@ -10,6 +10,7 @@
 use std::borrow::Cow;
 
 use ndarray::{ArrayD, ArrayViewD, Zip};
+use rayon::prelude::*;
 
 use crate::float::Float;
 use crate::pool;
@@ -58,12 +59,14 @@ pub fn scratch<F: Float>(len: usize) -> Vec<F> {
 }
 
 /// `f` of every element of `x`, into a [`scratch`] buffer (pooled or fresh).
-pub fn map1<F: Float>(x: &ArrayViewD<'_, F>, f: impl Fn(F) -> F) -> ArrayD<F> {
+pub fn map1<F: Float>(x: &ArrayViewD<'_, F>, f: impl Fn(F) -> F + Sync) -> ArrayD<F> {
     if let Some(xs) = x.as_slice() {
         let mut out = scratch(xs.len());
-        for (o, &v) in out.iter_mut().zip(xs) {
-            *o = f(v);
-        }
+        pieces(&mut out, PIECE, |start, out| {
+            for (o, &v) in out.iter_mut().zip(&xs[start..]) {
+                *o = f(v);
+            }
+        });
         if let Ok(y) = ArrayD::from_shape_vec(x.raw_dim(), out) {
             return y;
         }
@@ -80,7 +83,7 @@ pub fn map1<F: Float>(x: &ArrayViewD<'_, F>, f: impl Fn(F) -> F) -> ArrayD<F> {
 /// `f` element by element over two views of one shape, into a [`scratch`] buffer: a plain loop
 /// when both are contiguous, otherwise `Zip` (2-D views with static dimensions, which give
 /// `Zip` a fast inner loop; `IxDyn` indexes every element).
-pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F) -> F) -> ArrayD<F> {
+pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F) -> F + Sync) -> ArrayD<F> {
     if a.shape() == b.shape() {
         if let Some(out) = map2_flat(a, b, &f) {
             if let Ok(z) = ArrayD::from_shape_vec(a.raw_dim(), out) {
@@ -104,6 +107,26 @@ pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F
         }
         None => Zip::from(a).and(b).map_collect(|&x, &y| f(x, y)),
     }
+}
+
+/// Element-wise maps of at least this many elements are cut into pieces run on rayon's
+/// threads; below it, handing work over costs more than it saves.
+const PARALLEL: usize = 1 << 15;
+
+/// Elements per piece (about 64 KiB of f32 output): many pieces per thread, for balance.
+const PIECE: usize = 1 << 14;
+
+/// Runs `body(start, out[start..start + piece])` over `out` cut into pieces of `piece`
+/// elements (the last one shorter), on rayon's threads when `out` is large; each element is
+/// written by one call, so the values do not depend on the threads.
+fn pieces<F: Float>(out: &mut [F], piece: usize, body: impl Fn(usize, &mut [F]) + Sync) {
+    if out.len() < PARALLEL {
+        body(0, out);
+        return;
+    }
+    out.par_chunks_mut(piece)
+        .enumerate()
+        .for_each(|(k, out)| body(k * piece, out));
 }
 
 /// How a view reads row-major memory, element `i` (row-major) of it being:
@@ -155,46 +178,54 @@ impl<'a, F> Flat<'a, F> {
 /// `f` over two views of one shape as loops over flat memory, when each is contiguous or one
 /// of them is a [`Flat`] broadcast of a contiguous array and the other contiguous (the common
 /// cases, which `Zip` walks index by index); `None` otherwise.
-fn map2_flat<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: &impl Fn(F, F) -> F) -> Option<Vec<F>> {
+fn map2_flat<F: Float>(
+    a: &ArrayViewD<'_, F>,
+    b: &ArrayViewD<'_, F>,
+    f: &(impl Fn(F, F) -> F + Sync),
+) -> Option<Vec<F>> {
     let (x, y) = (Flat::of(a)?, Flat::of(b)?);
     if !matches!((&x, &y), (Flat::Each(_), _) | (_, Flat::Each(_))) {
         return None;
     }
     let mut out = scratch(a.len());
+    // A piece of whole runs (or tiles), so that each piece starts at a run's first element.
+    let whole = |run: usize| (PIECE / run).max(1) * run;
     match (x, y) {
-        (Flat::Each(xs), Flat::Each(ys)) => {
-            for ((o, &x), &y) in out.iter_mut().zip(xs).zip(ys) {
+        (Flat::Each(xs), Flat::Each(ys)) => pieces(&mut out, PIECE, |start, out| {
+            for ((o, &x), &y) in out.iter_mut().zip(&xs[start..]).zip(&ys[start..]) {
                 *o = f(x, y);
             }
-        }
-        (Flat::Each(xs), Flat::Repeat(ys, inner)) => {
-            for ((o, x), &y) in out.chunks_exact_mut(inner).zip(xs.chunks_exact(inner)).zip(ys) {
+        }),
+        (Flat::Each(xs), Flat::Repeat(ys, inner)) => pieces(&mut out, whole(inner), |start, out| {
+            let runs = out.chunks_exact_mut(inner).zip(xs[start..].chunks_exact(inner));
+            for ((o, x), &y) in runs.zip(&ys[start / inner..]) {
                 for (o, &x) in o.iter_mut().zip(x) {
                     *o = f(x, y);
                 }
             }
-        }
-        (Flat::Repeat(xs, inner), Flat::Each(ys)) => {
-            for ((o, y), &x) in out.chunks_exact_mut(inner).zip(ys.chunks_exact(inner)).zip(xs) {
+        }),
+        (Flat::Repeat(xs, inner), Flat::Each(ys)) => pieces(&mut out, whole(inner), |start, out| {
+            let runs = out.chunks_exact_mut(inner).zip(ys[start..].chunks_exact(inner));
+            for ((o, y), &x) in runs.zip(&xs[start / inner..]) {
                 for (o, &y) in o.iter_mut().zip(y) {
                     *o = f(x, y);
                 }
             }
-        }
-        (Flat::Each(xs), Flat::Tile(ys)) => {
-            for (o, x) in out.chunks_exact_mut(ys.len()).zip(xs.chunks_exact(ys.len())) {
+        }),
+        (Flat::Each(xs), Flat::Tile(ys)) => pieces(&mut out, whole(ys.len()), |start, out| {
+            for (o, x) in out.chunks_exact_mut(ys.len()).zip(xs[start..].chunks_exact(ys.len())) {
                 for ((o, &x), &y) in o.iter_mut().zip(x).zip(ys) {
                     *o = f(x, y);
                 }
             }
-        }
-        (Flat::Tile(xs), Flat::Each(ys)) => {
-            for (o, y) in out.chunks_exact_mut(xs.len()).zip(ys.chunks_exact(xs.len())) {
+        }),
+        (Flat::Tile(xs), Flat::Each(ys)) => pieces(&mut out, whole(xs.len()), |start, out| {
+            for (o, y) in out.chunks_exact_mut(xs.len()).zip(ys[start..].chunks_exact(xs.len())) {
                 for ((o, &y), &x) in o.iter_mut().zip(y).zip(xs) {
                     *o = f(x, y);
                 }
             }
-        }
+        }),
         // Two broadcasts: excluded above.
         _ => return None,
     }
@@ -213,14 +244,17 @@ pub fn map3<F: Float>(
     a: &ArrayViewD<'_, F>,
     b: &ArrayViewD<'_, F>,
     c: &ArrayViewD<'_, F>,
-    f: impl Fn(F, F, F) -> F,
+    f: impl Fn(F, F, F) -> F + Sync,
 ) -> ArrayD<F> {
     if let (Some(xs), Some(ys), Some(zs)) = (a.as_slice(), b.as_slice(), c.as_slice()) {
         if a.shape() == b.shape() && a.shape() == c.shape() {
             let mut out = scratch(xs.len());
-            for (((o, &x), &y), &z) in out.iter_mut().zip(xs).zip(ys).zip(zs) {
-                *o = f(x, y, z);
-            }
+            pieces(&mut out, PIECE, |start, out| {
+                let inputs = xs[start..].iter().zip(&ys[start..]).zip(&zs[start..]);
+                for (o, ((&x, &y), &z)) in out.iter_mut().zip(inputs) {
+                    *o = f(x, y, z);
+                }
+            });
             if let Ok(w) = ArrayD::from_shape_vec(a.raw_dim(), out) {
                 return w;
             }

@@ -163,7 +163,7 @@ impl<F: Float> CustomOp<F> for Unary<F> {
 pub(crate) fn elementwise_backward<F: Float, S>(
     ctx: &BackwardCtx<'_, F, S>,
     grads: &[Option<ArrayViewD<'_, F>>],
-    df: impl Fn(F, F) -> F,
+    df: impl Fn(F, F) -> F + Sync,
 ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
     let Some(g) = &grads[0] else { return Ok(vec![None]) };
     let gx = map3(g, &ctx.input(0), &ctx.output(0), |g, x, y| strong_mul(g, df(x, y)));
