@@ -102,7 +102,8 @@ enum Command {
         json: bool,
     },
     /// Samples per second (forward+backward with the spread of the runs, and forward alone) of
-    /// the fused op on 1 and all threads and of the stable and naive taped twins, also in a
+    /// the fused op on 1 and all threads and of the stable and naive taped twins (all threads:
+    /// the tape's element-wise ops run on rayon's pool), also in a
     /// training loop's steady state ("reused": the fused op into output and gradient buffers
     /// kept across runs, the twins on one tape cleared between runs) and, for the fused op, in
     /// one pass per ray ("1-pass": `evaluate_vjp_into`, the same bits), in f32 and f64, on the
@@ -115,7 +116,7 @@ enum Command {
     /// bound they reach for the bytes they must move per sample.
     ///
     /// With --op grid: lookups per second of the fused trilinear grid field (1 thread and all)
-    /// and of its taped twin (1 thread, a quarter of the lookups), forward + backward into the
+    /// and of its taped twin (all threads, a quarter of the lookups), forward + backward into the
     /// grid and forward alone, 4,194,304 lookups at uniform random positions in 128^3 x 4 and
     /// 64^3 x 4 grids, f32 and f64, each beside its error against a plain f64 loop on the same
     /// lookups and its peak extra memory.

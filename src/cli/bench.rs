@@ -475,9 +475,10 @@ fn measure<F: Float>(
         // The first run fills the pool (fresh pages): not timed, also in --quick.
         taped_step_reused(&op, &x, naive, &mut tape)?;
         let reused = median_secs(reps, || taped_step_reused(&op, &x, naive, &mut tape))? - setup;
+        // The twins run in the global pool: the tape's element-wise ops use all its threads.
         push(
             method,
-            1,
+            all,
             both,
             (reused.max(1e-9), None),
             fwd.max(1e-9),

@@ -21,7 +21,7 @@ pub fn report(title: &str, stamp: &Stamp, tables: &str) -> String {
 }
 
 /// The composite's headline: 65536 rays x 64 samples (or the first workload measured), f32
-/// and f64, the fused op on all threads against the taped twins on one.
+/// and f64, the fused op on all threads against the taped twins (also on all threads).
 pub fn composite_headline(results: &[Measurement], stamp: &Stamp) -> String {
     let Some(first) = results.first() else {
         return String::new();
