@@ -321,6 +321,46 @@ mod tests {
         assert_eq!(map3(&at, &bt, &at, |x, y, z| x * y + z), (&a * &b + &a).t());
     }
 
+    #[test]
+    fn large_maps_cut_into_pieces_match_zip_on_any_number_of_threads() {
+        // Past the parallel threshold, with lengths that are not multiples of a piece, runs
+        // (a column of 3) and tiles (a row of 7) that do not divide it either.
+        let n = 3 * PARALLEL + 1234;
+        let full = ArrayD::from_shape_fn(IxDyn(&[n, 3, 7]), |ix| (ix[0] * 21 + ix[1] * 7 + ix[2]) as f64);
+        let column = ArrayD::from_shape_fn(IxDyn(&[n, 1, 1]), |ix| 0.5 * ix[0] as f64);
+        let row = ArrayD::from_shape_fn(IxDyn(&[3, 7]), |ix| (ix[0] * 7 + ix[1]) as f64 + 0.25);
+        let f = |x: f64, y: f64| x - 2.0 * y;
+        let g = |x: f64, y: f64, z: f64| x * 0.5 - y + z;
+        let shape = IxDyn(&[n, 3, 7]);
+        let (col, row) = (column.broadcast(shape.clone()).unwrap(), row.broadcast(shape).unwrap());
+        let want = [
+            Zip::from(&full).and(&col).map_collect(|&x, &y| f(x, y)),
+            Zip::from(&col).and(&full).map_collect(|&x, &y| f(x, y)),
+            Zip::from(&full).and(&row).map_collect(|&x, &y| f(x, y)),
+            Zip::from(&row).and(&full).map_collect(|&x, &y| f(x, y)),
+            Zip::from(&full).and(&full).map_collect(|&x, &y| f(x, y)),
+        ];
+        let want1 = full.mapv(|x| -x);
+        let want3 = Zip::from(&full).and(&full).and(&full).map_collect(|&x, &y, &z| g(x, y, z));
+        for threads in [1, 3] {
+            let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+            pool.install(|| {
+                let got = [
+                    map2(&full.view(), &col, f),
+                    map2(&col, &full.view(), f),
+                    map2(&full.view(), &row, f),
+                    map2(&row, &full.view(), f),
+                    map2(&full.view(), &full.view(), f),
+                ];
+                for (k, (got, want)) in got.iter().zip(&want).enumerate() {
+                    assert_eq!(got, want, "case {k} on {threads} threads");
+                }
+                assert_eq!(map1(&full.view(), |x| -x), want1);
+                assert_eq!(map3(&full.view(), &full.view(), &full.view(), g), want3);
+            });
+        }
+    }
+
     proptest::proptest! {
         // map2 against ndarray's Zip for an operand of the full shape (row- or column-major)
         // against another that is the same, a broadcast of its trailing axes (a column, a
