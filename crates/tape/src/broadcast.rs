@@ -104,6 +104,16 @@ mod tests {
         ));
     }
 
+    /// A shape that `s` broadcasts to: `extra` leading axes, and each axis of length 1 in `s`
+    /// stretched to its entry of `stretch`.
+    fn stretched(s: &[usize], extra: &[usize], stretch: &[usize]) -> Vec<usize> {
+        extra
+            .iter()
+            .copied()
+            .chain(s.iter().zip(stretch).map(|(&d, &k)| if d == 1 { k } else { d }))
+            .collect()
+    }
+
     proptest! {
         // sum_to_shape(ones(broadcast), s) counts how many broadcast elements each operand
         // element stands for: the product of the broadcast sizes it was stretched over.
@@ -113,9 +123,7 @@ mod tests {
             extra in proptest::collection::vec(1usize..4, 0..3),
             stretch in proptest::collection::vec(1usize..4, 4),
         ) {
-            let big: Vec<usize> = extra.iter().copied()
-                .chain(s.iter().zip(&stretch).map(|(&d, &k)| if d == 1 { k } else { d }))
-                .collect();
+            let big = stretched(&s, &extra, &stretch);
             let g = ArrayD::<f64>::ones(IxDyn(&big));
             let r = sum_to_shape(g, &s);
             prop_assert_eq!(r.shape(), s.as_slice());
@@ -134,9 +142,7 @@ mod tests {
             extra in proptest::collection::vec(1usize..4, 0..3),
             stretch in proptest::collection::vec(1usize..4, 4),
         ) {
-            let big: Vec<usize> = extra.iter().copied()
-                .chain(s.iter().zip(&stretch).map(|(&d, &k)| if d == 1 { k } else { d }))
-                .collect();
+            let big = stretched(&s, &extra, &stretch);
             let g = ArrayD::<f64>::from_shape_fn(IxDyn(&big), |ix| {
                 (0..ix.ndim()).fold(0.0, |acc, k| acc * 7.0 + ix[k] as f64 + 1.0)
             });

@@ -341,7 +341,10 @@ mod tests {
             Zip::from(&full).and(&full).map_collect(|&x, &y| f(x, y)),
         ];
         let want1 = full.mapv(|x| -x);
-        let want3 = Zip::from(&full).and(&full).and(&full).map_collect(|&x, &y, &z| g(x, y, z));
+        let want3 = Zip::from(&full)
+            .and(&full)
+            .and(&full)
+            .map_collect(|&x, &y, &z| g(x, y, z));
         for threads in [1, 3] {
             let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
             pool.install(|| {
