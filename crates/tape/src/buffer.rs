@@ -114,12 +114,12 @@ pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F
 const PARALLEL: usize = 1 << 15;
 
 /// Elements per piece (about 64 KiB of f32 output): many pieces per thread, for balance.
-const PIECE: usize = 1 << 14;
+pub(crate) const PIECE: usize = 1 << 14;
 
 /// Runs `body(start, out[start..start + piece])` over `out` cut into pieces of `piece`
 /// elements (the last one shorter), on rayon's threads when `out` is large; each element is
 /// written by one call, so the values do not depend on the threads.
-fn pieces<F: Float>(out: &mut [F], piece: usize, body: impl Fn(usize, &mut [F]) + Sync) {
+pub(crate) fn pieces<F: Float>(out: &mut [F], piece: usize, body: impl Fn(usize, &mut [F]) + Sync) {
     if out.len() < PARALLEL {
         body(0, out);
         return;

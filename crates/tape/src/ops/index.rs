@@ -4,8 +4,9 @@
 //! A table is a sequence of rows (axis 0), each row the elements of the remaining axes. On a
 //! contiguous table a row is a slice, so both ops are loops of slice copies and adds over the
 //! indices (rows of 1 to 4 elements get loops with the row length known at compile time); a
-//! strided view is read row by row. `scatter_add` adds in index order, one thread, so its
-//! result never depends on the machine; in `f32` it accumulates in `f64` and rounds once, so a
+//! strided view is read row by row. `scatter_add` adds each output row's terms in index order
+//! (on rayon's threads, each owning a band of output rows), so its result never depends on the
+//! machine or the number of threads; in `f32` it accumulates in `f64` and rounds once, so a
 //! row that receives many small terms after a large one keeps them.
 //!
 //! ```
@@ -24,8 +25,9 @@
 //! ```
 
 use ndarray::{ArrayD, ArrayViewD, Axis, IxDyn};
+use rayon::prelude::*;
 
-use crate::buffer::{scratch, zeroed};
+use crate::buffer::{pieces, scratch, zeroed, PIECE};
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -116,31 +118,59 @@ fn scatter_add<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize], rows: usize) 
     // f32 sums go through f64: a row can receive thousands of terms.
     let out = if F::NAME == f64::NAME {
         let mut out = zeroed::<F>(len);
-        add_rows(&mut out, xs, indices, c);
+        add_rows_in_bands(&mut out, xs, indices, c);
         out
     } else {
         let mut wide = vec![0.0f64; len];
-        add_rows(&mut wide, xs, indices, c);
+        add_rows_in_bands(&mut wide, xs, indices, c);
         let mut out = scratch::<F>(len);
-        for (o, &w) in out.iter_mut().zip(&wide) {
-            *o = F::lit(w);
-        }
+        pieces(&mut out, PIECE, |start, out| {
+            for (o, &w) in out.iter_mut().zip(&wide[start..]) {
+                *o = F::lit(w);
+            }
+        });
         out
     };
     into_array(shape, out)
 }
 
-/// `acc[indices[k]] += xs[k]` row by row, in index order, the terms widened to `A`.
-fn add_rows<A: Float, F: Float>(acc: &mut [A], xs: &[F], indices: &[usize], c: usize) {
+/// Terms (input rows) below which a scatter stays on the calling thread.
+const PARALLEL_ROWS: usize = 1 << 14;
+
+/// `acc[indices[k]] += xs[k]` row by row, the terms widened to `A`, with the output rows cut
+/// into one band per thread of rayon's pool: each band's task reads every index and adds the
+/// rows that fall in its band, in index order. Every output row therefore sums the same terms
+/// in the same order as one sequential pass, whatever the number of threads.
+fn add_rows_in_bands<A: Float, F: Float>(acc: &mut [A], xs: &[F], indices: &[usize], c: usize) {
+    let rows = acc.len() / c;
+    let threads = rayon::current_num_threads();
+    if threads == 1 || indices.len() < PARALLEL_ROWS || rows < threads {
+        add_rows(acc, xs, indices, c, 0);
+        return;
+    }
+    let band = rows.div_ceil(threads);
+    acc.par_chunks_mut(band * c)
+        .enumerate()
+        .for_each(|(b, acc)| add_rows(acc, xs, indices, c, b * band));
+}
+
+/// `acc[indices[k] - first] += xs[k]` in index order for the indices in `first..first + rows`
+/// (`rows` being `acc`'s row count), the terms widened to `A`; other indices are skipped.
+fn add_rows<A: Float, F: Float>(acc: &mut [A], xs: &[F], indices: &[usize], c: usize, first: usize) {
     match c {
-        1 => add_rows_of::<A, F, 1>(acc, xs, indices),
-        2 => add_rows_of::<A, F, 2>(acc, xs, indices),
-        3 => add_rows_of::<A, F, 3>(acc, xs, indices),
-        4 => add_rows_of::<A, F, 4>(acc, xs, indices),
+        1 => add_rows_of::<A, F, 1>(acc, xs, indices, first),
+        2 => add_rows_of::<A, F, 2>(acc, xs, indices, first),
+        3 => add_rows_of::<A, F, 3>(acc, xs, indices, first),
+        4 => add_rows_of::<A, F, 4>(acc, xs, indices, first),
         _ => {
+            let rows = acc.len() / c;
             for (src, &i) in xs.chunks_exact(c).zip(indices) {
-                for (a, &v) in acc[i * c..(i + 1) * c].iter_mut().zip(src) {
-                    *a += A::lit(v.as_f64());
+                // Below `first`, the subtraction wraps to a huge row: skipped as well.
+                let r = i.wrapping_sub(first);
+                if r < rows {
+                    for (a, &v) in acc[r * c..(r + 1) * c].iter_mut().zip(src) {
+                        *a += A::lit(v.as_f64());
+                    }
                 }
             }
         }
@@ -148,10 +178,14 @@ fn add_rows<A: Float, F: Float>(acc: &mut [A], xs: &[F], indices: &[usize], c: u
 }
 
 /// [`add_rows`] for rows of `C` elements.
-fn add_rows_of<A: Float, F: Float, const C: usize>(acc: &mut [A], xs: &[F], indices: &[usize]) {
+fn add_rows_of<A: Float, F: Float, const C: usize>(acc: &mut [A], xs: &[F], indices: &[usize], first: usize) {
+    let rows = acc.len() / C;
     for (src, &i) in xs.chunks_exact(C).zip(indices) {
-        for (a, &v) in acc[i * C..(i + 1) * C].iter_mut().zip(src) {
-            *a += A::lit(v.as_f64());
+        let r = i.wrapping_sub(first);
+        if r < rows {
+            for (a, &v) in acc[r * C..(r + 1) * C].iter_mut().zip(src) {
+                *a += A::lit(v.as_f64());
+            }
         }
     }
 }
@@ -272,6 +306,39 @@ mod tests {
             row += &x.index_axis(Axis(0), k);
         }
         out
+    }
+
+    #[test]
+    fn a_large_scatter_in_bands_is_the_sequential_sum_on_any_number_of_threads() {
+        // Past the parallel threshold, rows that do not divide into the bands evenly, repeated
+        // indices (about 37 terms a row) and the row lengths with their own loops and without.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let (rows, n) = (1331, 50_000);
+        let indices: Vec<usize> = (0..n).map(|_| rng.gen_range(0..rows)).collect();
+        for c in [1, 4, 5] {
+            let x: Vec<f32> = (0..n * c).map(|_| rng.gen_range(-1.0f32..1.0)).collect();
+            // The oracle: one pass in index order, f64 sums rounded once.
+            let mut sums = vec![0.0f64; rows * c];
+            for (k, &i) in indices.iter().enumerate() {
+                for j in 0..c {
+                    sums[i * c + j] += x[k * c + j] as f64;
+                }
+            }
+            let want: Vec<f32> = sums.iter().map(|&v| v as f32).collect();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let got = pool.install(|| {
+                    let mut t = Tape::<f32>::new();
+                    let xv = t.param(ArrayD::from_shape_vec(IxDyn(&[n, c]), x.clone()).unwrap());
+                    let y = t.scatter_add(xv, &indices, rows).unwrap();
+                    t.value(y).unwrap().iter().copied().collect::<Vec<f32>>()
+                });
+                assert!(
+                    got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
+                    "row length {c} on {threads} threads"
+                );
+            }
+        }
     }
 
     #[test]
