@@ -58,7 +58,8 @@ pub fn scratch<F: Float>(len: usize) -> Vec<F> {
     }
 }
 
-/// `f` of every element of `x`, into a [`scratch`] buffer (pooled or fresh).
+/// `f` of every element of `x`, into a [`scratch`] buffer (pooled or fresh); a contiguous `x`
+/// in one loop, in pieces on rayon's threads when large (`f` is shared by them, hence `Sync`).
 pub fn map1<F: Float>(x: &ArrayViewD<'_, F>, f: impl Fn(F) -> F + Sync) -> ArrayD<F> {
     if let Some(xs) = x.as_slice() {
         let mut out = scratch(xs.len());
@@ -80,9 +81,11 @@ pub fn map1<F: Float>(x: &ArrayViewD<'_, F>, f: impl Fn(F) -> F + Sync) -> Array
     }
 }
 
-/// `f` element by element over two views of one shape, into a [`scratch`] buffer: a plain loop
-/// when both are contiguous, otherwise `Zip` (2-D views with static dimensions, which give
-/// `Zip` a fast inner loop; `IxDyn` indexes every element).
+/// `f` element by element over two views of one shape, into a [`scratch`] buffer: loops over
+/// flat memory when both are contiguous or one is a column, scalar or row broadcast of a
+/// contiguous array and the other contiguous (in pieces on rayon's threads when large),
+/// otherwise `Zip` (2-D views with static dimensions, which give `Zip` a fast inner loop;
+/// `IxDyn` indexes every element). `f` is shared by the threads, hence `Sync`.
 pub fn map2<F: Float>(a: &ArrayViewD<'_, F>, b: &ArrayViewD<'_, F>, f: impl Fn(F, F) -> F + Sync) -> ArrayD<F> {
     if a.shape() == b.shape() {
         if let Some(out) = map2_flat(a, b, &f) {
