@@ -180,7 +180,8 @@ impl<'a, F> Flat<'a, F> {
 
 /// `f` over two views of one shape as loops over flat memory, when each is contiguous or one
 /// of them is a [`Flat`] broadcast of a contiguous array and the other contiguous (the common
-/// cases, which `Zip` walks index by index); `None` otherwise.
+/// cases, which `Zip` walks index by index); `None` otherwise. A broadcast first operand is
+/// handled as a broadcast second one with the arguments of `f` swapped back.
 fn map2_flat<F: Float>(
     a: &ArrayViewD<'_, F>,
     b: &ArrayViewD<'_, F>,
@@ -191,48 +192,50 @@ fn map2_flat<F: Float>(
         return None;
     }
     let mut out = scratch(a.len());
-    // A piece of whole runs (or tiles), so that each piece starts at a run's first element.
-    let whole = |run: usize| (PIECE / run).max(1) * run;
+    let flipped = |y: F, x: F| f(x, y);
     match (x, y) {
         (Flat::Each(xs), Flat::Each(ys)) => pieces(&mut out, PIECE, |start, out| {
             for ((o, &x), &y) in out.iter_mut().zip(&xs[start..]).zip(&ys[start..]) {
                 *o = f(x, y);
             }
         }),
-        (Flat::Each(xs), Flat::Repeat(ys, inner)) => pieces(&mut out, whole(inner), |start, out| {
-            let runs = out.chunks_exact_mut(inner).zip(xs[start..].chunks_exact(inner));
-            for ((o, x), &y) in runs.zip(&ys[start / inner..]) {
-                for (o, &x) in o.iter_mut().zip(x) {
-                    *o = f(x, y);
-                }
-            }
-        }),
-        (Flat::Repeat(xs, inner), Flat::Each(ys)) => pieces(&mut out, whole(inner), |start, out| {
-            let runs = out.chunks_exact_mut(inner).zip(ys[start..].chunks_exact(inner));
-            for ((o, y), &x) in runs.zip(&xs[start / inner..]) {
-                for (o, &y) in o.iter_mut().zip(y) {
-                    *o = f(x, y);
-                }
-            }
-        }),
-        (Flat::Each(xs), Flat::Tile(ys)) => pieces(&mut out, whole(ys.len()), |start, out| {
-            for (o, x) in out.chunks_exact_mut(ys.len()).zip(xs[start..].chunks_exact(ys.len())) {
-                for ((o, &x), &y) in o.iter_mut().zip(x).zip(ys) {
-                    *o = f(x, y);
-                }
-            }
-        }),
-        (Flat::Tile(xs), Flat::Each(ys)) => pieces(&mut out, whole(xs.len()), |start, out| {
-            for (o, y) in out.chunks_exact_mut(xs.len()).zip(ys[start..].chunks_exact(xs.len())) {
-                for ((o, &y), &x) in o.iter_mut().zip(y).zip(xs) {
-                    *o = f(x, y);
-                }
-            }
-        }),
+        (Flat::Each(xs), Flat::Repeat(ys, inner)) => with_repeated(&mut out, xs, ys, inner, f),
+        (Flat::Repeat(xs, inner), Flat::Each(ys)) => with_repeated(&mut out, ys, xs, inner, &flipped),
+        (Flat::Each(xs), Flat::Tile(ys)) => with_tiled(&mut out, xs, ys, f),
+        (Flat::Tile(xs), Flat::Each(ys)) => with_tiled(&mut out, ys, xs, &flipped),
         // Two broadcasts: excluded above.
         _ => return None,
     }
     Some(out)
+}
+
+/// Elements per piece of whole runs (or tiles) of `run` elements, so that each piece starts at
+/// a run's first element.
+fn whole_runs(run: usize) -> usize {
+    (PIECE / run).max(1) * run
+}
+
+/// `out[i] = f(xs[i], ys[i / inner])`.
+fn with_repeated<F: Float>(out: &mut [F], xs: &[F], ys: &[F], inner: usize, f: &(impl Fn(F, F) -> F + Sync)) {
+    pieces(out, whole_runs(inner), |start, out| {
+        let runs = out.chunks_exact_mut(inner).zip(xs[start..].chunks_exact(inner));
+        for ((o, x), &y) in runs.zip(&ys[start / inner..]) {
+            for (o, &x) in o.iter_mut().zip(x) {
+                *o = f(x, y);
+            }
+        }
+    });
+}
+
+/// `out[i] = f(xs[i], ys[i % ys.len()])`.
+fn with_tiled<F: Float>(out: &mut [F], xs: &[F], ys: &[F], f: &(impl Fn(F, F) -> F + Sync)) {
+    pieces(out, whole_runs(ys.len()), |start, out| {
+        for (o, x) in out.chunks_exact_mut(ys.len()).zip(xs[start..].chunks_exact(ys.len())) {
+            for ((o, &x), &y) in o.iter_mut().zip(x).zip(ys) {
+                *o = f(x, y);
+            }
+        }
+    });
 }
 
 /// An array of `dim` in standard layout over a [`scratch`] buffer, for a caller that writes
