@@ -10,6 +10,7 @@
 
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array2, ArrayD};
+use rayon::prelude::*;
 
 use super::config::GridField;
 use super::geometry::Layout;
@@ -29,23 +30,35 @@ struct Cells {
     inside: Vec<bool>,
 }
 
+/// Positions a parallel task of [`cells`] locates.
+const CELLS_CHUNK: usize = 4096;
+
+/// Every position's cell, located on rayon's threads in chunks (each position's entries are
+/// written by one task, so nothing depends on the threads).
 fn cells<F: Float, const D: usize>(layout: &Layout<D>, positions: &[F], n: usize) -> Cells {
-    let mut c = Cells {
-        node: vec![0; n],
-        index: vec![Array2::zeros((n, 1)); D],
-        inside: vec![false; n],
-    };
-    for s in 0..n {
-        let p: [f64; D] = std::array::from_fn(|a| positions[s * D + a].as_f64());
-        if let Some(cell) = layout.locate(p) {
-            c.node[s] = cell.node;
-            c.inside[s] = true;
-            for (index, &i) in c.index.iter_mut().zip(&cell.index) {
-                index[[s, 0]] = i as f64;
+    let mut node = vec![0; n];
+    let mut index = vec![0.0f64; n * D];
+    let mut inside = vec![false; n];
+    node.par_chunks_mut(CELLS_CHUNK)
+        .zip(index.par_chunks_mut(CELLS_CHUNK * D))
+        .zip(inside.par_chunks_mut(CELLS_CHUNK))
+        .zip(positions.par_chunks(CELLS_CHUNK * D))
+        .for_each(|(((node, index), inside), positions)| {
+            for (s, p) in positions.chunks_exact(D).enumerate() {
+                let p: [f64; D] = std::array::from_fn(|a| p[a].as_f64());
+                if let Some(cell) = layout.locate(p) {
+                    node[s] = cell.node;
+                    inside[s] = true;
+                    for (a, &i) in cell.index.iter().enumerate() {
+                        index[s * D + a] = i as f64;
+                    }
+                }
             }
-        }
-    }
-    c
+        });
+    let index = (0..D)
+        .map(|a| Array2::from_shape_fn((n, 1), |(s, _)| index[s * D + a]))
+        .collect();
+    Cells { node, index, inside }
 }
 
 /// The lookup of `grid` at `positions` as [`GridField::apply`] computes it, with tape ops
@@ -105,7 +118,8 @@ fn lookup_in<F: Float, const D: usize>(
         for a in 1..D {
             w = tape.mul(w, factor(a))?;
         }
-        let idx: Vec<usize> = c.node.iter().map(|&node| node + layout.corners[k]).collect();
+        let corner = layout.corners[k];
+        let idx: Vec<usize> = c.node.par_iter().map(|&node| node + corner).collect();
         let values = tape.gather(rows, &idx)?;
         let term = tape.mul(values, w)?;
         sum = Some(match sum {

@@ -3,8 +3,9 @@
 //!
 //! A table is a sequence of rows (axis 0), each row the elements of the remaining axes. On a
 //! contiguous table a row is a slice, so both ops are loops of slice copies and adds over the
-//! indices (rows of 1 to 4 elements get loops with the row length known at compile time); a
-//! strided view is read row by row. `scatter_add` adds each output row's terms in index order
+//! indices (rows of 1 to 4 elements get loops with the row length known at compile time), and
+//! `gather` copies pieces of its output rows on rayon's threads; a strided view is read row by
+//! row. `scatter_add` adds each output row's terms in index order
 //! (on rayon's threads, each owning a band of output rows), so its result never depends on the
 //! machine or the number of threads; in `f32` it accumulates in `f64` and rounds once, so a
 //! row that receives many small terms after a large one keeps them.
@@ -68,23 +69,22 @@ fn into_array<F: Float>(shape: Vec<usize>, data: Vec<F>) -> Result<ArrayD<F>, Op
     ArrayD::from_shape_vec(IxDyn(&shape), data).map_err(|e| OpError::InvalidArgument(e.to_string()))
 }
 
-/// Rows `indices` of `x` (every index already checked to be below `x`'s row count).
+/// Rows `indices` of `x` (every index already checked to be below `x`'s row count). From a
+/// contiguous table the output is cut into pieces of whole rows on rayon's threads (each
+/// output row is one copy, so nothing depends on the threads); a strided table is read row by
+/// row on the calling thread.
 fn gather<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize]) -> Result<ArrayD<F>, OpError> {
     let (shape, c) = rows_shape(x.shape(), indices.len());
     let mut out = scratch::<F>(indices.len() * c);
     if c > 0 {
         match x.as_slice() {
-            Some(table) => match c {
-                1 => copy_rows::<F, 1>(table, indices, &mut out),
-                2 => copy_rows::<F, 2>(table, indices, &mut out),
-                3 => copy_rows::<F, 3>(table, indices, &mut out),
-                4 => copy_rows::<F, 4>(table, indices, &mut out),
-                _ => {
-                    for (dst, &i) in out.chunks_exact_mut(c).zip(indices) {
-                        dst.copy_from_slice(&table[i * c..(i + 1) * c]);
-                    }
-                }
-            },
+            Some(table) => {
+                let piece = PIECE.next_multiple_of(c);
+                pieces(&mut out, piece, |start, out| {
+                    let first = start / c;
+                    copy_rows(table, &indices[first..first + out.len() / c], c, out)
+                });
+            }
             None => {
                 for (dst, &i) in out.chunks_exact_mut(c).zip(indices) {
                     for (d, &v) in dst.iter_mut().zip(x.index_axis(Axis(0), i).iter()) {
@@ -97,8 +97,23 @@ fn gather<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize]) -> Result<ArrayD<F
     into_array(shape, out)
 }
 
-/// [`gather`]'s loop for rows of `C` elements, which the compiler unrolls.
-fn copy_rows<F: Float, const C: usize>(table: &[F], indices: &[usize], out: &mut [F]) {
+/// `out` (one row of `c` elements per index) = rows `indices` of the row-major `table`.
+fn copy_rows<F: Float>(table: &[F], indices: &[usize], c: usize, out: &mut [F]) {
+    match c {
+        1 => copy_rows_of::<F, 1>(table, indices, out),
+        2 => copy_rows_of::<F, 2>(table, indices, out),
+        3 => copy_rows_of::<F, 3>(table, indices, out),
+        4 => copy_rows_of::<F, 4>(table, indices, out),
+        _ => {
+            for (dst, &i) in out.chunks_exact_mut(c).zip(indices) {
+                dst.copy_from_slice(&table[i * c..(i + 1) * c]);
+            }
+        }
+    }
+}
+
+/// [`copy_rows`] for rows of `C` elements, which the compiler unrolls.
+fn copy_rows_of<F: Float, const C: usize>(table: &[F], indices: &[usize], out: &mut [F]) {
     for (dst, &i) in out.chunks_exact_mut(C).zip(indices) {
         dst.copy_from_slice(&table[i * C..(i + 1) * C]);
     }
@@ -337,6 +352,33 @@ mod tests {
                     got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
                     "row length {c} on {threads} threads"
                 );
+            }
+        }
+    }
+
+    #[test]
+    fn a_large_gather_in_pieces_is_the_row_by_row_copy_on_any_number_of_threads() {
+        // Past the parallel threshold, with row lengths whose pieces hold whole rows (1, 4) and
+        // one that does not divide a piece of the default size (5), and more rows than a piece.
+        let mut rng = rand::rngs::StdRng::seed_from_u64(6);
+        let (rows, n) = (1331, 50_001);
+        let indices: Vec<usize> = (0..n).map(|_| rng.gen_range(0..rows)).collect();
+        for c in [1, 4, 5] {
+            let table: Vec<f32> = (0..rows * c).map(|_| rng.gen_range(-1.0f32..1.0)).collect();
+            let want: Vec<f32> = indices
+                .iter()
+                .flat_map(|&i| table[i * c..(i + 1) * c].iter().copied())
+                .collect();
+            for threads in [1, 2, 3] {
+                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+                let got = pool.install(|| {
+                    let mut t = Tape::<f32>::new();
+                    let xv = t.param(ArrayD::from_shape_vec(IxDyn(&[rows, c]), table.clone()).unwrap());
+                    let y = t.gather(xv, &indices).unwrap();
+                    assert_eq!(t.shape(y).unwrap(), &[n, c]);
+                    t.value(y).unwrap().iter().copied().collect::<Vec<f32>>()
+                });
+                assert!(got == want, "row length {c} on {threads} threads");
             }
         }
     }
