@@ -280,7 +280,7 @@ impl<F: Float> Tape<F> {
 #[cfg(test)]
 mod tests {
     use super::super::test_util::assert_gradcheck;
-    use crate::{Tape, TapeError};
+    use crate::{Tape, TapeError, Var};
     use ndarray::{arr1, arr2, ArrayD, Axis, IxDyn};
     use rand::{Rng, SeedableRng};
 
@@ -323,6 +323,23 @@ mod tests {
         out
     }
 
+    /// The values of `op` applied to an f32 parameter of `shape` holding `values`, on a pool of
+    /// `threads` threads.
+    fn on_threads(
+        threads: usize,
+        shape: &[usize],
+        values: &[f32],
+        op: impl Fn(&mut Tape<f32>, Var) -> Result<Var, TapeError> + Send + Sync,
+    ) -> Vec<f32> {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| {
+            let mut t = Tape::<f32>::new();
+            let x = t.param(ArrayD::from_shape_vec(IxDyn(shape), values.to_vec()).unwrap());
+            let y = op(&mut t, x).unwrap();
+            t.value(y).unwrap().iter().copied().collect()
+        })
+    }
+
     #[test]
     fn a_large_scatter_in_bands_is_the_sequential_sum_on_any_number_of_threads() {
         // Past the parallel threshold, rows that do not divide into the bands evenly, repeated
@@ -341,13 +358,7 @@ mod tests {
             }
             let want: Vec<f32> = sums.iter().map(|&v| v as f32).collect();
             for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-                let got = pool.install(|| {
-                    let mut t = Tape::<f32>::new();
-                    let xv = t.param(ArrayD::from_shape_vec(IxDyn(&[n, c]), x.clone()).unwrap());
-                    let y = t.scatter_add(xv, &indices, rows).unwrap();
-                    t.value(y).unwrap().iter().copied().collect::<Vec<f32>>()
-                });
+                let got = on_threads(threads, &[n, c], &x, |t, x| t.scatter_add(x, &indices, rows));
                 assert!(
                     got.iter().zip(&want).all(|(a, b)| a.to_bits() == b.to_bits()),
                     "row length {c} on {threads} threads"
@@ -370,14 +381,8 @@ mod tests {
                 .flat_map(|&i| table[i * c..(i + 1) * c].iter().copied())
                 .collect();
             for threads in [1, 2, 3] {
-                let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
-                let got = pool.install(|| {
-                    let mut t = Tape::<f32>::new();
-                    let xv = t.param(ArrayD::from_shape_vec(IxDyn(&[rows, c]), table.clone()).unwrap());
-                    let y = t.gather(xv, &indices).unwrap();
-                    assert_eq!(t.shape(y).unwrap(), &[n, c]);
-                    t.value(y).unwrap().iter().copied().collect::<Vec<f32>>()
-                });
+                let got = on_threads(threads, &[rows, c], &table, |t, x| t.gather(x, &indices));
+                assert_eq!(got.len(), n * c);
                 assert!(got == want, "row length {c} on {threads} threads");
             }
         }
