@@ -697,9 +697,15 @@ fn report_fit<F: fogray::tape::Float>(
         return write_stdout(|w| Ok(serde_json::to_writer(w, &summary)?));
     }
     for e in &result.log {
+        // Before the first step there is no training loss (NaN in the log, null in JSON).
+        let loss = if e.train_loss.is_nan() {
+            "-".to_string()
+        } else {
+            format!("{:.3e}", e.train_loss)
+        };
         println!(
-            "step {:>6}  {:>8.2} s  train loss {:.3e}  test PSNR {:.2} dB",
-            e.step, e.seconds, e.train_loss, e.test_psnr
+            "step {:>6}  {:>8.2} s  train loss {loss:>9}  test PSNR {:.2} dB",
+            e.step, e.seconds, e.test_psnr
         );
     }
     println!(
