@@ -369,8 +369,8 @@ mod tests {
 
     #[test]
     fn a_large_gather_in_pieces_is_the_row_by_row_copy_on_any_number_of_threads() {
-        // Past the parallel threshold, with row lengths whose pieces hold whole rows (1, 4) and
-        // one that does not divide a piece of the default size (5), and more rows than a piece.
+        // Past the parallel threshold, with row lengths that divide the default piece (1, 4)
+        // and one whose pieces are rounded up to whole rows (5), and more rows than a piece.
         let mut rng = rand::rngs::StdRng::seed_from_u64(6);
         let (rows, n) = (1331, 50_001);
         let indices: Vec<usize> = (0..n).map(|_| rng.gen_range(0..rows)).collect();
