@@ -209,9 +209,9 @@ fn map2_flat<F: Float>(
     Some(out)
 }
 
-/// Elements per piece of whole runs (or tiles) of `run` elements, so that each piece starts at
-/// a run's first element.
-fn whole_runs(run: usize) -> usize {
+/// Elements per piece of whole runs (or tiles, or table rows) of `run` elements, so that each
+/// piece starts at a run's first element.
+pub(crate) fn whole_runs(run: usize) -> usize {
     (PIECE / run).max(1) * run
 }
 

@@ -28,7 +28,7 @@
 use ndarray::{ArrayD, ArrayViewD, Axis, IxDyn};
 use rayon::prelude::*;
 
-use crate::buffer::{pieces, scratch, zeroed, PIECE};
+use crate::buffer::{pieces, scratch, whole_runs, zeroed, PIECE};
 use crate::custom::{BackwardCtx, CustomOp};
 use crate::error::{OpError, Result};
 use crate::float::Float;
@@ -79,8 +79,7 @@ fn gather<F: Float>(x: &ArrayViewD<'_, F>, indices: &[usize]) -> Result<ArrayD<F
     if c > 0 {
         match x.as_slice() {
             Some(table) => {
-                let piece = PIECE.next_multiple_of(c);
-                pieces(&mut out, piece, |start, out| {
+                pieces(&mut out, whole_runs(c), |start, out| {
                     let first = start / c;
                     copy_rows(table, &indices[first..first + out.len() / c], c, out)
                 });
@@ -370,7 +369,7 @@ mod tests {
     #[test]
     fn a_large_gather_in_pieces_is_the_row_by_row_copy_on_any_number_of_threads() {
         // Past the parallel threshold, with row lengths that divide the default piece (1, 4)
-        // and one whose pieces are rounded up to whole rows (5), and more rows than a piece.
+        // and one whose pieces are cut down to whole rows (5), and more rows than a piece.
         let mut rng = rand::rngs::StdRng::seed_from_u64(6);
         let (rows, n) = (1331, 50_001);
         let indices: Vec<usize> = (0..n).map(|_| rng.gen_range(0..rows)).collect();
