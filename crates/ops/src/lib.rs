@@ -50,6 +50,7 @@ pub mod field;
 pub mod grid;
 pub mod hard;
 mod math;
+mod prefetch;
 pub mod prior;
 pub mod rays;
 pub mod sample;

@@ -14,6 +14,7 @@ use super::pack_attenuation::PackAttenuation;
 use super::pack_backward::{backward_pack, PackScratch};
 use super::rows::{add_row_dots, outer_product};
 use super::suffix::adds_minus_hides;
+use crate::prefetch::prefetch_span;
 
 /// Upstream gradients as flat slices (`None`: that output reached nothing).
 pub(crate) struct Upstream<'a, F> {
@@ -78,6 +79,17 @@ pub(crate) struct InputGrads<'a, F> {
 }
 
 impl<'a, F> InputGrads<'a, F> {
+    /// Asks for the cache lines of the wanted gradients of the block's samples `local` (see
+    /// [`Flat::request`](super::layout::Flat::request)).
+    #[inline(always)]
+    pub(crate) fn request(&self, local: std::ops::Range<usize>, ch: usize) {
+        // Unwanted gradients are empty slices: nothing is asked for.
+        prefetch_span(self.sigma, local.clone());
+        prefetch_span(self.delta, local.clone());
+        prefetch_span(self.color, local.start * ch..local.end * ch);
+        prefetch_span(self.t, local);
+    }
+
     /// One `InputGrads` per block, in block order (each empty where not wanted).
     pub(crate) fn split(self, blocks: &[Block], want: Wanted, ch: usize) -> Vec<InputGrads<'a, F>> {
         let InputGrads {
@@ -136,7 +148,13 @@ fn backward_block<'a, F: Float>(
     let mut att = Attenuation::default();
     let mut pack = PackAttenuation::default();
     let mut pack_scratch = PackScratch::default();
-    for unit in block.units(&op.offsets, op.packs) {
+    let mut units = block.units(&op.offsets, op.packs).peekable();
+    while let Some(unit) = units.next() {
+        // The next unit's lines are asked for while this one is computed.
+        if let Some((samples, local)) = units.peek().map(Unit::spans) {
+            x.request(samples);
+            o.request(local, x.ch);
+        }
         match unit {
             Unit::Single(ray) => one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o),
             Unit::Pack { first, len } => {

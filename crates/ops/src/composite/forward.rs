@@ -109,7 +109,12 @@ fn forward_block<'a, F: Float>(
     let mut pack = PackAttenuation::default();
     let mut pack_forward = ForwardScratch::default();
     let mut valid = true;
-    for unit in block.units(&op.offsets, op.packs) {
+    let mut units = block.units(&op.offsets, op.packs).peekable();
+    while let Some(unit) = units.next() {
+        // The next unit's inputs are asked for while this one is computed.
+        if let Some((samples, _)) = units.peek().map(Unit::spans) {
+            x.request(samples);
+        }
         match unit {
             Unit::Single(ray) => {
                 let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);

@@ -68,6 +68,17 @@ impl Unit {
     pub(crate) fn pack_samples(first: &Ray, len: usize) -> Range<usize> {
         first.samples.start..first.samples.start + LANES * len
     }
+
+    /// The unit's samples: in the op, and within its block.
+    pub(crate) fn spans(&self) -> (Range<usize>, Range<usize>) {
+        match self {
+            Unit::Single(ray) => (ray.samples.clone(), ray.local.clone()),
+            Unit::Pack { first, len } => {
+                let samples = Self::pack_samples(first, *len);
+                (samples.clone(), first.local.start..first.local.start + samples.len())
+            }
+        }
+    }
 }
 
 impl Block {

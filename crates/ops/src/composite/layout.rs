@@ -7,6 +7,7 @@ use std::ops::Range;
 use super::arrays::CompositeArrays;
 use super::config::{Background, Composite};
 use crate::error::CompositeError;
+use crate::prefetch::prefetch_span;
 use fogray_tape::buffer::flat;
 use fogray_tape::Float;
 
@@ -25,6 +26,19 @@ pub(crate) struct Flat<'a, F: Float> {
 }
 
 impl<F: Float> Flat<'_, F> {
+    /// Asks for the cache lines of `samples`' inputs at once, before the loops read them one
+    /// array after another: the misses then overlap instead of following each other.
+    #[inline(always)]
+    pub(crate) fn request(&self, samples: Range<usize>) {
+        let ch = self.ch;
+        prefetch_span(&self.sigma, samples.clone());
+        prefetch_span(&self.delta, samples.clone());
+        prefetch_span(&self.color, samples.start * ch..samples.end * ch);
+        if let Some(t) = &self.t {
+            prefetch_span(t, samples);
+        }
+    }
+
     /// The background of ray `r` (empty when there is none).
     pub fn background_of(&self, r: usize) -> &[F] {
         match self.background.len() {

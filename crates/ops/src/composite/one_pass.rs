@@ -63,7 +63,13 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
     let mut pack_forward = ForwardScratch::default();
     let mut pack_scratch = PackScratch::default();
     let mut valid = true;
-    for unit in block.units(&op.offsets, op.packs) {
+    let mut units = block.units(&op.offsets, op.packs).peekable();
+    while let Some(unit) = units.next() {
+        // The next unit's lines are asked for while this one is computed.
+        if let Some((samples, local)) = units.peek().map(Unit::spans) {
+            x.request(samples);
+            g.request(local, ch);
+        }
         match unit {
             Unit::Single(ray) => {
                 let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);

@@ -11,6 +11,7 @@ use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::geometry::{weights, Layout};
+use crate::prefetch::prefetch;
 
 /// Positions per parallel task (the results do not depend on it).
 pub(crate) const CHUNK: usize = 4096;
@@ -49,20 +50,6 @@ pub(crate) fn forward<F: Float, const D: usize>(
 /// interpolated: random lookups in a large grid wait on memory, and a batch keeps many
 /// loads in flight where one lookup at a time keeps two or three.
 const BATCH: usize = 16;
-
-/// Asks the CPU to start loading the cache line holding `x` into cache (a hint: it changes no
-/// value, and does nothing on other architectures).
-#[inline(always)]
-pub(crate) fn prefetch<T>(x: *const T) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: a prefetch never faults (not even for an address outside the process) and has
-    // no visible effect; SSE is part of the x86_64 baseline. (The intrinsic is a safe function from Rust 1.87.)
-    #[allow(unused_unsafe)]
-    unsafe {
-        use std::arch::x86_64::{_mm_prefetch, _MM_HINT_T0};
-        _mm_prefetch::<_MM_HINT_T0>(x.cast::<i8>());
-    }
-}
 
 /// Interpolates one chunk, `ch` channels per row in groups of `G` (`G` divides `ch`).
 #[inline(always)]

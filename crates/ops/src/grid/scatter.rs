@@ -18,9 +18,10 @@ use rayon::prelude::*;
 
 use multiversion::multiversion;
 
-use super::forward::{position, prefetch};
+use super::forward::position;
 use super::geometry::{weights, Layout};
 use super::scratch::Scratch;
+use crate::prefetch::prefetch;
 
 /// Positions per block of the counting sort (fixed: the order of the sums depends on it).
 const BLOCK: usize = 1 << 15;
