@@ -21,11 +21,17 @@ pub(crate) struct Attenuation {
     weights: Vec<f64>,
     /// See [`Attenuation::stop`].
     stop: usize,
+    /// Whether `alpha[len]` holds the whole ray's opacity `-expm1(-depth[len])` (see
+    /// [`Attenuation::compute_whole`]).
+    opacity_after: bool,
 }
 
 /// Samples per step when early termination may stop a ray: a multiple of the prefix sums'
 /// group of 4, so that the values are bitwise those of the ray taken whole.
 const CHUNK: usize = 32;
+
+/// Values a step of the exponentials' vector loops: a whole AVX-512 register of f64.
+const STEP: usize = 8;
 
 /// `out[k] = running + sum_{j<k} x[j]`; returns the new running total. Four samples at a time: the sums within a
 /// group are off the chain, which carries one addition per group instead of one per sample
@@ -71,6 +77,56 @@ impl Attenuation {
     /// the domain (see [`valid_steps`]) give meaningless results, never a panic.
     #[inline(always)]
     pub(crate) fn compute<F: Float>(&mut self, sigma: &[F], delta: &[F], min_transmittance: f64) {
+        if min_transmittance > 0.0 || sigma.len() % STEP == 0 {
+            self.compute_in_parts(sigma, delta, min_transmittance);
+        } else {
+            self.compute_whole(sigma, delta);
+        }
+    }
+
+    /// [`Attenuation::compute`] without early termination, for a ray whose length is not a
+    /// whole number of [`STEP`]s. The exponentials run over whole steps, into the buffers'
+    /// padding past the ray's values (scratch: computed, never read), where a loop over the
+    /// ray itself would run its last `len % STEP` values one scalar polynomial at a time (on a
+    /// ray of twenty samples, about as long as its vector part). The padding also has room for
+    /// the ray's own `T_len` and opacity, from its whole optical depth, which then need no
+    /// scalar polynomial either. Every value gets the same bits as in
+    /// [`Attenuation::compute_in_parts`]: the same function of the same argument.
+    #[inline(always)]
+    fn compute_whole<F: Float>(&mut self, sigma: &[F], delta: &[F]) {
+        let len = sigma.len();
+        // The samples and T_len (or the opacity) in whole steps.
+        let steps = (len + 1).next_multiple_of(STEP);
+        self.tau.resize(steps, 0.0);
+        self.alpha.resize(steps, 0.0);
+        self.weights.resize(len, 0.0);
+        self.depth.resize(steps, 0.0);
+        self.trans.resize(steps, 0.0);
+        self.stop = len;
+        self.opacity_after = true;
+        for ((t, &s), &d) in self.tau.iter_mut().zip(sigma).zip(delta) {
+            *t = s.as_f64() * d.as_f64();
+        }
+        let total = exclusive_prefix_sums(&self.tau[..len], &mut self.depth[..len], 0.0);
+        self.depth[len] = total;
+        self.tau[len] = total;
+        if single_tier::<F>() {
+            exp_neg_slice::<true>(&self.depth, &mut self.trans);
+            one_minus_exp_neg_slice::<true>(&self.tau, &mut self.alpha);
+        } else {
+            exp_neg_slice::<false>(&self.depth, &mut self.trans);
+            one_minus_exp_neg_slice::<false>(&self.tau, &mut self.alpha);
+        }
+        for ((w, &t), &a) in self.weights.iter_mut().zip(&self.trans).zip(&self.alpha) {
+            *w = t * a;
+        }
+    }
+
+    /// [`Attenuation::compute`] for a ray taken in parts of [`CHUNK`] samples (early
+    /// termination), or whose length is a whole number of [`STEP`]s.
+    #[inline(always)]
+    fn compute_in_parts<F: Float>(&mut self, sigma: &[F], delta: &[F], min_transmittance: f64) {
+        self.opacity_after = false;
         let len = sigma.len();
         self.tau.resize(len, 0.0);
         self.alpha.resize(len, 0.0);
@@ -132,12 +188,17 @@ impl Attenuation {
 
     /// `T_k`, `k = 0..=len`.
     pub(crate) fn transmittance(&self) -> &[f64] {
-        &self.trans
+        &self.trans[..=self.len()]
+    }
+
+    /// The ray's length (the buffers may be longer: see [`Attenuation::compute_whole`]).
+    fn len(&self) -> usize {
+        self.weights.len()
     }
 
     /// `alpha_k`, `k = 0..len`.
     pub(crate) fn alpha(&self) -> &[f64] {
-        &self.alpha
+        &self.alpha[..self.len()]
     }
 
     /// `w_k = T_k alpha_k`, `k = 0..len`.
@@ -150,7 +211,10 @@ impl Attenuation {
     /// that its fused multiply-adds are the caller's instructions, not library calls).
     #[inline(always)]
     pub(crate) fn opacity_before<F: Float>(&self, k: usize) -> f64 {
-        if single_tier::<F>() {
+        if self.opacity_after && k == self.len() {
+            // `-expm1(-depth[len])`, computed in the vector loop by the same function.
+            self.alpha[k]
+        } else if single_tier::<F>() {
             one_minus_exp_neg::<true>(self.depth[k])
         } else {
             one_minus_exp_neg::<false>(self.depth[k])
@@ -176,6 +240,41 @@ mod tests {
             }
             assert_eq!(total, want);
         }
+    }
+
+    /// Both ways of filling the buffers, for data of type `F`, on rays of every length up to a
+    /// few steps: the same bits, the opacity included.
+    fn whole_steps_agree_with_parts<F: Float>() {
+        for len in 0..=3 * STEP + 1 {
+            let sigma: Vec<F> = (0..len).map(|k| F::lit(0.03 + ((k * 37) % 11) as f64 * 0.4)).collect();
+            let delta: Vec<F> = (0..len).map(|k| F::lit(0.01 + (k % 3) as f64 * 0.2)).collect();
+            let mut whole = Attenuation::default();
+            let mut parts = Attenuation::default();
+            // Dirty buffers from a longer ray first: the padding must not leak into the values.
+            whole.compute(&[F::lit(7.0); 50], &[F::lit(3.0); 50], 0.0);
+            whole.compute(&sigma, &delta, 0.0);
+            parts.compute_in_parts(&sigma, &delta, 0.0);
+            assert_eq!(whole.opacity_after, len % STEP != 0, "len {len}");
+            let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+            assert_eq!(bits(whole.transmittance()), bits(parts.transmittance()), "len {len}");
+            assert_eq!(bits(whole.alpha()), bits(parts.alpha()), "len {len}");
+            assert_eq!(bits(whole.weights()), bits(parts.weights()), "len {len}");
+            assert_eq!(whole.stop(), parts.stop());
+            for k in 0..=len {
+                assert_eq!(
+                    whole.opacity_before::<F>(k).to_bits(),
+                    parts.opacity_before::<F>(k).to_bits(),
+                    "len {len} k {k}"
+                );
+            }
+            assert!(len == 0 || whole.opacity_before::<F>(len) > 0.0);
+        }
+    }
+
+    #[test]
+    fn whole_steps_into_the_padding_give_the_bits_of_the_ray_in_parts() {
+        whole_steps_agree_with_parts::<f32>();
+        whole_steps_agree_with_parts::<f64>();
     }
 
     #[test]
