@@ -7,7 +7,8 @@
 //! each time, its buffer pool reused). `fused-tape-mse` and `fused-tape-chain` are a training
 //! step's composite and mean squared error on a kept tape, forward and backward: one op
 //! (`Composite::apply_mse`) against `apply`, `sub`, `square` and `mean`. `cargo bench --bench composite` runs them all; `cargo bench --bench composite -- fused/f32`
-//! selects. `fogray bench` gives the same speeds beside each method's error and memory.
+//! selects. `ragged` runs the two fused steady states on a training batch's shape, rays of random
+//! lengths. `fogray bench` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
 
@@ -55,17 +56,35 @@ impl<F: Float> Inputs<F> {
 
 /// sigma ~ U[0, 5], delta = 2 / samples (total optical depth ~5), RGB in [0, 1].
 fn inputs<F: Float>(rays: usize, samples: usize) -> Inputs<F> {
-    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
-    let n = rays * samples;
-    let mut u = |lo: f64, hi: f64, len: usize| -> Vec<F> { (0..len).map(|_| F::lit(rng.gen_range(lo..hi))).collect() };
     let offsets: Vec<usize> = (0..=rays).map(|r| r * samples).collect();
+    inputs_on(&offsets, samples)
+}
+
+/// [`inputs`] on rays of the given `offsets`, with delta = 2 / `samples` (`samples` the mean
+/// length).
+fn inputs_on<F: Float>(offsets: &[usize], samples: usize) -> Inputs<F> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(1);
+    let rays = offsets.len() - 1;
+    let n = offsets[rays];
+    let mut u = |lo: f64, hi: f64, len: usize| -> Vec<F> { (0..len).map(|_| F::lit(rng.gen_range(lo..hi))).collect() };
     Inputs {
-        op: Composite::new(&offsets).unwrap().background(Background::Shared),
+        op: Composite::new(offsets).unwrap().background(Background::Shared),
         sigma: Array1::from(u(0.0, 5.0, n)),
         delta: Array1::from(vec![F::lit(2.0 / samples as f64); n]),
         color: Array2::from_shape_vec((n, 3), u(0.0, 1.0, 3 * n)).unwrap(),
         background: Array1::from(u(0.0, 1.0, 3)),
         grad: ArrayD::from_shape_vec(vec![rays, 3], u(-1.0, 1.0, 3 * rays)).unwrap(),
+    }
+}
+
+/// Kept buffers for the outputs and gradients of `x`.
+fn buffers_for<F: Float>(x: &Inputs<F>) -> Buffers<F> {
+    let (rays, n) = (x.grad.shape()[0], x.sigma.len());
+    Buffers {
+        color: ArrayD::zeros(vec![rays, 3]),
+        opacity: ArrayD::zeros(vec![rays]),
+        grad_sigma: ArrayD::zeros(vec![n]),
+        grad_color: ArrayD::zeros(vec![n, 3]),
     }
 }
 
@@ -190,13 +209,7 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
         group.throughput(Throughput::Elements((rays * samples) as u64));
         group.sample_size(10);
         group.bench_with_input(BenchmarkId::new("fused", &id), &x, |b, x| b.iter(|| fused(x)));
-        let n = rays * samples;
-        let mut buffers = Buffers {
-            color: ArrayD::zeros(vec![rays, 3]),
-            opacity: ArrayD::zeros(vec![rays]),
-            grad_sigma: ArrayD::zeros(vec![n]),
-            grad_color: ArrayD::zeros(vec![n, 3]),
-        };
+        let mut buffers = buffers_for(&x);
         // `-packed`: rays eight at a time across the vector lanes (`Composite::pack_rays`).
         let packed = x.op.clone().pack_rays(true);
         for (suffix, op) in [("", &x.op), ("-packed", &packed)] {
@@ -226,9 +239,35 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
     }
 }
 
+/// `ragged/16384x0-54`: a training batch's shape, 16384 rays of random lengths 0 to 54 (27 on
+/// average, as an occupancy grid's samples), into kept buffers. Each loop of a ray then ends
+/// at a count that changes from ray to ray.
+fn bench_ragged<F: Float>(c: &mut Criterion) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(2);
+    let mut offsets = vec![0];
+    for _ in 0..16384 {
+        offsets.push(offsets[offsets.len() - 1] + rng.gen_range(0..=54usize));
+    }
+    let x = inputs_on::<F>(&offsets, 27);
+    let mut buffers = buffers_for(&x);
+    let mut group = c.benchmark_group(format!("composite/{}", F::NAME));
+    group.throughput(Throughput::Elements(x.sigma.len() as u64));
+    group.sample_size(10);
+    let id = "ragged-16384x0-54";
+    group.bench_with_input(BenchmarkId::new("fused-into", id), &x, |b, x| {
+        b.iter(|| fused_into(&x.op, x, &mut buffers))
+    });
+    group.bench_with_input(BenchmarkId::new("fused-one-pass", id), &x, |b, x| {
+        b.iter(|| fused_one_pass(&x.op, x, &mut buffers))
+    });
+    group.finish();
+}
+
 fn benches(c: &mut Criterion) {
     bench_precision::<f32>(c);
     bench_precision::<f64>(c);
+    bench_ragged::<f32>(c);
+    bench_ragged::<f64>(c);
 }
 
 criterion_group!(composite, benches);

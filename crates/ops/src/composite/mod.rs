@@ -54,6 +54,12 @@
 //!   baseline and chosen at run time, with the per-ray loops inlined into them. The values do
 //!   not depend on which one runs: every fused multiply-add is written as one (`mul_add`), and
 //!   the compiler contracts nothing else.
+//! - Each block's loop asks for the next ray's cache lines (inputs, and the gradients it
+//!   writes) before it computes the current ray, so that their misses overlap with the work
+//!   (`crate::prefetch`, a hint: no value changes).
+//! - A ray whose length is not a multiple of 8 runs its exponentials over whole vector steps
+//!   into the attenuation buffers' padding, its `T_len` and opacity included, instead of one
+//!   scalar polynomial per value of its tail (`attenuation`, the same bits).
 //! - The forward keeps only each ray's stop index; the backward recomputes `T_k` and `alpha_k`
 //!   from sigma and delta with the same code (bitwise the same values), so the op's extra
 //!   memory is its outputs and gradients alone; the price is two vectorised exponentials per
