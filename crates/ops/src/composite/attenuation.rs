@@ -21,6 +21,8 @@ pub(crate) struct Attenuation {
     weights: Vec<f64>,
     /// See [`Attenuation::stop`].
     stop: usize,
+    /// The ray's length: the buffers only grow (see [`grow`]), and may be longer.
+    len: usize,
     /// Whether `alpha[len]` holds the whole ray's opacity `-expm1(-depth[len])` (see
     /// [`Attenuation::compute_whole`]).
     opacity_after: bool,
@@ -32,6 +34,16 @@ const CHUNK: usize = 32;
 
 /// Values a step of the exponentials' vector loops: a whole AVX-512 register of f64.
 const STEP: usize = 8;
+
+/// Makes `v` at least `n` long. Scratch buffers only grow: resized to each ray's length, they
+/// cleared their new tails ray after ray when lengths change (a `memset` in every profile of
+/// rays of random lengths).
+#[inline(always)]
+pub(crate) fn grow(v: &mut Vec<f64>, n: usize) {
+    if v.len() < n {
+        v.resize(n, 0.0);
+    }
+}
 
 /// `out[k] = running + sum_{j<k} x[j]`; returns the new running total. Four samples at a time: the sums within a
 /// group are off the chain, which carries one addition per group instead of one per sample
@@ -97,27 +109,29 @@ impl Attenuation {
         let len = sigma.len();
         // The samples and T_len (or the opacity) in whole steps.
         let steps = (len + 1).next_multiple_of(STEP);
-        self.tau.resize(steps, 0.0);
-        self.alpha.resize(steps, 0.0);
-        self.weights.resize(len, 0.0);
-        self.depth.resize(steps, 0.0);
-        self.trans.resize(steps, 0.0);
+        for v in [&mut self.tau, &mut self.alpha, &mut self.depth, &mut self.trans] {
+            grow(v, steps);
+        }
+        grow(&mut self.weights, len);
+        self.len = len;
         self.stop = len;
         self.opacity_after = true;
-        for ((t, &s), &d) in self.tau.iter_mut().zip(sigma).zip(delta) {
+        let (tau, alpha) = (&mut self.tau[..steps], &mut self.alpha[..steps]);
+        let (depth, trans) = (&mut self.depth[..steps], &mut self.trans[..steps]);
+        for ((t, &s), &d) in tau.iter_mut().zip(sigma).zip(delta) {
             *t = s.as_f64() * d.as_f64();
         }
-        let total = exclusive_prefix_sums(&self.tau[..len], &mut self.depth[..len], 0.0);
-        self.depth[len] = total;
-        self.tau[len] = total;
+        let total = exclusive_prefix_sums(&tau[..len], &mut depth[..len], 0.0);
+        depth[len] = total;
+        tau[len] = total;
         if single_tier::<F>() {
-            exp_neg_slice::<true>(&self.depth, &mut self.trans);
-            one_minus_exp_neg_slice::<true>(&self.tau, &mut self.alpha);
+            exp_neg_slice::<true>(depth, trans);
+            one_minus_exp_neg_slice::<true>(tau, alpha);
         } else {
-            exp_neg_slice::<false>(&self.depth, &mut self.trans);
-            one_minus_exp_neg_slice::<false>(&self.tau, &mut self.alpha);
+            exp_neg_slice::<false>(depth, trans);
+            one_minus_exp_neg_slice::<false>(tau, alpha);
         }
-        for ((w, &t), &a) in self.weights.iter_mut().zip(&self.trans).zip(&self.alpha) {
+        for ((w, &t), &a) in self.weights[..len].iter_mut().zip(&*trans).zip(&*alpha) {
             *w = t * a;
         }
     }
@@ -128,11 +142,12 @@ impl Attenuation {
     fn compute_in_parts<F: Float>(&mut self, sigma: &[F], delta: &[F], min_transmittance: f64) {
         self.opacity_after = false;
         let len = sigma.len();
-        self.tau.resize(len, 0.0);
-        self.alpha.resize(len, 0.0);
-        self.weights.resize(len, 0.0);
-        self.depth.resize(len + 1, 0.0);
-        self.trans.resize(len + 1, 0.0);
+        for v in [&mut self.tau, &mut self.alpha, &mut self.weights] {
+            grow(v, len);
+        }
+        grow(&mut self.depth, len + 1);
+        grow(&mut self.trans, len + 1);
+        self.len = len;
         self.stop = len;
         let single = single_tier::<F>();
         let chunk = if min_transmittance > 0.0 { CHUNK } else { len.max(1) };
@@ -193,7 +208,7 @@ impl Attenuation {
 
     /// The ray's length (the buffers may be longer: see [`Attenuation::compute_whole`]).
     fn len(&self) -> usize {
-        self.weights.len()
+        self.len
     }
 
     /// `alpha_k`, `k = 0..len`.
@@ -203,7 +218,7 @@ impl Attenuation {
 
     /// `w_k = T_k alpha_k`, `k = 0..len`.
     pub(crate) fn weights(&self) -> &[f64] {
-        &self.weights
+        &self.weights[..self.len]
     }
 
     /// `-expm1(-depth)` of the optical depth before sample `k` (`k = stop`: the ray's opacity,

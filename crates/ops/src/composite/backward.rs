@@ -5,7 +5,7 @@ use fogray_tape::Float;
 use multiversion::multiversion;
 use rayon::prelude::*;
 
-use super::attenuation::Attenuation;
+use super::attenuation::{grow, Attenuation};
 use super::config::Composite;
 use super::forward::Residuals;
 use super::lanes::{Unit, LANES};
@@ -230,7 +230,9 @@ pub(crate) fn backward_ray<F: Float>(
     let Scratch { value, d_tau, g_color } = scratch;
     let gc: Option<&[F]> = g.color;
     g_color.clear();
-    g_color.extend(gc.into_iter().flatten().map(|&v| f(v)));
+    if let Some(gc) = gc {
+        g_color.extend(gc.iter().map(|&v| f(v)));
+    }
     let (g_opacity, g_depth) = (g.opacity, g.depth);
     let bg = x.background_of(r);
     let (sigma, delta) = (&x.sigma[samples.clone()], &x.delta[samples.clone()]);
@@ -245,8 +247,10 @@ pub(crate) fn backward_ray<F: Float>(
         }
     }
 
-    value.clear();
-    value.resize(stop, g_opacity);
+    grow(value, stop);
+    grow(d_tau, stop);
+    let (value, d_tau) = (&mut value[..stop], &mut d_tau[..stop]);
+    value.fill(g_opacity);
     if let Some(t) = &x.t {
         for (v, &t) in value.iter_mut().zip(&t[samples.clone()]) {
             *v += g_depth * f(t);
@@ -263,8 +267,7 @@ pub(crate) fn backward_ray<F: Float>(
 
     // R: expected value of what lies behind, given the ray reaches it; starts at the background.
     let behind: f64 = g_color.iter().zip(bg).map(|(&g, &b)| g * f(b)).sum();
-    // Every entry is written below: no need to clear it first.
-    d_tau.resize(stop, 0.0);
+    // Every entry of `d_tau` is written below: no need to clear it first.
     adds_minus_hides(trans, alpha, value, behind, d_tau);
     if let Some(gt) = g.transmittance {
         // U: sum over later samples of gT_i T_i (skipped samples all see T_stop), a suffix sum.
