@@ -83,6 +83,21 @@ pub(crate) fn valid_steps<F: Float>(sigma: &[F], delta: &[F]) -> bool {
 }
 
 impl Attenuation {
+    /// Buffers for rays of up to `len` samples, allocated once (they would otherwise grow by
+    /// reallocation as longer rays come).
+    pub(crate) fn for_rays(len: usize) -> Self {
+        let room = (len + 1).next_multiple_of(STEP);
+        let buffer = || Vec::with_capacity(room);
+        Attenuation {
+            tau: buffer(),
+            depth: buffer(),
+            trans: buffer(),
+            alpha: buffer(),
+            weights: buffer(),
+            ..Self::default()
+        }
+    }
+
     /// Fills the buffers for one ray, up to its stop: with `min_transmittance > 0`, samples are
     /// taken [`CHUNK`] at a time and nothing is computed past the chunk where the transmittance
     /// first falls below it (so early termination saves the work it promises). Values outside

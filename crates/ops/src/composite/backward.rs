@@ -144,8 +144,9 @@ fn backward_block<'a, F: Float>(
     block: &Block,
     mut o: InputGrads<'a, F>,
 ) {
-    let mut scratch = Scratch::default();
-    let mut att = Attenuation::default();
+    let longest = block.longest_ray(&op.offsets);
+    let mut scratch = Scratch::for_rays(longest);
+    let mut att = Attenuation::for_rays(longest);
     let mut pack = PackAttenuation::default();
     let mut pack_scratch = PackScratch::default();
     let mut units = block.units(&op.offsets, op.packs).peekable();
@@ -210,6 +211,17 @@ pub(crate) struct Scratch {
     d_tau: Vec<f64>,
     /// The upstream colour gradient in f64.
     g_color: Vec<f64>,
+}
+
+impl Scratch {
+    /// Buffers for rays of up to `len` samples, allocated once.
+    pub(crate) fn for_rays(len: usize) -> Self {
+        Scratch {
+            value: Vec::with_capacity(len),
+            d_tau: Vec::with_capacity(len),
+            g_color: Vec::new(),
+        }
+    }
 }
 
 /// One ray's input gradients into `o` (its block's), from the ray's attenuation as the forward

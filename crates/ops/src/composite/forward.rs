@@ -105,7 +105,7 @@ fn forward_block<'a, F: Float>(
     stop: &'a mut [usize],
 ) -> bool {
     let mut acc = vec![0.0f64; x.ch];
-    let mut att = Attenuation::default();
+    let mut att = Attenuation::for_rays(block.longest_ray(&op.offsets));
     let mut pack = PackAttenuation::default();
     let mut pack_forward = ForwardScratch::default();
     let mut valid = true;

@@ -184,6 +184,12 @@ pub(crate) struct Block {
 }
 
 impl Block {
+    /// The length of the block's longest ray.
+    pub(crate) fn longest_ray(&self, offsets: &[usize]) -> usize {
+        let ends = &offsets[self.rays.start..=self.rays.end];
+        ends.windows(2).map(|w| w[1] - w[0]).max().unwrap_or(0)
+    }
+
     /// Ray `r` (one of the block's) placed in the op and in the block.
     pub(crate) fn ray(&self, offsets: &[usize], r: usize) -> Ray {
         Ray {

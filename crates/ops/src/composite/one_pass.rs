@@ -57,8 +57,9 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
     let ch = x.ch;
     let mut acc = vec![0.0f64; ch];
     let mut d_color = vec![F::zero(); ch * LANES];
-    let mut att = Attenuation::default();
-    let mut scratch = Scratch::default();
+    let longest = block.longest_ray(&op.offsets);
+    let mut att = Attenuation::for_rays(longest);
+    let mut scratch = Scratch::for_rays(longest);
     let mut pack = PackAttenuation::default();
     let mut pack_forward = ForwardScratch::default();
     let mut pack_scratch = PackScratch::default();
