@@ -26,7 +26,8 @@ pub(crate) fn prefetch_span<T>(values: &[T], range: std::ops::Range<usize>) {
     }
     let per_line = (LINE / std::mem::size_of::<T>()).max(1);
     let mut at = range.start;
-    // The first request may cover values before the range; every later one starts a line.
+    // One request a line's width after the one before: each lands in the next line, so every
+    // line the range touches is asked for once, but perhaps the last.
     while at < end {
         prefetch(values.as_ptr().wrapping_add(at));
         at += per_line;

@@ -122,7 +122,8 @@ impl Attenuation {
     #[inline(always)]
     fn compute_whole<F: Float>(&mut self, sigma: &[F], delta: &[F]) {
         let len = sigma.len();
-        // The samples and T_len (or the opacity) in whole steps.
+        // The samples and one slot more (`T_len` in `trans`, the opacity in `alpha`), in whole
+        // steps.
         let steps = (len + 1).next_multiple_of(STEP);
         for v in [&mut self.tau, &mut self.alpha, &mut self.depth, &mut self.trans] {
             grow(v, steps);
@@ -218,17 +219,12 @@ impl Attenuation {
 
     /// `T_k`, `k = 0..=len`.
     pub(crate) fn transmittance(&self) -> &[f64] {
-        &self.trans[..=self.len()]
-    }
-
-    /// The ray's length (the buffers may be longer: see [`Attenuation::compute_whole`]).
-    fn len(&self) -> usize {
-        self.len
+        &self.trans[..=self.len]
     }
 
     /// `alpha_k`, `k = 0..len`.
     pub(crate) fn alpha(&self) -> &[f64] {
-        &self.alpha[..self.len()]
+        &self.alpha[..self.len]
     }
 
     /// `w_k = T_k alpha_k`, `k = 0..len`.
@@ -241,7 +237,7 @@ impl Attenuation {
     /// that its fused multiply-adds are the caller's instructions, not library calls).
     #[inline(always)]
     pub(crate) fn opacity_before<F: Float>(&self, k: usize) -> f64 {
-        if self.opacity_after && k == self.len() {
+        if self.opacity_after && k == self.len {
             // `-expm1(-depth[len])`, computed in the vector loop by the same function.
             self.alpha[k]
         } else if single_tier::<F>() {
