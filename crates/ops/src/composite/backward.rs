@@ -202,8 +202,7 @@ fn one_ray<'a, F: Float>(
     backward_ray(x, want, &ray, att, up, scratch, o);
 }
 
-/// Per-block buffers of the backward, reused ray after ray.
-#[derive(Default)]
+/// Per-block buffers of the backward, reused ray after ray (built by [`Scratch::for_rays`]).
 pub(crate) struct Scratch {
     /// What sample k is worth if the ray stops there: `g_C . c_k + g_O + g_D t_k + g_w_k`.
     value: Vec<f64>,
