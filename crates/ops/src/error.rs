@@ -207,7 +207,7 @@ pub enum GridError {
 /// computed (and nothing of the caller's is changed) when one is returned.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
-pub enum FieldError {
+pub enum ActivationError {
     /// A shift that is not finite.
     #[error("shift is {value} (must be finite)")]
     InvalidShift {
@@ -271,7 +271,7 @@ macro_rules! tape_error_from {
 
 tape_error_from! {
     PriorError => "total_variation",
-    FieldError => "density_color",
+    ActivationError => "density_color",
     GridError => "grid_field",
     GeometryError => "rays",
     SampleError => "sample",

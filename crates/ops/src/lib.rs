@@ -17,7 +17,7 @@
 //! - [`grid`]: a dense grid field over a box, looked up bilinearly (2-D) or trilinearly (3-D)
 //!   at packed positions, as a fused op ([`GridField`]) with a deterministic parallel backward
 //!   into the grid values and the positions, and its taped twin;
-//! - [`field`]: the activations of a grid renderer's raw values, density
+//! - [`activation`]: the activations of a grid renderer's raw values, density
 //!   `softplus(raw_0 + shift)` and colour `sigmoid(raw_1..)`, as a fused op
 //!   ([`DensityColor`]) with a hand-written backward, and its taped twin;
 //! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]).
@@ -44,9 +44,9 @@
 
 #![warn(missing_docs)]
 
+pub mod activation;
 pub mod composite;
 mod error;
-pub mod field;
 pub mod grid;
 pub mod hard;
 mod math;
@@ -56,11 +56,11 @@ pub mod rays;
 pub mod sample;
 pub mod twins;
 
+pub use activation::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
 pub use composite::{
     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
-pub use error::{CompositeError, FieldError, GeometryError, GridError, PriorError, SampleError};
-pub use field::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
+pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted};
 pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};

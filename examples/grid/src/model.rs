@@ -22,9 +22,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use fogray::ops::field::{twin, DensityColor};
+use fogray::ops::activation::{twin, DensityColor};
 use fogray::ops::sample::PackedSamples;
-use fogray::ops::{twins, Composite, CompositeInputs, CompositeVars, FieldError, GridBox, GridError, GridField};
+use fogray::ops::{twins, ActivationError, Composite, CompositeInputs, CompositeVars, GridBox, GridError, GridField};
 use fogray::tape::params::{ParamId, Params};
 use fogray::tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
@@ -45,7 +45,7 @@ fn param_error(e: fogray::tape::params::ParamError) -> GridError {
 
 /// The activation's error in the model's error type: the model's API predates the fused
 /// activation, and its callers only report these (a non-finite shift, a NaN in the grid).
-fn field_error(e: &FieldError) -> GridError {
+fn field_error(e: &ActivationError) -> GridError {
     GridError::Shape {
         what: "density/colour activation",
         expected: "a finite shift and raw values without NaN".into(),

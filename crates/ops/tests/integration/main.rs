@@ -2,9 +2,9 @@
 //! crate of its own that compiles the libraries' generic kernels again (add a module here,
 //! not a file beside this one).
 
+mod activation;
 mod composite_mse;
 mod composite_packs;
-mod field;
 mod grid_common;
 mod grid_into;
 mod grid_threads;

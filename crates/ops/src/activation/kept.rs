@@ -73,7 +73,7 @@ impl Drop for KeptDecays {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::field::DensityColor;
+    use crate::activation::DensityColor;
     use fogray_tape::Tape;
     use ndarray::Array2;
 

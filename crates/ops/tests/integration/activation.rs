@@ -2,8 +2,8 @@
 //! differences, hand-computed values at the extremes, its own f64 run (for f32 data), and
 //! itself on other thread counts; its errors and their leaving everything unchanged.
 
-use fogray_ops::field::{twin, DensityColor};
-use fogray_ops::{ActivatedGrads, ActivatedMut, FieldError};
+use fogray_ops::activation::{twin, DensityColor};
+use fogray_ops::{ActivatedGrads, ActivatedMut, ActivationError};
 use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{arr2, Array1, Array2, ArrayD, Axis};
 use proptest::prelude::*;
@@ -343,8 +343,8 @@ fn unrecorded_outputs_are_the_recorded_ones<F: fogray_tape::Float>() {
         let b = tape.param(bad);
         let e = tape.no_grad(|t| op.apply(t, b)).unwrap_err();
         assert_eq!(
-            e.downcast_ref::<FieldError>(),
-            Some(&FieldError::NanRaw { row: n - 1, channel: 1 }),
+            e.downcast_ref::<ActivationError>(),
+            Some(&ActivationError::NanRaw { row: n - 1, channel: 1 }),
             "{e}"
         );
     }
@@ -422,22 +422,22 @@ fn bad_input_is_a_typed_error_and_changes_nothing() {
     );
     assert!(matches!(
         DensityColor::new(f64::INFINITY),
-        Err(FieldError::InvalidShift { .. })
+        Err(ActivationError::InvalidShift { .. })
     ));
     let op = DensityColor::new(0.0).unwrap();
 
     let narrow = Array2::<f64>::zeros((3, 1));
-    assert!(matches!(op.evaluate(narrow.view()), Err(FieldError::Shape { .. })));
+    assert!(matches!(op.evaluate(narrow.view()), Err(ActivationError::Shape { .. })));
     let mut x = raw(31, 9000, 4, 1.0);
     x[[8001, 2]] = f64::NAN;
     x[[8500, 0]] = f64::NAN;
     assert_eq!(
         op.evaluate(x.view()).unwrap_err(),
-        FieldError::NanRaw { row: 8001, channel: 2 }
+        ActivationError::NanRaw { row: 8001, channel: 2 }
     );
     assert_eq!(
         op.density(x.view()).unwrap_err(),
-        FieldError::NanRaw { row: 8500, channel: 0 }
+        ActivationError::NanRaw { row: 8500, channel: 0 }
     );
 
     // Buffers of the wrong shape, or input at fault: the buffers keep their values.
@@ -450,7 +450,7 @@ fn bad_input_is_a_typed_error_and_changes_nothing() {
             color: c.view_mut(),
         },
     );
-    assert!(matches!(e, Err(FieldError::Shape { what: "color", .. })));
+    assert!(matches!(e, Err(ActivationError::Shape { what: "color", .. })));
     let mut bad = good.clone();
     bad[[4, 3]] = f64::NAN;
     let mut c3 = Array2::from_elem((5, 3), 9.0);
@@ -476,7 +476,7 @@ fn bad_input_is_a_typed_error_and_changes_nothing() {
     );
     assert!(matches!(
         e,
-        Err(FieldError::Shape {
+        Err(ActivationError::Shape {
             what: "sigma gradient",
             ..
         })
@@ -491,18 +491,24 @@ fn bad_input_is_a_typed_error_and_changes_nothing() {
     let before = tape.len();
     let err = op.apply(&mut tape, r).unwrap_err();
     assert_eq!(
-        err.downcast_ref::<FieldError>(),
-        Some(&FieldError::NanRaw { row: 4, channel: 3 })
+        err.downcast_ref::<ActivationError>(),
+        Some(&ActivationError::NanRaw { row: 4, channel: 3 })
     );
     for v in [t3, n] {
         let err = op.apply(&mut tape, v).unwrap_err();
         assert!(
-            matches!(err.downcast_ref::<FieldError>(), Some(FieldError::Shape { .. })),
+            matches!(
+                err.downcast_ref::<ActivationError>(),
+                Some(ActivationError::Shape { .. })
+            ),
             "{err}"
         );
         let err = twin::density_color(&mut tape, &op, v).unwrap_err();
         assert!(
-            matches!(err.downcast_ref::<FieldError>(), Some(FieldError::Shape { .. })),
+            matches!(
+                err.downcast_ref::<ActivationError>(),
+                Some(ActivationError::Shape { .. })
+            ),
             "{err}"
         );
     }

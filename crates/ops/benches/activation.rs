@@ -18,7 +18,7 @@ use std::hint::black_box;
 use std::time::Instant;
 
 use criterion::{BenchmarkId, Criterion, Throughput};
-use fogray_ops::field::{twin, DensityColor};
+use fogray_ops::activation::{twin, DensityColor};
 use fogray_ops::{ActivatedGrads, ActivatedMut};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2};

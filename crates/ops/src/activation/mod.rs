@@ -40,7 +40,7 @@
 //! or on a constant, nothing is kept.
 //!
 //! ```
-//! use fogray_ops::field::DensityColor;
+//! use fogray_ops::activation::DensityColor;
 //! use fogray_tape::Tape;
 //! use ndarray::arr2;
 //!

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use super::config::{Activated, ActivatedGrads, ActivatedMut, DensityColor};
 use super::kept::KeptDecays;
 use super::kernel::{self, CHUNK};
-use crate::error::FieldError;
+use crate::error::ActivationError;
 
 /// The values of `x` in row-major order: borrowed when contiguous, copied otherwise.
 fn flat<'a, F: Float, D: ndarray::Dimension>(x: &'a ndarray::ArrayView<'_, F, D>) -> Cow<'a, [F]> {
@@ -21,8 +21,8 @@ fn flat<'a, F: Float, D: ndarray::Dimension>(x: &'a ndarray::ArrayView<'_, F, D>
     }
 }
 
-fn shape_error(what: &'static str, expected: String, got: &[usize]) -> FieldError {
-    FieldError::Shape {
+fn shape_error(what: &'static str, expected: String, got: &[usize]) -> ActivationError {
+    ActivationError::Shape {
         what,
         expected,
         got: format!("{got:?}"),
@@ -30,8 +30,8 @@ fn shape_error(what: &'static str, expected: String, got: &[usize]) -> FieldErro
 }
 
 /// `data` as a `[rows, cols]` array.
-fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) -> Result<Array2<F>, FieldError> {
-    Array2::from_shape_vec((rows, cols), data).map_err(|e| FieldError::Shape {
+fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) -> Result<Array2<F>, ActivationError> {
+    Array2::from_shape_vec((rows, cols), data).map_err(|e| ActivationError::Shape {
         what,
         expected: format!("[{rows}, {cols}]"),
         got: e.to_string(),
@@ -39,7 +39,7 @@ fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) 
 }
 
 /// Checks that `raw` is `[n, k]` with `k >= 2` and holds no NaN; returns `(n, k)`.
-fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), FieldError> {
+fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), ActivationError> {
     let (n, k) = raw.dim();
     if k < 2 {
         return Err(shape_error("raw values", "[n, k] with k >= 2".into(), raw.shape()));
@@ -52,7 +52,7 @@ fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), FieldE
         .any(|c| c.iter().fold(false, |acc, x| acc | x.is_nan()));
     if has_nan {
         let i = values.iter().position(|x| x.is_nan()).unwrap_or(0);
-        return Err(FieldError::NanRaw {
+        return Err(ActivationError::NanRaw {
             row: i / k,
             channel: i % k,
         });
@@ -61,7 +61,7 @@ fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), FieldE
 }
 
 /// Checks the upstream gradients' shapes against `n` rows of `k` raw values.
-fn check_upstream<F: Float>(upstream: &ActivatedGrads<'_, F>, n: usize, k: usize) -> Result<(), FieldError> {
+fn check_upstream<F: Float>(upstream: &ActivatedGrads<'_, F>, n: usize, k: usize) -> Result<(), ActivationError> {
     if let Some(g) = &upstream.sigma {
         if g.len() != n {
             return Err(shape_error("sigma gradient", format!("[{n}]"), g.shape()));
@@ -79,9 +79,9 @@ impl DensityColor {
     /// The density and colour of every row of `raw` (`[n, k]`, `k >= 2`): `sigma` `[n]` and
     /// `color` `[n, k - 1]` (see the [module docs](super) for the forms and their accuracy).
     ///
-    /// Errors: `raw` not `[n, k]` with `k >= 2` ([`FieldError::Shape`]), a NaN raw value
-    /// ([`FieldError::NanRaw`], the first one).
-    pub fn evaluate<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Activated<F>, FieldError> {
+    /// Errors: `raw` not `[n, k]` with `k >= 2` ([`ActivationError::Shape`]), a NaN raw value
+    /// ([`ActivationError::NanRaw`], the first one).
+    pub fn evaluate<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Activated<F>, ActivationError> {
         let (n, k) = check_raw(&raw)?;
         let (sigma, color) = self.forward_flat(&flat(&raw), n, k, None);
         Ok(Activated {
@@ -95,7 +95,11 @@ impl DensityColor {
     ///
     /// Errors: as [`DensityColor::evaluate`], and buffers of the wrong shape; the buffers are
     /// unchanged then.
-    pub fn evaluate_into<F: Float>(&self, raw: ArrayView2<'_, F>, out: ActivatedMut<'_, F>) -> Result<(), FieldError> {
+    pub fn evaluate_into<F: Float>(
+        &self,
+        raw: ArrayView2<'_, F>,
+        out: ActivatedMut<'_, F>,
+    ) -> Result<(), ActivationError> {
         let (n, k) = check_raw(&raw)?;
         let ActivatedMut { mut sigma, mut color } = out;
         if sigma.len() != n {
@@ -121,15 +125,15 @@ impl DensityColor {
     /// The density alone, `softplus(raw_0 + shift)` `[n]`, of `raw` `[n, k]` (`k >= 1`
     /// here: the colour channels are not read), bitwise as [`DensityColor::evaluate`] gives it.
     ///
-    /// Errors: `raw` with no column ([`FieldError::Shape`]), a NaN density
-    /// ([`FieldError::NanRaw`]).
-    pub fn density<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Array1<F>, FieldError> {
+    /// Errors: `raw` with no column ([`ActivationError::Shape`]), a NaN density
+    /// ([`ActivationError::NanRaw`]).
+    pub fn density<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Array1<F>, ActivationError> {
         let (n, k) = raw.dim();
         if k == 0 {
             return Err(shape_error("raw values", "[n, k] with k >= 1".into(), raw.shape()));
         }
         if let Some(row) = raw.column(0).iter().position(|x| x.is_nan()) {
-            return Err(FieldError::NanRaw { row, channel: 0 });
+            return Err(ActivationError::NanRaw { row, channel: 0 });
         }
         let mut sigma = scratch(n);
         kernel::density(self.shift(), k, &flat(&raw), &mut sigma);
@@ -146,7 +150,7 @@ impl DensityColor {
         &self,
         raw: ArrayView2<'_, F>,
         upstream: &ActivatedGrads<'_, F>,
-    ) -> Result<Array2<F>, FieldError> {
+    ) -> Result<Array2<F>, ActivationError> {
         let (n, k) = check_raw(&raw)?;
         check_upstream(upstream, n, k)?;
         let g = self.backward_flat(&flat(&raw), k, upstream, None);
@@ -162,7 +166,7 @@ impl DensityColor {
         raw: ArrayView2<'_, F>,
         upstream: &ActivatedGrads<'_, F>,
         mut g_raw: ArrayViewMut2<'_, F>,
-    ) -> Result<(), FieldError> {
+    ) -> Result<(), ActivationError> {
         let (n, k) = check_raw(&raw)?;
         check_upstream(upstream, n, k)?;
         if g_raw.dim() != (n, k) {
@@ -218,7 +222,7 @@ impl DensityColor {
 }
 
 /// The activation's own error, kept whole through the tape (`TapeError::downcast_ref`).
-fn op_error(e: FieldError) -> OpError {
+fn op_error(e: ActivationError) -> OpError {
     OpError::typed(e)
 }
 
