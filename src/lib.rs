@@ -5,6 +5,7 @@
 //! and holds what the command line and the examples share ([`stamp`]: the provenance written
 //! at the top of every generated report).
 
+pub use fogray_fit as fit;
 pub use fogray_ops as ops;
 pub use fogray_tape as tape;
 

@@ -4,29 +4,34 @@
 //! Bad input (a bad flag or scene file, a zero count) exits with status 2 and one line on
 //! stderr; scripts outside this crate rely on the flags and the JSON as they are.
 
+use std::collections::BTreeMap;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 
 use anyhow::{Context, Result};
 use clap::parser::ValueSource;
 use clap::{ArgMatches, Args, CommandFactory, FromArgMatches, Parser, Subcommand};
 use serde::Serialize;
 
+use fogray::fit::checkpoint::{self, ModelInfo};
+use fogray::fit::dataset::Dataset;
+use fogray::fit::dense::DenseGrid;
+use fogray::fit::depth::write_depth_png;
+use fogray::fit::images::{nested, write_comparison_png, write_png};
+use fogray::fit::interrupt::StopFlag;
+use fogray::fit::metrics::psnr;
+use fogray::fit::plots;
+use fogray::fit::render::{render_picture, RenderOptions};
+use fogray::fit::sampling::occupancy_grid;
+use fogray::fit::settings::{Budget, FitSettings, Precision, Sampling};
+use fogray::fit::train::{fit_from, FitResult, Progress};
+use fogray::fit::RadianceField;
 use fogray::ops::sample::CellPoints;
-use fogray_grid::checkpoint::{self, Cameras, ModelInfo, SavedFit};
-use fogray_grid::dataset::Dataset;
-use fogray_grid::depth::write_depth_png;
-use fogray_grid::fit::{fit_from, Budget, FitConfig, FitResult, Sampling};
-use fogray_grid::images::{nested, write_comparison_png, write_png};
-use fogray_grid::model::Method;
 use fogray_grid::photographs::{photograph, photographs};
-use fogray_grid::plots;
-use fogray_grid::render::render_view;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
+use fogray_grid::views::dataset;
 
 #[derive(Parser)]
 #[command(
@@ -77,12 +82,31 @@ impl RingArgs {
         Ok(Ring::new(self.views, self.test_views, self.size)?)
     }
 
-    fn cameras(&self) -> Cameras {
-        Cameras {
-            views: self.views,
-            test_views: self.test_views,
-            size: self.size,
-        }
+    /// The cameras as a checkpoint's entries.
+    fn entries(&self) -> BTreeMap<String, String> {
+        [
+            ("views", self.views),
+            ("test_views", self.test_views),
+            ("size", self.size),
+        ]
+        .into_iter()
+        .map(|(k, v)| (k.to_string(), v.to_string()))
+        .collect()
+    }
+
+    /// The cameras saved in a checkpoint's entries.
+    fn saved(extra: &BTreeMap<String, String>, path: &Path) -> Result<RingArgs> {
+        let read = |key: &str| -> Result<usize> {
+            extra
+                .get(key)
+                .and_then(|v| v.parse().ok())
+                .with_context(|| format!("{} is not a fogray-grid model: no camera entry {key:?}", path.display()))
+        };
+        Ok(RingArgs {
+            views: read("views")?,
+            test_views: read("test_views")?,
+            size: read("size")?,
+        })
     }
 }
 
@@ -163,32 +187,7 @@ struct FitArgs {
     #[command(flatten)]
     ring: RingArgs,
     #[command(flatten)]
-    training: TrainingArgs,
-    /// Fused ops or their taped twins.
-    #[arg(long, value_enum, default_value = "fused")]
-    method: MethodArg,
-    /// Floating-point type of the model and the render.
-    #[arg(long, value_enum, default_value = "f32")]
-    precision: Precision,
-    /// Samples every half voxel across the box, or only in the cells an occupancy grid marks
-    /// occupied (test views are then rendered with it too).
-    #[arg(long, value_enum, default_value = "occupancy")]
-    sampling: SamplingArg,
-    /// Adam's learning rate, until 60 % of the budget.
-    #[arg(long, default_value_t = 0.2)]
-    lr: f64,
-    /// Adam's learning rate at the end: from 60 % of the budget on it falls geometrically
-    /// from --lr to this (pass the --lr value for a constant rate).
-    #[arg(long, default_value_t = 0.02)]
-    lr_final: f64,
-    /// Weight of the total-variation prior on the raw grid (the mean squared difference of
-    /// neighbouring nodes) added to the loss; 0 for none.
-    #[arg(long, default_value_t = 1.5e-4)]
-    tv: f64,
-    /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
-    /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).
-    #[arg(long)]
-    no_grow: bool,
+    settings: FitSettings,
     /// Print one JSON object (the log and the final figures) instead of text.
     #[arg(long)]
     json: bool,
@@ -296,14 +295,14 @@ fn run_report(args: ReportArgs) -> Result<()> {
     let anchor = args.anchor.as_deref().map(Anchor::read).transpose()?;
     let budget = args.training.budget();
     let options = ReportOptions {
-        fit: FitConfig {
+        fit: FitSettings {
             grid: args.training.grid,
             batch: args.training.batch,
-            budget,
             seed: args.training.seed,
             evaluations: args.evaluations,
-            ..FitConfig::default()
-        },
+            ..FitSettings::default()
+        }
+        .with_budget(budget),
         configs,
         slice_pixels: 128,
     };
@@ -312,14 +311,14 @@ fn run_report(args: ReportArgs) -> Result<()> {
     let given: Vec<String> = std::env::args().skip(1).collect();
     let stamp = fogray::stamp::Stamp::now(&format!("fogray-grid {}", given.join(" ")));
     let reproduce = format!("cargo run --release -p fogray-grid -- {}", given.join(" "));
-    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background)?;
+    let data = dataset(&scene, &ring)?;
     let bar = indicatif::ProgressBar::new(1000);
     if let Ok(style) = indicatif::ProgressStyle::with_template("{prefix} [{bar:40}] {msg} ({elapsed})") {
         bar.set_style(style.progress_chars("=> "));
     }
     let names: Vec<String> = options.configs.iter().map(|c| c.to_string()).collect();
     // One bar for every fit, restarted under a new label when the fit changes.
-    let show = |label: String, p: fogray_grid::fit::Progress| {
+    let show = |label: String, p: Progress| {
         if bar.prefix() != label {
             bar.reset();
             bar.set_prefix(label);
@@ -391,67 +390,37 @@ fn run_report(args: ReportArgs) -> Result<()> {
     Ok(())
 }
 
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum MethodArg {
-    Fused,
-    Taped,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum Precision {
-    F32,
-    F64,
-}
-
-#[derive(Clone, Copy, clap::ValueEnum)]
-enum SamplingArg {
-    Uniform,
-    Occupancy,
-}
-
-impl MethodArg {
-    fn name(self) -> &'static str {
-        match self {
-            MethodArg::Fused => "fused",
-            MethodArg::Taped => "taped",
-        }
-    }
-}
-
-impl Precision {
-    fn name(self) -> &'static str {
-        match self {
-            Precision::F32 => "f32",
-            Precision::F64 => "f64",
-        }
-    }
-}
-
-impl SamplingArg {
-    fn name(self) -> &'static str {
-        match self {
-            SamplingArg::Uniform => "uniform",
-            SamplingArg::Occupancy => "occupancy",
-        }
-    }
-}
-
 #[derive(Serialize)]
 struct FitSummary<'a> {
-    log: &'a [fogray_grid::fit::LogEntry],
+    log: &'a [fogray::fit::train::LogEntry],
     final_test_psnr: f64,
     seconds: f64,
     samples_per_ray_mean: f64,
     occupied_fraction: f64,
     /// With --profile.
     #[serde(skip_serializing_if = "Option::is_none")]
-    profile: Option<fogray_grid::profile::ProfileTable>,
+    profile: Option<fogray::fit::profile::ProfileTable>,
 }
 
 /// What a fit resumes from: the file and its metadata.
 struct Resume {
     path: PathBuf,
     info: ModelInfo,
+}
+
+/// What a fit trains on, beside its settings: the scene and the cameras, as a checkpoint
+/// keeps them.
+struct Problem {
+    scene: Scene,
+    ring: RingArgs,
+}
+
+impl Problem {
+    fn entries(&self) -> BTreeMap<String, String> {
+        let mut m = self.ring.entries();
+        m.insert("scene".into(), self.scene.to_json_pretty());
+        m
+    }
 }
 
 fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
@@ -462,16 +431,18 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
         }),
         None => None,
     };
-    let precision = match args.precision {
-        Precision::F32 => checkpoint::Precision::F32,
-        Precision::F64 => checkpoint::Precision::F64,
+    let (settings, problem) = match &resume {
+        None => (
+            args.settings,
+            Problem {
+                scene: args.scene.load()?,
+                ring: RingArgs { ..args.ring },
+            },
+        ),
+        Some(r) => resumed_settings(&args, r, given)?,
     };
-    let flags = flag_config(&args);
-    let (config, cameras, scene, precision) = match &resume {
-        None => (flags, args.ring.cameras(), args.scene.load()?, precision),
-        Some(r) => resumed_settings(&args, r, flags, precision, given)?,
-    };
-    let ring = cameras.ring()?;
+    settings.check()?;
+    let ring = problem.ring.ring()?;
     // Before training, so that a bad directory costs nothing.
     if let Some(dir) = &args.out {
         create_dir(dir)?;
@@ -485,108 +456,55 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
             anyhow::bail!("cannot write {}: no directory {}", file.display(), parent.display());
         }
     }
-    let data = Dataset::new(&ring, &photographs(&scene, &ring), scene.background)?;
-    let saved = SavedFit {
-        precision,
-        config,
-        cameras,
-        scene,
+    let data = dataset(&problem.scene, &ring)?;
+    let stop = StopFlag::on_ctrl_c()?;
+    match settings.precision {
+        Precision::F32 => fit_and_save::<f32>(&args, &data, &settings, &problem, resume.as_ref(), &stop),
+        Precision::F64 => fit_and_save::<f64>(&args, &data, &settings, &problem, resume.as_ref(), &stop),
+    }
+}
+
+/// A resumed fit's settings, scene and cameras: the file's, except those given on the command
+/// line; --grid and --precision, if given, must be the file's.
+fn resumed_settings(args: &FitArgs, resume: &Resume, given: &dyn Fn(&str) -> bool) -> Result<(FitSettings, Problem)> {
+    let saved = &resume.info.settings;
+    let asked_precision = if given("precision") {
+        args.settings.precision
+    } else {
+        saved.precision
     };
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = Arc::clone(&stop);
-    ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("cannot catch Ctrl-C")?;
-    match precision {
-        checkpoint::Precision::F32 => fit_and_save::<f32>(&args, &data, &saved, resume.as_ref(), &stop),
-        checkpoint::Precision::F64 => fit_and_save::<f64>(&args, &data, &saved, resume.as_ref(), &stop),
-    }
-}
-
-/// The settings the flags ask for.
-fn flag_config(args: &FitArgs) -> FitConfig {
-    FitConfig {
-        grid: args.training.grid,
-        batch: args.training.batch,
-        budget: args.training.budget(),
-        method: match args.method {
-            MethodArg::Fused => Method::Fused,
-            MethodArg::Taped => Method::Taped,
-        },
-        sampling: match args.sampling {
-            SamplingArg::Uniform => Sampling::Uniform,
-            SamplingArg::Occupancy => Sampling::Occupancy,
-        },
-        seed: args.training.seed,
-        lr: args.lr,
-        lr_final: args.lr_final,
-        grow: !args.no_grow,
-        smoothness: args.tv,
-        ..FitConfig::default()
-    }
-}
-
-/// A resumed fit's settings: the file's, except those given on the command line; --grid and
-/// --precision, if given, must be the file's.
-fn resumed_settings(
-    args: &FitArgs,
-    resume: &Resume,
-    flags: FitConfig,
-    precision: checkpoint::Precision,
-    given: &dyn Fn(&str) -> bool,
-) -> Result<(FitConfig, Cameras, Scene, checkpoint::Precision)> {
-    let saved = &resume.info.fit;
-    let asked_precision = if given("precision") { precision } else { saved.precision };
-    let asked_grid = if given("grid") { flags.grid } else { saved.config.grid };
+    let asked_grid = if given("grid") { args.settings.grid } else { saved.grid };
     resume.info.check_matches(&resume.path, asked_precision, asked_grid)?;
-    let pick = |id: &str| given(id);
-    let file = saved.config;
-    let config = FitConfig {
-        grid: file.grid,
-        batch: if pick("batch") { flags.batch } else { file.batch },
-        budget: if pick("steps") || pick("seconds") {
-            flags.budget
-        } else {
-            file.budget
-        },
-        method: if pick("method") { flags.method } else { file.method },
-        sampling: if pick("sampling") {
-            flags.sampling
-        } else {
-            file.sampling
-        },
-        seed: if pick("seed") { flags.seed } else { file.seed },
-        lr: if pick("lr") { flags.lr } else { file.lr },
-        lr_final: if pick("lr_final") {
-            flags.lr_final
-        } else {
-            file.lr_final
-        },
-        grow: if pick("no_grow") { flags.grow } else { file.grow },
-        smoothness: if pick("tv") { flags.smoothness } else { file.smoothness },
-        ..file
-    };
-    let cameras = Cameras {
-        views: if pick("views") {
+    let settings = args.settings.given_over(saved, given)?;
+    let extra = &resume.info.extra;
+    let file_ring = RingArgs::saved(extra, &resume.path)?;
+    let ring = RingArgs {
+        views: if given("views") {
             args.ring.views
         } else {
-            saved.cameras.views
+            file_ring.views
         },
-        test_views: if pick("test_views") {
+        test_views: if given("test_views") {
             args.ring.test_views
         } else {
-            saved.cameras.test_views
+            file_ring.test_views
         },
-        size: if pick("size") {
-            args.ring.size
-        } else {
-            saved.cameras.size
-        },
+        size: if given("size") { args.ring.size } else { file_ring.size },
     };
-    let scene = if pick("scene") {
+    let scene = if given("scene") {
         args.scene.load()?
     } else {
-        saved.scene.clone()
+        saved_scene(extra, &resume.path)?
     };
-    Ok((config, cameras, scene, saved.precision))
+    Ok((settings, Problem { scene, ring }))
+}
+
+/// The scene saved in a checkpoint's entries.
+fn saved_scene(extra: &BTreeMap<String, String>, path: &Path) -> Result<Scene> {
+    let text = extra
+        .get("scene")
+        .with_context(|| format!("{} is not a fogray-grid model: no scene", path.display()))?;
+    Scene::from_json(text).with_context(|| format!("{}: the saved scene", path.display()))
 }
 
 /// Where an interrupted fit is saved without --save-model.
@@ -604,17 +522,17 @@ const INTERRUPTED: i32 = 130;
 fn fit_and_save<F: fogray::tape::Float>(
     args: &FitArgs,
     data: &Dataset,
-    saved: &SavedFit,
+    settings: &FitSettings,
+    problem: &Problem,
     resume: Option<&Resume>,
-    stop: &AtomicBool,
+    stop: &StopFlag,
 ) -> Result<()> {
     let start = match resume {
-        Some(r) => Some(checkpoint::load::<F>(&r.path)?.start),
+        Some(r) => Some(checkpoint::load::<F, DenseGrid<F>>(&r.path)?.start),
         None => None,
     };
     let save_path = args.save_model.clone().unwrap_or_else(|| default_model_path(args));
     let first_step = start.as_ref().map_or(0, |s| s.training.step);
-    let config = saved.config;
     let bar = if args.json {
         indicatif::ProgressBar::hidden()
     } else {
@@ -624,7 +542,7 @@ fn fit_and_save<F: fogray::tape::Float>(
         }
         bar
     };
-    let mut progress = |p: fogray_grid::fit::Progress| {
+    let mut progress = |p: Progress| {
         if p.step == first_step + 1 {
             bar.suspend(|| {
                 eprintln!(
@@ -636,9 +554,15 @@ fn fit_and_save<F: fogray::tape::Float>(
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!("step {}", p.step));
     };
-    let result = fit_from::<F>(data, &config, start, Some(stop), &mut progress)?;
+    let result = fit_from::<F, DenseGrid<F>>(data, settings, start, Some(stop.flag()), &mut progress)?;
     if args.save_model.is_some() || result.interrupted {
-        checkpoint::save(&save_path, &result.model, &result.training, saved)?;
+        checkpoint::save(
+            &save_path,
+            &result.model,
+            &result.training,
+            settings,
+            &problem.entries(),
+        )?;
     }
     if result.interrupted {
         bar.finish_and_clear();
@@ -649,13 +573,14 @@ fn fit_and_save<F: fogray::tape::Float>(
         );
         std::process::exit(INTERRUPTED);
     }
-    report_fit(args, data, result, &bar)
+    report_fit(args, settings, data, result, &bar)
 }
 
 fn report_fit<F: fogray::tape::Float>(
     args: &FitArgs,
+    settings: &FitSettings,
     data: &Dataset,
-    result: FitResult<F>,
+    result: FitResult<F, DenseGrid<F>>,
     bar: &indicatif::ProgressBar,
 ) -> Result<()> {
     bar.finish_and_clear();
@@ -668,14 +593,14 @@ fn report_fit<F: fogray::tape::Float>(
     }
     if let Some(dir) = &args.out {
         for (t, render) in data.test.iter().zip(&result.renders) {
-            let path = dir.join(format!("test-view-{:03}.png", t.view));
-            write_comparison_png(&path, t.photograph.view(), render.view(), 4.0, 4)?;
+            let path = dir.join(format!("test-view-{}.png", t.name));
+            write_comparison_png(&path, t.image.view(), render.view(), 4.0, 4)?;
         }
         let label = format!(
             "{} {} {}",
-            args.method.name(),
-            args.precision.name(),
-            args.sampling.name()
+            settings.method.name(),
+            settings.precision.name(),
+            settings.sampling.name()
         );
         plots::psnr_curves(
             &dir.join("psnr"),
@@ -741,7 +666,7 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
     match cli.command {
         Command::Photographs { scene, ring, json, out } => {
             let (scene, ring) = (scene.load()?, ring.ring()?);
-            let images = photographs(&scene, &ring);
+            let images = photographs(&scene, &ring)?;
             let mut written = Vec::new();
             if let Some(dir) = &out {
                 create_dir(dir)?;
@@ -801,16 +726,16 @@ struct RenderSummary {
 
 fn run_render(args: RenderArgs) -> Result<()> {
     let info = checkpoint::read_info(&args.model)?;
-    let saved = &info.fit;
-    let cameras = Cameras {
-        views: args.views.unwrap_or(saved.cameras.views),
-        test_views: args.test_views.unwrap_or(saved.cameras.test_views),
-        size: args.size.unwrap_or(saved.cameras.size),
-    };
-    let ring = cameras.ring()?;
+    let saved_ring = RingArgs::saved(&info.extra, &args.model)?;
+    let ring = RingArgs {
+        views: args.views.unwrap_or(saved_ring.views),
+        test_views: args.test_views.unwrap_or(saved_ring.test_views),
+        size: args.size.unwrap_or(saved_ring.size),
+    }
+    .ring()?;
     let scene = match &args.scene {
         Some(path) => Scene::read(path)?,
-        None => saved.scene.clone(),
+        None => saved_scene(&info.extra, &args.model)?,
     };
     let views = if args.all {
         (0..ring.len()).collect()
@@ -829,27 +754,32 @@ fn run_render(args: RenderArgs) -> Result<()> {
         anyhow::bail!("no view to render: the ring has no test views; pass --view I or --all");
     }
     create_dir(&args.out)?;
-    match saved.precision {
-        checkpoint::Precision::F32 => render_views::<f32>(&args, &ring, &scene, &views),
-        checkpoint::Precision::F64 => render_views::<f64>(&args, &ring, &scene, &views),
+    match info.settings.precision {
+        Precision::F32 => render_views::<f32>(&args, &ring, &scene, &views),
+        Precision::F64 => render_views::<f64>(&args, &ring, &scene, &views),
     }
 }
 
 fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &Scene, views: &[usize]) -> Result<()> {
-    let saved = checkpoint::load::<F>(&args.model)?;
+    let saved = checkpoint::load::<F, DenseGrid<F>>(&args.model)?;
     let model = saved.start.model;
-    // An occupancy model renders with its saved grid; a file without one (written before
-    // grids were saved) gets one rebuilt from the saved density, one update.
-    let occupancy = match saved.fit.config.sampling {
+    // An occupancy model renders with its saved grid; a file without one gets one rebuilt
+    // from the saved density, one update.
+    let occupancy = match saved.settings.sampling {
         Sampling::Uniform => None,
         Sampling::Occupancy => {
-            let mut grid = fogray_grid::fit::occupancy_grid(saved.fit.config.grid)?;
+            let mut grid = occupancy_grid(model.bounds(), saved.settings.grid)?;
             match &saved.start.training.occupancy {
                 Some(state) => grid.restore(state)?,
                 None => grid.update(|p| model.densities(p), CellPoints::Centre)?,
             }
             Some(grid)
         }
+    };
+    let options = RenderOptions {
+        background: scene.background,
+        method: fogray::fit::settings::Method::Fused,
+        depth: true,
     };
     // PNGs of about 256 pixels a side whatever the image size.
     let scale = (256 / ring.size()).clamp(1, 16) as u32;
@@ -859,13 +789,23 @@ fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &
         psnr: Vec::new(),
     };
     for &view in views {
-        let r = render_view(&model, ring, view, scene.background, occupancy.as_ref())?;
-        let exact = photograph(scene, &ring.camera(view), ring.size());
-        let db = fogray_grid::images::psnr(&[r.color.view()], &[exact.view()])?;
+        let camera = ring.camera(view)?;
+        let view_data = fogray::fit::dataset::View::new(view.to_string(), &camera, photograph(scene, &camera))?;
+        let r = render_picture(
+            &model,
+            occupancy.as_ref(),
+            &view_data.origins,
+            &view_data.directions,
+            view_data.size(),
+            &options,
+        )?;
+        let exact = view_data.image;
+        let db = psnr(&[r.color.view()], &[exact.view()])?;
         let image_path = args.out.join(format!("view-{view:03}.png"));
         let depth_path = args.out.join(format!("depth-{view:03}.png"));
         write_comparison_png(&image_path, exact.view(), r.color.view(), 4.0, scale)?;
-        let range = write_depth_png(&depth_path, r.depth.view(), &format!("view {view}"), scale)?;
+        let depth = r.depth.context("a render asked for depth gave none")?;
+        let range = write_depth_png(&depth_path, depth.view(), &format!("view {view}"), scale)?;
         if !args.json {
             let depth = match range {
                 Some(d) => format!("depth {:.3} to {:.3}", d.near, d.far),

@@ -7,36 +7,46 @@
 //! use fogray_grid::scene::Scene;
 //!
 //! let ring = Ring::new(2, 1, 8)?;
-//! let images = photographs(&Scene::default(), &ring);
+//! let images = photographs(&Scene::default(), &ring)?;
 //! assert_eq!(images.len(), 3);
 //! assert_eq!(images[0].shape(), &[8, 8, 3]); // [row][column][channel]
 //! # Ok::<(), fogray_grid::ring::RingError>(())
 //! ```
 
+use fogray::ops::PinholeCamera;
 use ndarray::Array3;
 use rayon::prelude::*;
 
-use crate::exact::render_ray;
-use crate::ring::{Camera, Ring};
+use crate::exact::{render_ray, Ray};
+use crate::ring::{Ring, RingError};
 use crate::scene::Scene;
 
-/// The exact `size x size` RGB photograph of a validated scene from `camera`, as
-/// `[row][column][channel]` (rows top to bottom). Values are in `[0, 1]`: convex combinations
-/// of colours and background.
-pub fn photograph(scene: &Scene, camera: &Camera, size: usize) -> Array3<f64> {
-    let pixels: Vec<f64> = (0..size * size)
+/// The exact RGB photograph of a validated scene from `camera`, as `[row][column][channel]`
+/// (rows top to bottom). Values are in `[0, 1]`: convex combinations of colours and
+/// background.
+pub fn photograph(scene: &Scene, camera: &PinholeCamera) -> Array3<f64> {
+    let (w, h) = (camera.intrinsics().width, camera.intrinsics().height);
+    let pixels: Vec<f64> = (0..w * h)
         .into_par_iter()
-        .flat_map_iter(|p| render_ray(scene, &camera.ray(p / size, p % size, size)).color)
+        .flat_map_iter(|p| {
+            let ray = Ray {
+                origin: camera.centre(),
+                direction: camera.direction(p / w, p % w),
+            };
+            render_ray(scene, &ray).color
+        })
         .collect();
-    // size * size * 3 values were produced for that shape.
-    Array3::from_shape_vec((size, size, 3), pixels).unwrap_or_else(|_| unreachable!())
+    // w * h * 3 values were produced for that shape.
+    Array3::from_shape_vec((h, w, 3), pixels).unwrap_or_else(|_| unreachable!())
 }
 
 /// The exact photographs of every view of the ring, in view order (training and test views
 /// alike; [`Ring::is_test`] tells them apart).
-pub fn photographs(scene: &Scene, ring: &Ring) -> Vec<Array3<f64>> {
+///
+/// Errors: as [`Ring::camera`].
+pub fn photographs(scene: &Scene, ring: &Ring) -> Result<Vec<Array3<f64>>, RingError> {
     (0..ring.len())
-        .map(|i| photograph(scene, &ring.camera(i), ring.size()))
+        .map(|i| Ok(photograph(scene, &ring.camera(i)?)))
         .collect()
 }
 
@@ -49,7 +59,7 @@ mod tests {
     fn the_default_scene_photographs_lie_in_0_1_and_show_the_scene() {
         let ring = Ring::new(4, 2, 16).unwrap();
         let scene = Scene::default();
-        let images = photographs(&scene, &ring);
+        let images = photographs(&scene, &ring).unwrap();
         for (i, image) in images.iter().enumerate() {
             assert!(image.iter().all(|v| (0.0..=1.0).contains(v)), "view {i}");
             // The red sphere of density 40 and radius 0.45 sits at the centre of every view:
@@ -62,7 +72,7 @@ mod tests {
             assert!(corner > 0.5, "view {i}: corner {corner}");
         }
         // Pixel (row, column) is render_ray of that pixel's ray.
-        let ray = ring.camera(3).ray(5, 11, 16);
+        let ray = ring.rays(3).unwrap()[5 * 16 + 11];
         let ExactPixel { color, .. } = render_ray(&scene, &ray);
         assert_eq!(images[3].slice(ndarray::s![5, 11, ..]).to_vec(), color.to_vec());
     }

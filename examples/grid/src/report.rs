@@ -25,8 +25,8 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
-use crate::fit::FitError;
-use crate::images::ImageError;
+use fogray::fit::images::ImageError;
+use fogray::fit::FitError;
 
 pub mod anchor;
 pub mod compare;

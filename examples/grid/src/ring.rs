@@ -7,7 +7,8 @@
 //! `right = normalise(forward x up)` and `up' = right x forward`. Images are `W x W` with a
 //! vertical field of view of 40 degrees: pixel (row `a`, column `b`) looks along
 //! `normalise(forward + u right + v up')`, `f = tan 20 deg`, `u = ((b + 0.5) / W * 2 - 1) f`,
-//! `v = -((a + 0.5) / W * 2 - 1) f`. With `e = n / T` (integer division), view `i` is a test
+//! `v = -((a + 0.5) / W * 2 - 1) f` (the library's [`PinholeCamera::look_at`] with the
+//! principal point at the image centre: the same rays, up to rounding). With `e = n / T` (integer division), view `i` is a test
 //! view when `i mod e == e / 2`. Scripts outside this crate rebuild these cameras from the same
 //! formulas, so they are kept exactly.
 //!
@@ -16,13 +17,14 @@
 //!
 //! let ring = Ring::new(32, 4, 64)?;
 //! assert_eq!(ring.test_views(), vec![4, 13, 22, 31]);
-//! let camera = ring.camera(0);
-//! let eye_distance = camera.eye.iter().map(|x| x * x).sum::<f64>().sqrt();
+//! let camera = ring.camera(0)?;
+//! let eye_distance = camera.centre().iter().map(|x| x * x).sum::<f64>().sqrt();
 //! assert!((eye_distance - 3.0).abs() < 1e-12);
-//! assert_eq!(ring.rays(0).len(), 64 * 64);
+//! assert_eq!(ring.rays(0)?.len(), 64 * 64);
 //! # Ok::<(), fogray_grid::ring::RingError>(())
 //! ```
 
+use fogray::ops::{GeometryError, Intrinsics, PinholeCamera};
 use thiserror::Error;
 
 use crate::exact::Ray;
@@ -34,7 +36,7 @@ pub const FIELD_OF_VIEW_DEGREES: f64 = 40.0;
 
 /// Why a ring of cameras was rejected.
 #[non_exhaustive]
-#[derive(Debug, Clone, PartialEq, Eq, Error)]
+#[derive(Debug, Clone, PartialEq, Error)]
 pub enum RingError {
     /// A count that must be at least 1.
     #[error("{what} must be at least 1, got 0")]
@@ -42,19 +44,9 @@ pub enum RingError {
         /// `views` or `size`.
         what: &'static str,
     },
-}
-
-/// One pinhole camera: its eye and orthonormal frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Camera {
-    /// Position of the pinhole.
-    pub eye: [f64; 3],
-    /// Unit vector towards the origin.
-    pub forward: [f64; 3],
-    /// Unit vector to the right of the image.
-    pub right: [f64; 3],
-    /// Unit vector to the top of the image (`right x forward`).
-    pub up: [f64; 3],
+    /// The library camera refused a view (not expected for the ring's eyes).
+    #[error(transparent)]
+    Camera(#[from] GeometryError),
 }
 
 /// `V` training and `T` test views of `W x W` pixels (see the [module docs](self)).
@@ -65,49 +57,12 @@ pub struct Ring {
     size: usize,
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [
-        a[1] * b[2] - a[2] * b[1],
-        a[2] * b[0] - a[0] * b[2],
-        a[0] * b[1] - a[1] * b[0],
-    ]
-}
-
-fn normalise(a: [f64; 3]) -> [f64; 3] {
-    let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-    a.map(|x| x / n)
-}
-
-impl Camera {
-    /// The camera at `eye` looking at the origin (`eye` must not be the origin).
-    pub fn looking_at_origin(eye: [f64; 3]) -> Camera {
-        let forward = normalise(eye.map(|x| -x));
-        let up = if forward[2].abs() >= 0.99 {
-            [0.0, 1.0, 0.0]
-        } else {
-            [0.0, 0.0, 1.0]
-        };
-        let right = normalise(cross(forward, up));
-        Camera {
-            eye,
-            forward,
-            right,
-            up: cross(right, forward),
-        }
-    }
-
-    /// The ray through the centre of pixel (`row`, `column`) of a `size x size` image, with a
-    /// unit direction. Rows run top to bottom, columns left to right.
-    pub fn ray(&self, row: usize, column: usize, size: usize) -> Ray {
-        let f = (0.5 * FIELD_OF_VIEW_DEGREES).to_radians().tan();
-        let w = size as f64;
-        let u = ((column as f64 + 0.5) / w * 2.0 - 1.0) * f;
-        let v = -((row as f64 + 0.5) / w * 2.0 - 1.0) * f;
-        let d = [0, 1, 2].map(|k| self.forward[k] + u * self.right[k] + v * self.up[k]);
-        Ray {
-            origin: self.eye,
-            direction: normalise(d),
-        }
+/// The up vector of a camera looking along `forward`: `+z`, or `+y` where the view is steep.
+fn world_up(forward_z: f64) -> [f64; 3] {
+    if forward_z.abs() >= 0.99 {
+        [0.0, 1.0, 0.0]
+    } else {
+        [0.0, 0.0, 1.0]
     }
 }
 
@@ -177,17 +132,28 @@ impl Ring {
         [r * phi.cos(), r * phi.sin(), z].map(|x| EYE_DISTANCE * x)
     }
 
-    /// The camera of view `i`.
-    pub fn camera(&self, i: usize) -> Camera {
-        Camera::looking_at_origin(self.eye(i))
+    /// The camera of view `i`: at [`Ring::eye`], looking at the origin, `size x size` pixels
+    /// with a vertical field of view of [`FIELD_OF_VIEW_DEGREES`].
+    ///
+    /// Errors: [`RingError::Camera`] (not expected: every eye is off the origin).
+    pub fn camera(&self, i: usize) -> Result<PinholeCamera, RingError> {
+        let eye = self.eye(i);
+        let k = Intrinsics::from_vertical_fov(self.size, self.size, FIELD_OF_VIEW_DEGREES.to_radians())?;
+        let forward_z = -eye[2] / eye.iter().map(|x| x * x).sum::<f64>().sqrt();
+        Ok(PinholeCamera::look_at(k, eye, [0.0; 3], world_up(forward_z))?)
     }
 
     /// The rays of view `i`, one per pixel in row-major order (`row * size + column`).
-    pub fn rays(&self, i: usize) -> Vec<Ray> {
-        let camera = self.camera(i);
-        (0..self.size * self.size)
-            .map(|p| camera.ray(p / self.size, p % self.size, self.size))
-            .collect()
+    ///
+    /// Errors: as [`Ring::camera`].
+    pub fn rays(&self, i: usize) -> Result<Vec<Ray>, RingError> {
+        let camera = self.camera(i)?;
+        Ok((0..self.size * self.size)
+            .map(|p| Ray {
+                origin: camera.centre(),
+                direction: camera.direction(p / self.size, p % self.size),
+            })
+            .collect())
     }
 }
 
@@ -224,13 +190,33 @@ mod tests {
         }
     }
 
+    /// A camera's eye and unit frame (forward, right, image up) read off its camera-to-world
+    /// matrix (OpenCV columns: right, down, forward).
+    struct Frame {
+        eye: [f64; 3],
+        forward: [f64; 3],
+        right: [f64; 3],
+        up: [f64; 3],
+    }
+
+    fn frame(ring: &Ring, i: usize) -> Frame {
+        let m = ring.camera(i).unwrap().camera_to_world();
+        let column = |c: usize| [m[0][c], m[1][c], m[2][c]];
+        Frame {
+            eye: column(3),
+            forward: column(2),
+            right: column(0),
+            up: column(1).map(|x| -x),
+        }
+    }
+
     #[test]
     fn eyes_lie_on_the_radius_3_sphere_and_frames_are_orthonormal() {
         // 200 views: view 0 has z = 1 - 1/200 = 0.995, steep enough for the +y up vector.
         let ring = Ring::new(190, 10, 5).unwrap();
-        assert!(ring.camera(0).forward[2].abs() >= 0.99 && ring.camera(1).forward[2].abs() < 0.99);
+        assert!(frame(&ring, 0).forward[2].abs() >= 0.99 && frame(&ring, 1).forward[2].abs() < 0.99);
         for i in 0..ring.len() {
-            let c = ring.camera(i);
+            let c = frame(&ring, i);
             assert!((dot(c.eye, c.eye).sqrt() - 3.0).abs() < 1e-12);
             for (a, b) in [(c.forward, c.right), (c.forward, c.up), (c.right, c.up)] {
                 assert!(dot(a, b).abs() < 1e-12);
@@ -250,7 +236,7 @@ mod tests {
     fn pixel_rays_are_unit_and_the_centre_pixel_of_an_odd_image_hits_the_origin() {
         let ring = Ring::new(6, 2, 5).unwrap();
         for i in 0..ring.len() {
-            let rays = ring.rays(i);
+            let rays = ring.rays(i).unwrap();
             for r in &rays {
                 assert!((dot(r.direction, r.direction) - 1.0).abs() < 1e-14);
             }
@@ -260,7 +246,7 @@ mod tests {
             assert!(dot(at3, at3).sqrt() < 1e-12, "{at3:?}");
             // The top-left pixel centre is up and to the left: its angle from forward is
             // atan(sqrt(u^2 + v^2)) with u = -v = -(4/5) tan 20 deg.
-            let c = ring.camera(i);
+            let c = frame(&ring, i);
             let corner = rays[0];
             let t = 0.8 * 20f64.to_radians().tan();
             assert!((dot(corner.direction, c.forward) - (2.0 * t * t).sqrt().atan().cos()).abs() < 1e-12);

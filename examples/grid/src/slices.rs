@@ -16,14 +16,15 @@
 
 use std::path::Path;
 
+use fogray::fit::dense::{DenseGrid, BOUNDS};
+use fogray::fit::images::ImageError;
+use fogray::fit::{FitError, RadianceField};
 use fogray::ops::sample::{GridAxis, OccupancyGrid};
-use fogray::ops::{GridError, SampleError};
+use fogray::ops::SampleError;
 use fogray::tape::Float;
 use ndarray::Array2;
 use plotters::prelude::*;
 
-use crate::images::ImageError;
-use crate::model::{GridModel, BOUNDS};
 use crate::scene::Scene;
 
 const FONT: &str = "sans-serif";
@@ -93,8 +94,8 @@ pub fn scene_density_planes(scene: &Scene, n: usize) -> Vec<PlaneImage> {
 
 /// The model's density on the three planes, `n x n` pixels each.
 ///
-/// Errors: as [`GridModel::densities`].
-pub fn model_density_planes<F: Float>(model: &GridModel<F>, n: usize) -> Result<Vec<PlaneImage>, GridError> {
+/// Errors: as [`RadianceField::densities`].
+pub fn model_density_planes<F: Float>(model: &DenseGrid<F>, n: usize) -> Result<Vec<PlaneImage>, FitError> {
     AXES.iter()
         .map(|&axis| {
             let points = Array2::from_shape_fn((n * n, 3), |(k, a)| F::lit(pixel_point(axis, n, k / n, k % n)[a]));

@@ -65,7 +65,7 @@ mod visible_tests;
 
 pub use importance::Importance;
 pub use occupancy::{GridAxis, OccupancyGrid, OccupancySlice, OccupancyState};
-pub use occupancy_config::{CellPoints, OccupancyConfig, Threshold};
+pub use occupancy_config::{CellPoints, OccupancyConfig, Refresh, Threshold};
 pub use packed::{PackedSamples, SampleVars};
 pub use stratified::{Jitter, Stratified};
 pub use uniform::{Spacing, Uniform};

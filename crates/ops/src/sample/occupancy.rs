@@ -298,6 +298,30 @@ impl OccupancyGrid {
         Ok(out)
     }
 
+    /// The refresh policy of a training loop (nerfacc's `update_every_n_steps`): after step
+    /// `step` (counted from 1), calls [`OccupancyGrid::update`] with `density` at cell points
+    /// `points` if the config's [`Refresh`](super::Refresh) says the step is due. Returns
+    /// whether it refreshed.
+    ///
+    /// Errors: as [`OccupancyGrid::update`] (the grid is unchanged then).
+    pub fn update_every_n_steps<F, D, E>(
+        &mut self,
+        step: usize,
+        density: D,
+        points: CellPoints,
+    ) -> Result<bool, SampleError>
+    where
+        F: Float,
+        D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E> + Sync,
+        E: Display,
+    {
+        if !self.config.refresh().is_due(step) {
+            return Ok(false);
+        }
+        self.update(density, points)?;
+        Ok(true)
+    }
+
     /// Evaluates `density` (positions `[m, 3]` to densities `[m]`, e.g. a closure over a
     /// density grid) at `points` of every cell, sets `estimate = max(estimate * decay, new)`
     /// and marks the cells above the threshold occupied. Calls `density` on chunks of cells

@@ -24,6 +24,35 @@ pub enum Threshold {
 pub struct OccupancyConfig {
     threshold: Threshold,
     decay: f64,
+    refresh: Refresh,
+}
+
+/// When a training loop refreshes the grid ([`OccupancyGrid::update_every_n_steps`](super::OccupancyGrid::update_every_n_steps)):
+/// every `every` steps from step `warmup` on.
+///
+/// A fresh model is a thin fog with no cell above the threshold, and a cell once empty gets
+/// no samples to grow back from, so the density must first gather where the matter is: until
+/// `warmup` every cell stays occupied.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Refresh {
+    /// Steps before the first refresh.
+    pub warmup: usize,
+    /// Steps between refreshes (at least 1).
+    pub every: usize,
+}
+
+impl Default for Refresh {
+    /// From step 64, every 16 steps.
+    fn default() -> Self {
+        Refresh { warmup: 64, every: 16 }
+    }
+}
+
+impl Refresh {
+    /// Whether the grid is refreshed after step `step` (steps counted from 1).
+    pub fn is_due(&self, step: usize) -> bool {
+        step >= self.warmup && step % self.every == 0
+    }
 }
 
 pub(crate) fn config_error(what: &'static str, value: f64, rule: &'static str) -> SampleError {
@@ -44,6 +73,7 @@ impl OccupancyConfig {
         Ok(OccupancyConfig {
             threshold: Threshold::Opacity { step, opacity },
             decay: 0.95,
+            refresh: Refresh::default(),
         })
     }
 
@@ -60,6 +90,7 @@ impl OccupancyConfig {
         Ok(OccupancyConfig {
             threshold: Threshold::Density(density),
             decay: 0.95,
+            refresh: Refresh::default(),
         })
     }
 
@@ -71,6 +102,21 @@ impl OccupancyConfig {
         }
         self.decay = decay;
         Ok(self)
+    }
+
+    /// Sets when a training loop refreshes the grid (default: [`Refresh::default`]).
+    /// Errors: `every` is 0.
+    pub fn with_refresh(mut self, refresh: Refresh) -> Result<Self, SampleError> {
+        if refresh.every == 0 {
+            return Err(config_error("refresh interval", 0.0, "must be at least 1 step"));
+        }
+        self.refresh = refresh;
+        Ok(self)
+    }
+
+    /// When a training loop refreshes the grid.
+    pub fn refresh(&self) -> Refresh {
+        self.refresh
     }
 
     /// The threshold.

@@ -4,6 +4,7 @@ use std::convert::Infallible;
 
 use super::*;
 use crate::rays::Aabb;
+use crate::sample::Refresh;
 use crate::SampleError;
 use ndarray::{Array1, ArrayView2};
 
@@ -224,4 +225,29 @@ fn restore_rejects_bad_states_and_leaves_the_grid_alone() {
         }
     }
     assert_eq!(grid, before);
+}
+
+#[test]
+fn a_refresh_policy_updates_from_its_warmup_every_n_steps_only() {
+    let config = OccupancyConfig::density(0.5)
+        .unwrap()
+        .with_refresh(Refresh { warmup: 10, every: 4 })
+        .unwrap();
+    let mut grid = OccupancyGrid::new(cube(), 2, config).unwrap();
+    // Steps 1..=20: due at 12, 16, 20 (at least 10, a multiple of 4); 8 is before the warmup.
+    let due: Vec<usize> = (1..=20)
+        .filter(|&s| grid.update_every_n_steps(s, constant(0.0), CellPoints::Centre).unwrap())
+        .collect();
+    assert_eq!(due, vec![12, 16, 20]);
+    // Before any due step the grid is untouched (every cell occupied); after, density 0 empties it.
+    let mut fresh = OccupancyGrid::new(cube(), 2, config).unwrap();
+    assert!(!fresh
+        .update_every_n_steps(11, constant(0.0), CellPoints::Centre)
+        .unwrap());
+    assert_eq!(fresh.occupied_fraction(), 1.0);
+    assert_eq!(grid.occupied_fraction(), 0.0);
+    assert!(OccupancyConfig::density(0.5)
+        .unwrap()
+        .with_refresh(Refresh { warmup: 0, every: 0 })
+        .is_err());
 }

@@ -23,7 +23,7 @@ use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::fit::LogEntry;
+use fogray::fit::train::LogEntry;
 
 use super::reach::check;
 use super::ReportError;

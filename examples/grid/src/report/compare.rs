@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use crate::fit::LogEntry;
+use fogray::fit::train::LogEntry;
 
 use super::reach::{final_psnr, reach, Reach};
 use super::ReportError;

@@ -4,19 +4,9 @@
 use std::fmt;
 use std::str::FromStr;
 
-use crate::fit::Sampling;
-use crate::model::Method;
+use fogray::fit::settings::{Method, Precision, Sampling};
 
 use super::ReportError;
-
-/// The floating-point type of a fit.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Precision {
-    /// `f32` (the default).
-    F32,
-    /// `f64`.
-    F64,
-}
 
 /// One configuration of the report.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -3,7 +3,7 @@
 
 use fogray::stamp::Stamp;
 
-use crate::fit::Budget;
+use fogray::fit::settings::Budget;
 
 use super::anchor::Anchor;
 use super::compare::{

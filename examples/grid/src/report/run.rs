@@ -5,11 +5,15 @@ use fogray::tape::Float;
 use ndarray::Array3;
 use serde::Serialize;
 
-use crate::dataset::Dataset;
-use crate::fit::{fit, FitConfig, FitError, FitResult, LogEntry, Progress};
 use crate::slices::{model_density_planes, occupancy_planes, PlaneImage};
+use fogray::fit::dataset::Dataset;
+use fogray::fit::dense::DenseGrid;
+use fogray::fit::settings::FitSettings;
+use fogray::fit::train::{fit, FitResult, LogEntry, Progress};
 
-use super::configuration::{Precision, RunConfig};
+use fogray::fit::settings::Precision;
+
+use super::configuration::RunConfig;
 use super::ReportError;
 
 /// What the report runs.
@@ -17,7 +21,7 @@ use super::ReportError;
 pub struct ReportOptions {
     /// The settings every fit shares (grid, batch, budget, seed, ...); each configuration sets
     /// the method and the sampling.
-    pub fit: FitConfig,
+    pub fit: FitSettings,
     /// The configurations, in the order they run (at least one, no repeats).
     pub configs: Vec<RunConfig>,
     /// Pixels per side of the density slices (at least 1).
@@ -79,10 +83,14 @@ fn check(options: &ReportOptions) -> Result<(), ReportError> {
     Ok(())
 }
 
-fn keep<F: Float>(config: &RunConfig, result: FitResult<F>, slice_pixels: usize) -> Result<ConfigRun, ReportError> {
-    let density = model_density_planes(&result.model, slice_pixels).map_err(FitError::from)?;
+fn keep<F: Float>(
+    config: &RunConfig,
+    result: FitResult<F, DenseGrid<F>>,
+    slice_pixels: usize,
+) -> Result<ConfigRun, ReportError> {
+    let density = model_density_planes(&result.model, slice_pixels)?;
     let occupancy = match &result.occupancy {
-        Some(grid) => Some(occupancy_planes(grid).map_err(FitError::from)?),
+        Some(grid) => Some(occupancy_planes(grid).map_err(fogray::fit::FitError::from)?),
         None => None,
     };
     Ok(ConfigRun {
@@ -109,13 +117,21 @@ fn keep<F: Float>(config: &RunConfig, result: FitResult<F>, slice_pixels: usize)
 pub(crate) fn run_config(
     data: &Dataset,
     config: &RunConfig,
-    fit_config: &FitConfig,
+    fit_config: &FitSettings,
     slice_pixels: usize,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<ConfigRun, ReportError> {
     match config.precision {
-        Precision::F32 => keep(config, fit::<f32>(data, fit_config, progress)?, slice_pixels),
-        Precision::F64 => keep(config, fit::<f64>(data, fit_config, progress)?, slice_pixels),
+        Precision::F32 => keep(
+            config,
+            fit::<f32, DenseGrid<f32>>(data, fit_config, progress)?,
+            slice_pixels,
+        ),
+        Precision::F64 => keep(
+            config,
+            fit::<f64, DenseGrid<f64>>(data, fit_config, progress)?,
+            slice_pixels,
+        ),
     }
 }
 
@@ -132,9 +148,10 @@ pub fn run_configs(
     check(options)?;
     let mut runs = Vec::with_capacity(options.configs.len());
     for (i, config) in options.configs.iter().enumerate() {
-        let fit_config = FitConfig {
+        let fit_config = FitSettings {
             method: config.method,
             sampling: config.sampling,
+            precision: config.precision,
             ..options.fit
         };
         let mut report = |p| progress(i, p);

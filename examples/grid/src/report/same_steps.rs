@@ -15,9 +15,10 @@
 
 use serde::Serialize;
 
-use crate::dataset::Dataset;
-use crate::fit::{Budget, FitConfig, Progress};
-use crate::model::Method;
+use fogray::fit::dataset::Dataset;
+use fogray::fit::settings::Method;
+use fogray::fit::settings::{Budget, FitSettings};
+use fogray::fit::train::Progress;
 
 use super::configuration::RunConfig;
 use super::run::{run_config, ConfigRun, ReportOptions};
@@ -123,16 +124,16 @@ pub fn same_steps(
             continue;
         }
         let name = super::markdown::shared(fused.sampling, fused.precision);
-        let (fused_run, fused_again, taped_run) = match options.fit.budget {
+        let (fused_run, fused_again, taped_run) = match options.fit.budget() {
             Budget::Steps(_) => (StepsRun::of(fused), None, StepsRun::of(taped)),
             Budget::Seconds(_) => {
                 let mut run = |config: &RunConfig, again: &str| -> Result<StepsRun, ReportError> {
-                    let fit_config = FitConfig {
+                    let fit_config = FitSettings {
                         method: config.method,
                         sampling: config.sampling,
-                        budget: Budget::Steps(taped.steps),
+                        precision: config.precision,
                         evaluations: EXTRA_RUN_EVALUATIONS,
-                        ..options.fit
+                        ..options.fit.with_budget(Budget::Steps(taped.steps))
                     };
                     let label = format!("{config}, {} steps{again}", taped.steps);
                     let mut report = |p| progress(&label, p);

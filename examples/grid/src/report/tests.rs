@@ -9,8 +9,9 @@ use super::markdown::{checkpoints, config_rows, fused_vs_taped_rows, occupancy_v
 use super::reach::{psnr_at, reach};
 use super::run::{best, ConfigRun, FinalPictures};
 use super::ReportError;
-use crate::fit::{Budget, LogEntry, Sampling};
-use crate::model::Method;
+use fogray::fit::settings::Method;
+use fogray::fit::settings::{Budget, Sampling};
+use fogray::fit::train::LogEntry;
 
 fn entry(step: usize, seconds: f64, test_psnr: f64, samples: usize) -> LogEntry {
     LogEntry {

@@ -7,12 +7,12 @@ use fogray::machine::Bandwidth;
 use fogray::stamp::Stamp;
 use serde::Serialize;
 
-use crate::dataset::Dataset;
-use crate::fit::Budget;
-use crate::images::write_comparison_png;
-use crate::plots::{psnr_curves_against, Curve, XAxis};
 use crate::scene::Scene;
 use crate::slices::{scene_density_planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
+use fogray::fit::dataset::Dataset;
+use fogray::fit::images::write_comparison_png;
+use fogray::fit::plots::{psnr_curves_against, Curve, XAxis};
+use fogray::fit::settings::Budget;
 
 use super::anchor::Anchor;
 use super::compare::{AgainstAnchor, FusedVsTaped, OccupancyVsUniform};
@@ -129,9 +129,9 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
         top.name, top.final_test_psnr
     );
     for (t, render) in data.test.iter().zip(&top.pictures.renders) {
-        let name = format!("test-view-{:03}.png", t.view);
-        write_comparison_png(&dir.join(&name), t.photograph.view(), render.view(), 4.0, SCALE)?;
-        md += &format!("![test view {}]({name})\n\n", t.view);
+        let name = format!("test-view-{}.png", t.name);
+        write_comparison_png(&dir.join(&name), t.image.view(), render.view(), 4.0, SCALE)?;
+        md += &format!("![test view {}]({name})\n\n", t.name);
     }
     if let Some(n) = top.pictures.density.first().map(|p| p.values.nrows()) {
         // Decades: the fitted density spans empty space (softplus of the shift, about 0.02)

@@ -3,7 +3,7 @@
 //! viridis never shows.
 //!
 //! ```
-//! use fogray_grid::depth::write_depth_png;
+//! use fogray_fit::depth::write_depth_png;
 //! use ndarray::Array2;
 //!
 //! let mut depth = Array2::from_shape_fn((8, 8), |(a, b)| 2.0 + 0.1 * (a + b) as f64);
@@ -12,7 +12,7 @@
 //! let range = write_depth_png(&file, depth.view(), "view 3", 4)?.unwrap();
 //! assert!((range.near - 2.1).abs() < 1e-12 && (range.far - 3.4).abs() < 1e-12);
 //! # std::fs::remove_file(&file).ok();
-//! # Ok::<(), fogray_grid::images::ImageError>(())
+//! # Ok::<(), fogray_fit::images::ImageError>(())
 //! ```
 
 use std::path::Path;

@@ -1,12 +1,12 @@
 //! Where a fit's training time went: the wall time of each phase of a step, and the tape's
-//! time op by op ([`fogray::tape::Profile`]), summed over the steps of one [`fit_from`] call.
+//! time op by op ([`fogray_tape::Profile`]), summed over the steps of one [`fit_from`] call.
 //! Fused against taped, the two tables say what the fused ops buy and what both share.
 //!
-//! [`fit_from`]: crate::fit::fit_from
+//! [`fit_from`]: crate::train::fit_from
 
 use std::time::Duration;
 
-use fogray::tape::Profile;
+use fogray_tape::Profile;
 use serde::Serialize;
 
 /// The phases of a training step, in order.

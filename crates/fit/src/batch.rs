@@ -6,27 +6,13 @@
 //! misses and a conversion on every step; interleaved once in `F`, its origin, direction and
 //! colour share one or two cache lines.
 //!
-//! ```
-//! use fogray_grid::batch::TrainingTable;
-//! use fogray_grid::dataset::Dataset;
-//! use fogray_grid::{photographs::photographs, ring::Ring, scene::Scene};
-//!
-//! let ring = Ring::new(4, 1, 6)?;
-//! let data = Dataset::new(&ring, &photographs(&Scene::default(), &ring), [1.0; 3])?;
-//! let table = TrainingTable::<f32>::new(&data);
-//! let batch = table.gather(&[5, 0, 5])?;
-//! assert_eq!(batch.colors.nrows(), 3);
-//! assert_eq!(batch.colors[[0, 1]], data.colors[[5, 1]] as f32);
-//! # Ok::<(), Box<dyn std::error::Error>>(())
-//! ```
-
-use fogray::ops::rays::RayBatch;
-use fogray::tape::Float;
+use fogray_ops::rays::RayBatch;
+use fogray_tape::Float;
 use ndarray::Array2;
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
-use crate::fit::FitError;
+use crate::error::FitError;
 
 /// Values of a pixel in the table: origin, direction, colour.
 const ROW: usize = 9;
@@ -106,16 +92,11 @@ impl<F: Float> TrainingTable<F> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{photographs::photographs, ring::Ring, scene::Scene};
-
-    fn data() -> Dataset {
-        let ring = Ring::new(3, 1, 5).unwrap();
-        Dataset::new(&ring, &photographs(&Scene::default(), &ring), [1.0; 3]).unwrap()
-    }
+    use crate::testing::small_dataset;
 
     #[test]
     fn a_batch_holds_the_drawn_pixels_rounded_to_the_precision() {
-        let data = data();
+        let data = small_dataset();
         // Past one parallel task's rows, and ending inside another's.
         let mut rows = vec![7, 0, 74, 7];
         rows.extend((0..2 * ROWS_PER_TASK + 3).map(|k| (k * 37 + 5) % data.origins.nrows()));
@@ -134,10 +115,11 @@ mod tests {
 
     #[test]
     fn a_row_past_the_last_pixel_is_refused() {
-        let data = data();
+        let data = small_dataset();
         let table = TrainingTable::<f64>::new(&data);
-        assert_eq!(table.pixels(), 3 * 25);
-        let err = table.gather(&[0, 75]).unwrap_err();
-        assert!(err.to_string().contains("training pixel 75"), "{err}");
+        let pixels = data.origins.nrows();
+        assert_eq!(table.pixels(), pixels);
+        let err = table.gather(&[0, pixels]).unwrap_err();
+        assert!(err.to_string().contains(&format!("training pixel {pixels}")), "{err}");
     }
 }

@@ -1,14 +1,14 @@
 //! Test PSNR against training seconds (or steps), one curve per configuration, as SVG and PNG.
 //!
 //! ```
-//! use fogray_grid::fit::LogEntry;
-//! use fogray_grid::plots::{psnr_curves, Curve};
+//! use fogray_fit::train::LogEntry;
+//! use fogray_fit::plots::{psnr_curves, Curve};
 //!
 //! let log = [
 //!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0, samples: 0 },
 //!     LogEntry { step: 50, seconds: 2.0, train_loss: 0.01, test_psnr: 20.0, samples: 6400 },
 //! ];
-//! let dir = std::env::temp_dir().join(format!("fogray-grid-plots-doc-{}", std::process::id()));
+//! let dir = std::env::temp_dir().join(format!("fogray-fit-plots-doc-{}", std::process::id()));
 //! std::fs::create_dir_all(&dir)?;
 //! psnr_curves(&dir.join("psnr"), &[Curve { label: "fused".into(), log: &log }])?;
 //! assert!(dir.join("psnr.png").exists() && dir.join("psnr.svg").exists());
@@ -23,8 +23,8 @@ use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
-use crate::fit::LogEntry;
 use crate::images::ImageError;
+use crate::train::LogEntry;
 
 const FONT: &str = "sans-serif";
 const COLORS: [RGBColor; 6] = [

@@ -1,6 +1,7 @@
 //! PSNR against hand-computed values; PNGs decoded back and compared pixel by pixel.
 
 use super::*;
+use crate::metrics::psnr;
 use ndarray::Array3;
 
 fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
@@ -14,7 +15,7 @@ fn decode(path: &Path) -> (u32, u32, Vec<u8>) {
 }
 
 fn temp(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("fogray-grid-images-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("fogray-fit-images-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     dir.join(name)
 }

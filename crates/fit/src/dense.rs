@@ -1,0 +1,231 @@
+//! The dense grid: `N^3` nodes over `[-1, 1]^3` of raw density and raw RGB, looked up
+//! trilinearly by fogray-ops' grid field, activated (density `softplus(raw + shift)`, colour
+//! `sigmoid(raw)`, view-independent) and composited over packed samples, either with the fused
+//! ops or with their taped twins; a total-variation prior on the raw grid joins the training
+//! loss. It suits small scenes: its memory and a step's cost grow with `N^3`.
+//!
+//! ```
+//! use fogray_fit::dense::DenseGrid;
+//! use fogray_fit::model::{RadianceField, RenderWanted};
+//! use fogray_fit::settings::{FitSettings, Method};
+//! use fogray_ops::rays::RayBatch;
+//! use fogray_ops::sample::{Spacing, Uniform};
+//! use fogray_tape::Tape;
+//! use ndarray::arr2;
+//!
+//! let model = DenseGrid::<f32>::fresh(&FitSettings::default(), 8)?;
+//! let rays = RayBatch::new(arr2(&[[0.0f32, -3.0, 0.0]]), arr2(&[[0.0f32, 1.0, 0.0]]))?;
+//! let clip = model.bounds().clip(&rays);
+//! let samples = Uniform::new(Spacing::Step(model.sample_step()))?.sample(&rays, &clip)?;
+//! let mut tape = Tape::new();
+//! let out = model.render(&mut tape, samples, [1.0; 3], Method::Fused, RenderWanted::default())?;
+//! // A fresh grid is a thin grey fog: density softplus(-4) = 0.018 over a length of 2.
+//! let c = tape.value(out.color)?[[0, 0]];
+//! assert!(c > 0.98 && c < 1.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use fogray_ops::activation::{twin, DensityColor};
+use fogray_ops::prior::TotalVariation;
+use fogray_ops::rays::Aabb;
+use fogray_ops::sample::PackedSamples;
+use fogray_ops::{twins, Composite, CompositeInputs, CompositeVars, GridBox, GridField};
+use fogray_tape::params::{ParamId, Params};
+use fogray_tape::{Float, Tape, TapeError, Var};
+use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
+
+use crate::error::FitError;
+use crate::model::{RadianceField, RenderWanted, TrainingLoss};
+use crate::settings::{FitSettings, Method};
+
+/// Channels of a raw grid value: density, then red, green, blue.
+pub const CHANNELS: usize = 4;
+
+/// The box the grid covers.
+pub const BOUNDS: ([f64; 3], [f64; 3]) = ([-1.0; 3], [1.0; 3]);
+
+/// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
+pub const GRID: &str = "grid";
+
+/// A dense grid of raw density and colour, its parameters kept in a [`Params`] store.
+#[derive(Debug)]
+pub struct DenseGrid<F: Float> {
+    params: Params<F>,
+    grid: ParamId,
+    field: GridField,
+    activation: DensityColor,
+    prior: TotalVariation,
+    bounds: Aabb,
+    nodes: usize,
+}
+
+impl<F: Float> DenseGrid<F> {
+    /// A grid of `nodes^3` nodes (at least 2) over `[-1, 1]^3`, every raw value 0: density
+    /// `softplus(shift)` and colour grey (0.5) everywhere; `smoothness` weighs its
+    /// total-variation prior (0 for none).
+    ///
+    /// Errors: fewer than 2 nodes, more than memory can address, a shift that is not finite, a
+    /// smoothness that is negative or not finite.
+    pub fn new(nodes: usize, shift: f64, smoothness: f64) -> Result<Self, FitError> {
+        let field = GridField::new(GridBox::new(&BOUNDS.0, &BOUNDS.1)?, &[nodes, nodes, nodes, CHANNELS])?;
+        let mut params = Params::new();
+        let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, CHANNELS)))?;
+        let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
+        Ok(DenseGrid {
+            bounds: Aabb::new(BOUNDS.0, BOUNDS.1)?,
+            params,
+            grid,
+            field,
+            activation: DensityColor::new(shift)?,
+            prior,
+            nodes,
+        })
+    }
+
+    /// The raw grid's id in the store.
+    pub fn grid_id(&self) -> ParamId {
+        self.grid
+    }
+
+    /// The activation (its shift).
+    pub fn activation(&self) -> &DensityColor {
+        &self.activation
+    }
+
+    /// Records the lookup of `samples` in `grid` and the activation, and returns the composite
+    /// over the samples' rays with its inputs (the background `background`, shared).
+    fn composite_inputs(
+        &self,
+        tape: &mut Tape<F>,
+        grid: Var,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+        depth: bool,
+    ) -> Result<(Composite, CompositeInputs), TapeError> {
+        let (vars, offsets) = samples.into_tape(tape);
+        let raw = match method {
+            Method::Fused => self.field.apply(tape, grid, vars.positions)?,
+            Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, vars.positions)?,
+        };
+        let activated = match method {
+            Method::Fused => self.activation.apply(tape, raw)?,
+            Method::Taped => twin::density_color(tape, &self.activation, raw)?,
+        };
+        let inputs = CompositeInputs {
+            sigma: activated.sigma,
+            delta: vars.delta,
+            color: activated.color,
+            background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
+            t: depth.then_some(vars.t),
+        };
+        let op = Composite::packed(offsets);
+        Ok((if depth { op.with_depth() } else { op }, inputs))
+    }
+}
+
+impl<F: Float> RadianceField<F> for DenseGrid<F> {
+    const KIND: &'static str = "dense-grid";
+
+    fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
+        DenseGrid::new(nodes, settings.shift, settings.smoothness)
+    }
+
+    /// Each new node takes the trilinear interpolation of this grid's raw values at its
+    /// position.
+    fn resampled(&self, nodes: usize) -> Result<Self, FitError> {
+        let mut grown = DenseGrid::<F>::new(nodes, self.activation.shift(), self.prior.weight())?;
+        let spacing = 2.0 / (nodes - 1) as f64;
+        let at = |i: usize| F::lit(BOUNDS.0[0] + i as f64 * spacing);
+        let positions = Array2::from_shape_fn((nodes * nodes * nodes, 3), |(p, axis)| match axis {
+            0 => at(p / (nodes * nodes)),
+            1 => at(p / nodes % nodes),
+            _ => at(p % nodes),
+        });
+        let grid = self.params.get(self.grid)?;
+        let raw = self.field.evaluate(&grid, &positions.view().into_dyn())?;
+        let raw = raw
+            .into_shape_with_order(IxDyn(&[nodes, nodes, nodes, CHANNELS]))
+            .map_err(|e| FitError::Config(format!("resampled grid: {e}")))?;
+        grown.params.get_mut(grown.grid)?.assign(&raw);
+        Ok(grown)
+    }
+
+    fn nodes(&self) -> usize {
+        self.nodes
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// Half the spacing of the nodes, `1 / (nodes - 1)`.
+    fn sample_step(&self) -> f64 {
+        1.0 / (self.nodes - 1) as f64
+    }
+
+    fn params(&self) -> &Params<F> {
+        &self.params
+    }
+
+    fn params_mut(&mut self) -> &mut Params<F> {
+        &mut self.params
+    }
+
+    fn render(
+        &self,
+        tape: &mut Tape<F>,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+        wanted: RenderWanted,
+    ) -> Result<CompositeVars, TapeError> {
+        let grid = tape.param_from(&self.params, self.grid)?;
+        let (op, inputs) = self.composite_inputs(tape, grid, samples, background, method, wanted.depth)?;
+        match method {
+            Method::Fused => op.apply(tape, &inputs),
+            Method::Taped => twins::stable(tape, &op, &inputs),
+        }
+    }
+
+    /// The fused method records the composite and the loss as one op
+    /// ([`Composite::apply_mse`], one pass per ray for forward and backward); the taped one
+    /// the stable twin, then `sub`, `square` and `mean`.
+    fn training_loss(
+        &self,
+        tape: &mut Tape<F>,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        target: Var,
+        method: Method,
+    ) -> Result<TrainingLoss, TapeError> {
+        let grid = tape.param_from(&self.params, self.grid)?;
+        let (op, inputs) = self.composite_inputs(tape, grid, samples, background, method, false)?;
+        let photometric = match method {
+            Method::Fused => op.apply_mse(tape, &inputs, target)?,
+            Method::Taped => {
+                let color = twins::stable(tape, &op, &inputs)?.color;
+                let residual = tape.sub(color, target)?;
+                let squared = tape.square(residual)?;
+                tape.mean(squared)?
+            }
+        };
+        let objective = if self.prior.weight() > 0.0 {
+            let smooth = self.prior.apply(tape, grid)?;
+            tape.add(photometric, smooth)?
+        } else {
+            photometric
+        };
+        Ok(TrainingLoss { photometric, objective })
+    }
+
+    /// A position outside the box reads raw 0 (density `softplus(shift)`).
+    fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError> {
+        let grid = self.params.get(self.grid)?;
+        let raw = self.field.evaluate(&grid, &positions.into_dyn())?;
+        let raw = raw
+            .into_dimensionality::<Ix2>()
+            .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
+        Ok(self.activation.density(raw.view())?)
+    }
+}

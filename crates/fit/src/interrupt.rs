@@ -1,0 +1,53 @@
+//! Ctrl-C as a stop flag: a long fit checks it before each step, finishes the step under way
+//! and returns what it has, so that the caller can save it.
+//!
+//! ```no_run
+//! use fogray_fit::interrupt::StopFlag;
+//!
+//! let stop = StopFlag::on_ctrl_c()?;
+//! // ... fit_from(&data, &settings, None, Some(stop.flag()), &mut |_| {}) ...
+//! # Ok::<(), fogray_fit::error::FitError>(())
+//! ```
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
+use crate::error::FitError;
+
+/// A flag raised by Ctrl-C (or by [`StopFlag::raise`]).
+#[derive(Debug, Clone, Default)]
+pub struct StopFlag(Arc<AtomicBool>);
+
+impl StopFlag {
+    /// A flag that nothing raises but [`StopFlag::raise`].
+    pub fn new() -> Self {
+        StopFlag::default()
+    }
+
+    /// A flag that Ctrl-C raises (SIGINT; SIGTERM too on Unix where the `ctrlc` crate
+    /// catches it).
+    ///
+    /// Errors: [`FitError::Config`] if the process's handler is already set (once a process).
+    pub fn on_ctrl_c() -> Result<Self, FitError> {
+        let stop = StopFlag::new();
+        let flag = Arc::clone(&stop.0);
+        ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
+            .map_err(|e| FitError::Config(format!("cannot catch Ctrl-C: {e}")))?;
+        Ok(stop)
+    }
+
+    /// The flag, as [`fit_from`](crate::train::fit_from) takes it.
+    pub fn flag(&self) -> &AtomicBool {
+        &self.0
+    }
+
+    /// Raises the flag.
+    pub fn raise(&self) {
+        self.0.store(true, Ordering::Relaxed);
+    }
+
+    /// Whether the flag is raised.
+    pub fn is_raised(&self) -> bool {
+        self.0.load(Ordering::Relaxed)
+    }
+}

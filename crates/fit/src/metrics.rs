@@ -1,0 +1,44 @@
+//! How close renders are to their pictures.
+//!
+//! ```
+//! use fogray_fit::metrics::psnr;
+//! use ndarray::Array3;
+//!
+//! // Every value off by 0.1: MSE 0.01, PSNR = -10 log10(0.01) = 20 dB.
+//! let exact = Array3::from_elem((4, 4, 3), 0.5);
+//! let render = Array3::from_elem((4, 4, 3), 0.6);
+//! let db = psnr(&[render.view()], &[exact.view()])?;
+//! assert!((db - 20.0).abs() < 1e-9);
+//! # Ok::<(), fogray_fit::images::ImageError>(())
+//! ```
+
+use ndarray::{ArrayView3, Zip};
+
+use crate::images::{check_same, ImageError};
+
+/// Test PSNR in dB: `-10 log10` of the mean over all pixels and channels of all image pairs of
+/// `(clamp(render, 0, 1) - exact)^2`. Infinite when every clamped render equals its photograph.
+///
+/// Errors: [`ImageError::Empty`] for no images, [`ImageError::Shape`] if the counts or any
+/// pair's shapes differ.
+pub fn psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
+    if renders.is_empty() {
+        return Err(ImageError::Empty);
+    }
+    if renders.len() != exacts.len() {
+        return Err(ImageError::Shape {
+            what: "number of renders".into(),
+            expected: vec![exacts.len()],
+            got: vec![renders.len()],
+        });
+    }
+    let (mut sum, mut count) = (0.0, 0usize);
+    for (i, (r, e)) in renders.iter().zip(exacts).enumerate() {
+        check_same(&format!("render {i}"), r, e)?;
+        sum += Zip::from(r)
+            .and(e)
+            .fold(0.0, |acc, r, e| acc + (r.clamp(0.0, 1.0) - e).powi(2));
+        count += r.len();
+    }
+    Ok(-10.0 * (sum / count as f64).log10())
+}

@@ -1,0 +1,96 @@
+//! What the training loop, the renderer and the checkpoints ask of a radiance field: its
+//! parameters, how to record a render and a training loss on a tape, its density without a
+//! tape (for the occupancy grid), and how it grows coarse to fine. [`DenseGrid`] is the first
+//! implementation.
+//!
+//! [`DenseGrid`]: crate::dense::DenseGrid
+
+use fogray_ops::rays::Aabb;
+use fogray_ops::sample::PackedSamples;
+use fogray_ops::CompositeVars;
+use fogray_tape::params::Params;
+use fogray_tape::{Float, Tape, TapeError, Var};
+use ndarray::{Array1, ArrayView2};
+
+use crate::error::FitError;
+use crate::settings::{FitSettings, Method};
+
+/// What a training step records: the photometric loss alone (for the log) and the objective
+/// the backward starts from (the loss plus the model's own priors).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct TrainingLoss {
+    /// `mean((C - target)^2)` over rays and channels, a 0-d value.
+    pub photometric: Var,
+    /// The photometric loss plus the model's priors, a 0-d value.
+    pub objective: Var,
+}
+
+/// Which outputs a render records beyond the colour.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct RenderWanted {
+    /// The unnormalised expected depth `sum w_k t_k` of each ray.
+    pub depth: bool,
+}
+
+/// A radiance field the pipeline can fit, render and save.
+pub trait RadianceField<F: Float>: Sized + Sync {
+    /// The name of the model in a checkpoint's metadata.
+    const KIND: &'static str;
+
+    /// A fresh model for `settings` with `nodes` per axis (a growth stage's resolution).
+    ///
+    /// Errors: a resolution or setting the model cannot take.
+    fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError>;
+
+    /// The same field at `nodes` per axis (coarse-to-fine growth).
+    ///
+    /// Errors: as [`RadianceField::fresh`].
+    fn resampled(&self, nodes: usize) -> Result<Self, FitError>;
+
+    /// Nodes per axis.
+    fn nodes(&self) -> usize;
+
+    /// The box the field covers; it is empty outside.
+    fn bounds(&self) -> Aabb;
+
+    /// The spacing of samples along a ray that resolves the field (half a voxel for a grid).
+    fn sample_step(&self) -> f64;
+
+    /// The trainable parameters, by name (a checkpoint saves each under its name).
+    fn params(&self) -> &Params<F>;
+
+    /// The trainable parameters, for an optimiser's step or a checkpoint's load.
+    fn params_mut(&mut self) -> &mut Params<F>;
+
+    /// Records the render of `samples` over `background`: colour `[R, 3]`, opacity `[R]` and,
+    /// if wanted, the depth. The samples move onto the tape.
+    ///
+    /// Errors: from the ops (a tape error naming the op).
+    fn render(
+        &self,
+        tape: &mut Tape<F>,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+        wanted: RenderWanted,
+    ) -> Result<CompositeVars, TapeError>;
+
+    /// Records a training step's loss against `target` (`[R, 3]`) with the parameters lent to
+    /// the tape, so that the backward reaches them.
+    ///
+    /// Errors: from the ops, or a target of the wrong shape.
+    fn training_loss(
+        &self,
+        tape: &mut Tape<F>,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        target: Var,
+        method: Method,
+    ) -> Result<TrainingLoss, TapeError>;
+
+    /// The density at `positions` (`[m, 3]`), without a tape: for the occupancy grid, slices
+    /// and meshes.
+    ///
+    /// Errors: from the ops, or a NaN density (a diverged fit).
+    fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError>;
+}

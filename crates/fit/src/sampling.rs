@@ -1,0 +1,45 @@
+//! Where a fit puts its samples: every `step` across the model's box, or only in the occupied
+//! cells of an occupancy grid (its midpoint sampler).
+
+use fogray_ops::rays::{Aabb, RayBatch};
+use fogray_ops::sample::{Jitter, OccupancyConfig, OccupancyGrid, PackedSamples, Spacing, Uniform};
+use fogray_tape::Float;
+
+use crate::error::FitError;
+
+/// Samples `rays` every `step` across `bounds`, or keeps only the samples whose midpoints lie
+/// in occupied cells of `occupancy` (its midpoint sampler: the march's pieces, less up to two
+/// at each run of occupied cells, tested in vector lanes instead of a walk through every cell).
+///
+/// Errors: a step that is not finite and positive.
+pub fn sample_rays<F: Float>(
+    bounds: &Aabb,
+    occupancy: Option<&OccupancyGrid>,
+    rays: &RayBatch<F>,
+    step: f64,
+) -> Result<PackedSamples<F>, FitError> {
+    let clip = bounds.clip(rays);
+    Ok(match occupancy {
+        None => Uniform::new(Spacing::Step(step))?.sample(rays, &clip)?,
+        Some(g) => g.march_midpoints(rays, &clip, step, Jitter::None)?,
+    })
+}
+
+/// An occupancy grid as a fit of `grid` nodes per axis over `bounds` keeps one: one cell per
+/// voxel, a cell occupied while a step of half the final voxel through it would stop at least
+/// 1 % of the light (the final grid's half voxel sets the threshold, so it means the same at
+/// every growth stage). Every cell is occupied until its first refresh, which its default
+/// [`Refresh`](fogray_ops::sample::Refresh) policy times.
+///
+/// Errors: fewer than 2 nodes.
+pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitError> {
+    if grid < 2 {
+        return Err(FitError::Config("--grid must be at least 2".into()));
+    }
+    let final_step = 1.0 / (grid - 1) as f64;
+    Ok(OccupancyGrid::new(
+        bounds,
+        grid - 1,
+        OccupancyConfig::opacity(final_step, 0.01)?,
+    )?)
+}

@@ -1,0 +1,313 @@
+//! The fit's settings: one struct that is the command line's flags (with the `cli` feature),
+//! the checkpoint's metadata and what a resumed fit starts from. Adding a hyperparameter is one
+//! field here, with its default in [`FitSettings::DEFAULT`].
+//!
+//! ```
+//! use fogray_fit::settings::{Budget, FitSettings, Method};
+//!
+//! let settings = FitSettings { steps: Some(300), method: Method::Taped, ..FitSettings::default() };
+//! assert_eq!(settings.budget(), Budget::Steps(300));
+//! let text = serde_json::to_string(&settings)?;
+//! assert_eq!(serde_json::from_str::<FitSettings>(&text)?, settings);
+//! // A file written before a setting existed reads that setting's default.
+//! let old: FitSettings = serde_json::from_str(r#"{"grid": 32}"#)?;
+//! assert_eq!((old.grid, old.lr), (32, FitSettings::DEFAULT.lr));
+//! # Ok::<(), serde_json::Error>(())
+//! ```
+
+use serde::{Deserialize, Serialize};
+use serde_json::{Map, Value};
+
+use crate::error::FitError;
+
+/// Which implementation of the grid lookup, the activation and the composite a step records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Method {
+    /// The fused ops (one record each, hand-written backwards).
+    Fused,
+    /// Their taped twins (built from tape primitives).
+    Taped,
+}
+
+/// Where samples go along each ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Sampling {
+    /// Every half voxel across the box.
+    Uniform,
+    /// Every half voxel, but only in the cells of an occupancy grid (one cell per voxel) that
+    /// the current density marks as occupied; refreshed as its
+    /// [`Refresh`](fogray_ops::sample::Refresh) policy says.
+    Occupancy,
+}
+
+/// The floating-point type of a model and its render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Precision {
+    /// `f32`.
+    F32,
+    /// `f64`.
+    F64,
+}
+
+impl Precision {
+    /// `f32` or `f64`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+
+    /// The precision of `F` (`f32` or `f64`, the two [`Float`](fogray_tape::Float) types).
+    pub fn of<F: fogray_tape::Float>() -> Precision {
+        if std::mem::size_of::<F>() == 4 {
+            Precision::F32
+        } else {
+            Precision::F64
+        }
+    }
+}
+
+impl Method {
+    /// `fused` or `taped`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Fused => "fused",
+            Method::Taped => "taped",
+        }
+    }
+}
+
+impl Sampling {
+    /// `uniform` or `occupancy`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Uniform => "uniform",
+            Sampling::Occupancy => "occupancy",
+        }
+    }
+}
+
+/// When training stops.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Budget {
+    /// After this many steps.
+    Steps(usize),
+    /// Once this many seconds of training (evaluations excluded) have passed.
+    Seconds(f64),
+}
+
+/// Training seconds when neither `steps` nor `seconds` is set.
+pub const DEFAULT_SECONDS: f64 = 60.0;
+
+/// Everything a fit is configured by (see the [module docs](self)).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(default)]
+#[cfg_attr(feature = "cli", derive(clap::Args))]
+pub struct FitSettings {
+    /// Nodes per axis of the grid (of its last growth stage).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.grid))]
+    pub grid: usize,
+    /// Training seconds (evaluations excluded); 60 unless --steps is given.
+    #[cfg_attr(feature = "cli", arg(long, conflicts_with = "steps", allow_negative_numbers = true))]
+    pub seconds: Option<f64>,
+    /// Training steps instead of seconds.
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub steps: Option<usize>,
+    /// Training rays per step.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.batch))]
+    pub batch: usize,
+    /// Seed of the batches.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.seed))]
+    pub seed: u64,
+    /// Fused ops or their taped twins.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.method))]
+    pub method: Method,
+    /// Floating-point type of the model and the render.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.precision))]
+    pub precision: Precision,
+    /// Samples every half voxel across the box, or only in the cells an occupancy grid marks
+    /// occupied (test views are then rendered with it too).
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.sampling))]
+    pub sampling: Sampling,
+    /// Adam's learning rate, until 60 % of the budget.
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.lr))]
+    pub lr: f64,
+    /// Adam's learning rate at the end: from 60 % of the budget on it falls geometrically
+    /// from --lr to this (pass the --lr value for a constant rate).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.lr_final))]
+    pub lr_final: f64,
+    /// Weight of the total-variation prior on the raw grid (the mean squared difference of
+    /// neighbouring nodes) added to the loss; 0 for none.
+    #[cfg_attr(feature = "cli", arg(long = "tv", default_value_t = FitSettings::DEFAULT.smoothness))]
+    pub smoothness: f64,
+    /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
+    /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).
+    #[cfg_attr(feature = "cli", arg(long = "no-grow", action = clap::ArgAction::SetFalse))]
+    pub grow: bool,
+    /// The density's shift: raw 0 is density softplus(shift), the fresh grid's thin fog.
+    #[cfg_attr(feature = "cli", arg(long, allow_negative_numbers = true, default_value_t = FitSettings::DEFAULT.shift))]
+    pub shift: f64,
+    /// Test evaluations, evenly spaced over the budget (plus one at the start and the end).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.evaluations))]
+    pub evaluations: usize,
+}
+
+impl FitSettings {
+    /// The defaults: a 64^3 grid grown coarse to fine, 8192 rays a step for 60 s, fused ops,
+    /// occupancy sampling, f32.
+    pub const DEFAULT: FitSettings = FitSettings {
+        grid: 64,
+        seconds: None,
+        steps: None,
+        batch: 8192,
+        seed: 0,
+        method: Method::Fused,
+        precision: Precision::F32,
+        sampling: Sampling::Occupancy,
+        lr: 0.2,
+        lr_final: 0.02,
+        smoothness: 1.5e-4,
+        grow: true,
+        shift: -4.0,
+        evaluations: 20,
+    };
+
+    /// `steps` if set, else `seconds` (60 if neither).
+    pub fn budget(&self) -> Budget {
+        match (self.steps, self.seconds) {
+            (Some(n), _) => Budget::Steps(n),
+            (None, s) => Budget::Seconds(s.unwrap_or(DEFAULT_SECONDS)),
+        }
+    }
+
+    /// Sets the budget (`steps` or `seconds`, the other cleared).
+    pub fn with_budget(mut self, budget: Budget) -> Self {
+        (self.steps, self.seconds) = match budget {
+            Budget::Steps(n) => (Some(n), None),
+            Budget::Seconds(s) => (None, Some(s)),
+        };
+        self
+    }
+
+    /// Checks every setting's range. Errors: [`FitError::Config`] naming the flag.
+    pub fn check(&self) -> Result<(), FitError> {
+        let bad = |what: &str| Err(FitError::Config(what.into()));
+        if self.grid < 2 {
+            return bad("--grid must be at least 2");
+        }
+        if self.batch == 0 {
+            return bad("--batch must be at least 1");
+        }
+        if !(self.lr.is_finite() && self.lr > 0.0) {
+            return bad("--lr must be finite and positive");
+        }
+        if !(self.lr_final.is_finite() && self.lr_final > 0.0) {
+            return bad("--lr-final must be finite and positive");
+        }
+        if !(self.smoothness.is_finite() && self.smoothness >= 0.0) {
+            return bad("--tv must be finite and non-negative");
+        }
+        if !self.shift.is_finite() {
+            return bad("--shift must be finite");
+        }
+        match self.budget() {
+            Budget::Steps(0) => bad("--steps must be at least 1"),
+            Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => bad("--seconds must be finite and positive"),
+            _ => Ok(()),
+        }
+    }
+
+    /// A resumed fit's settings: `saved`'s, except the fields `given` names (by field name, as
+    /// clap's argument ids are), which are `self`'s. `steps` and `seconds` are one setting, the
+    /// budget: giving either replaces both.
+    ///
+    /// Errors: [`FitError::Config`] if the settings cannot be merged (not expected for two
+    /// values of this type).
+    pub fn given_over(&self, saved: &FitSettings, given: &dyn Fn(&str) -> bool) -> Result<FitSettings, FitError> {
+        let as_map = |s: &FitSettings| match serde_json::to_value(s) {
+            Ok(Value::Object(map)) => Ok(map),
+            other => Err(FitError::Config(format!("settings as JSON: {other:?}"))),
+        };
+        let (flags, mut merged): (Map<String, Value>, Map<String, Value>) = (as_map(self)?, as_map(saved)?);
+        let budget_given = given("steps") || given("seconds");
+        for (key, value) in flags {
+            let budget = key == "steps" || key == "seconds";
+            if (budget && budget_given) || (!budget && given(&key)) {
+                merged.insert(key, value);
+            }
+        }
+        serde_json::from_value(Value::Object(merged)).map_err(|e| FitError::Config(e.to_string()))
+    }
+}
+
+impl Default for FitSettings {
+    fn default() -> Self {
+        FitSettings::DEFAULT
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn given_flags_win_over_the_saved_settings_and_the_rest_is_saved() {
+        let saved = FitSettings {
+            grid: 32,
+            lr: 0.5,
+            steps: Some(100),
+            ..FitSettings::DEFAULT
+        };
+        let flags = FitSettings {
+            lr: 0.1,
+            seconds: Some(5.0),
+            grid: 64,
+            ..FitSettings::DEFAULT
+        };
+        let merged = flags.given_over(&saved, &|id| id == "lr" || id == "seconds").unwrap();
+        assert_eq!(merged.lr, 0.1);
+        assert_eq!(merged.grid, 32);
+        // The budget is one setting: --seconds clears the saved --steps.
+        assert_eq!(merged.budget(), Budget::Seconds(5.0));
+        let untouched = flags.given_over(&saved, &|_| false).unwrap();
+        assert_eq!(untouched, saved);
+    }
+
+    #[test]
+    fn every_setting_is_checked() {
+        let ok = FitSettings::DEFAULT;
+        assert!(ok.check().is_ok());
+        for (bad, flag) in [
+            (FitSettings { grid: 1, ..ok }, "--grid"),
+            (FitSettings { batch: 0, ..ok }, "--batch"),
+            (FitSettings { lr: f64::NAN, ..ok }, "--lr"),
+            (FitSettings { lr_final: 0.0, ..ok }, "--lr-final"),
+            (FitSettings { smoothness: -1.0, ..ok }, "--tv"),
+            (
+                FitSettings {
+                    shift: f64::INFINITY,
+                    ..ok
+                },
+                "--shift",
+            ),
+            (FitSettings { steps: Some(0), ..ok }, "--steps"),
+            (
+                FitSettings {
+                    seconds: Some(-1.0),
+                    ..ok
+                },
+                "--seconds",
+            ),
+        ] {
+            let e = bad.check().unwrap_err().to_string();
+            assert!(e.starts_with(flag), "{e}");
+        }
+    }
+}

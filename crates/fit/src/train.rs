@@ -1,0 +1,334 @@
+//! The training loop: Adam on a model's parameters, minimising the mean squared error of random
+//! batches of training rays (plus the model's priors), with the schedules of
+//! [`schedule`](crate::schedule) (learning rate, coarse-to-fine growth), the occupancy grid's
+//! own refresh policy, and the test PSNR on the held-out views measured at intervals (outside
+//! the training clock).
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::Instant;
+
+use fogray_ops::sample::{CellPoints, OccupancyGrid};
+use fogray_tape::optim::{Adam, AdamConfig};
+use fogray_tape::{Float, Tape};
+use ndarray::Array3;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha12Rng;
+use serde::Serialize;
+
+use crate::batch::TrainingTable;
+use crate::dataset::Dataset;
+use crate::error::FitError;
+use crate::metrics::psnr;
+use crate::model::RadianceField;
+use crate::profile::{Phases, StepProfile};
+use crate::render::{render_picture, RenderOptions};
+use crate::sampling::{occupancy_grid, sample_rays};
+use crate::schedule::{growth_stages, learning_rate};
+use crate::settings::{Budget, FitSettings, Sampling};
+use crate::state::{Start, TrainingState};
+
+/// One line of the log.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct LogEntry {
+    /// Steps done.
+    pub step: usize,
+    /// Training seconds so far (evaluations excluded).
+    pub seconds: f64,
+    /// The last step's loss (mean over rays and channels of the squared error); NaN at step 0.
+    pub train_loss: f64,
+    /// Test PSNR (dB) over all test views.
+    pub test_psnr: f64,
+    /// Training samples so far, over all rays of all steps (what a step's cost grows with).
+    pub samples: usize,
+}
+
+/// What a fit returns.
+#[derive(Debug)]
+pub struct FitResult<F: Float, M> {
+    /// The evaluations, in order.
+    pub log: Vec<LogEntry>,
+    /// Test PSNR at the end.
+    pub final_test_psnr: f64,
+    /// Training seconds, evaluations excluded.
+    pub seconds: f64,
+    /// Mean samples per training ray over this call's steps (NaN if it took none).
+    pub samples_per_ray_mean: f64,
+    /// Fraction of occupied cells at the end (1 with uniform sampling).
+    pub occupied_fraction: f64,
+    /// Final renders of the test views `[H][W][3]`, unclamped, in view order.
+    pub renders: Vec<Array3<f64>>,
+    /// The fitted model.
+    pub model: M,
+    /// Where the fit stopped, beyond the model: with it, [`fit_from`] continues the fit.
+    pub training: TrainingState<F>,
+    /// Whether the fit stopped early because its stop flag was raised.
+    pub interrupted: bool,
+    /// The final occupancy grid, with occupancy sampling.
+    pub occupancy: Option<OccupancyGrid>,
+    /// Where this call's training time went, phase by phase and op by op.
+    pub profile: StepProfile,
+}
+
+/// Progress reported after every step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Progress {
+    /// Steps done.
+    pub step: usize,
+    /// Fraction of the budget used, in `[0, 1]`.
+    pub fraction: f64,
+}
+
+/// Renders every test view of `data` from `model` (colour only, unclamped), with the
+/// occupancy grid a model fitted with one was trained with.
+///
+/// Errors: the ops' errors.
+pub fn render_test_views<F: Float, M: RadianceField<F>>(
+    model: &M,
+    data: &Dataset,
+    settings: &FitSettings,
+    occupancy: Option<&OccupancyGrid>,
+) -> Result<Vec<Array3<f64>>, FitError> {
+    let options = RenderOptions {
+        background: data.background,
+        method: settings.method,
+        depth: false,
+    };
+    data.test
+        .iter()
+        .map(|t| Ok(render_picture(model, occupancy, &t.origins, &t.directions, t.size(), &options)?.color))
+        .collect()
+}
+
+/// The PSNR of `renders` against the test views' pictures.
+///
+/// Errors: renders that do not match the views.
+pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
+    let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
+    let e: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
+    Ok(psnr(&r, &e)?)
+}
+
+/// Fits a fresh model to `data` for its budget: [`fit_from`] with no start and no stop flag.
+///
+/// ```
+/// use fogray_fit::dense::DenseGrid;
+/// use fogray_fit::settings::FitSettings;
+/// use fogray_fit::dataset::{Dataset, View};
+/// use fogray_fit::train::fit;
+/// use fogray_ops::{Intrinsics, PinholeCamera};
+/// use ndarray::Array3;
+///
+/// let k = Intrinsics::from_vertical_fov(8, 8, 0.7)?;
+/// let views = [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, -3.0, 0.0]].map(|eye| {
+///     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
+///     View::new("v", &camera, Array3::from_elem((8, 8, 3), 0.25)).unwrap()
+/// });
+/// let data = Dataset::new(&views[..2], vec![views[2].clone()], [1.0; 3])?;
+/// let settings = FitSettings { grid: 12, batch: 64, steps: Some(5), ..FitSettings::default() };
+/// let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {})?;
+/// assert_eq!(result.log.last().unwrap().step, 5);
+/// assert_eq!(result.renders.len(), 1); // one per test view
+/// # Ok::<(), Box<dyn std::error::Error>>(())
+/// ```
+///
+/// Errors: as [`fit_from`].
+pub fn fit<F: Float, M: RadianceField<F>>(
+    data: &Dataset,
+    settings: &FitSettings,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<FitResult<F, M>, FitError> {
+    fit_from(data, settings, None, None, progress)
+}
+
+/// Fits a model to `data` from `start` (a saved fit: model, Adam's moments, step, training
+/// seconds, growth stage and position in the batch stream) or afresh, until the budget, which
+/// counts the steps and seconds of `start` too, is spent or `stop` is raised (checked before
+/// each step, so the step under way is finished). Calls `progress` after every step.
+///
+/// Continuing a fit stopped at step `k` takes the same steps, bit for bit, as the fit that
+/// was never stopped, given the same settings (growth and the learning rate's anneal happen at
+/// fractions of the budget, so the first part must have had the same budget, or no growth and
+/// a constant rate) and a budget of steps (a budget of seconds stops where the clock says).
+/// The occupancy grid is part of the state; a start without one begins with every cell
+/// occupied until the next refresh.
+///
+/// Errors: a setting out of range ([`FitError::Config`]), a start whose model is not a growth
+/// stage of these settings, or an error of the ops.
+pub fn fit_from<F: Float, M: RadianceField<F>>(
+    data: &Dataset,
+    settings: &FitSettings,
+    start: Option<Start<F, M>>,
+    stop: Option<&AtomicBool>,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<FitResult<F, M>, FitError> {
+    settings.check()?;
+    let stages = growth_stages(settings);
+    let (mut model, resumed) = match start {
+        Some(s) => (s.model, Some(s.training)),
+        None => (M::fresh(settings, stages[0].1)?, None),
+    };
+    let stage = resumed.as_ref().map_or(0, |t| t.stage);
+    if stages.get(stage).map(|s| s.1) != Some(model.nodes()) {
+        return Err(FitError::Config(format!(
+            "the saved grid ({} nodes per axis, growth stage {stage}) is not a stage of this fit's --grid {}",
+            model.nodes(),
+            settings.grid
+        )));
+    }
+    let mut next_stage = stage + 1;
+    let bounds = model.bounds();
+    let mut occupancy = match settings.sampling {
+        Sampling::Uniform => None,
+        Sampling::Occupancy => Some(occupancy_grid(bounds, settings.grid)?),
+    };
+    if let (Some(grid), Some(state)) = (&mut occupancy, resumed.as_ref().and_then(|t| t.occupancy.as_ref())) {
+        grid.restore(state)?;
+    }
+    let adam_config = AdamConfig {
+        lr: settings.lr,
+        ..AdamConfig::default()
+    };
+    let mut adam = Adam::new(adam_config)?;
+    // StdRng's generator, named so that its position in the stream can be saved.
+    let mut rng = ChaCha12Rng::seed_from_u64(settings.seed);
+    let (mut seconds, mut step) = (0.0, 0usize);
+    if let Some(t) = resumed {
+        rng.set_word_pos(t.batch_stream);
+        (seconds, step) = (t.seconds, t.step);
+        for (name, state) in t.adam {
+            let id = model
+                .params()
+                .id(&name)
+                .ok_or_else(|| FitError::Config(format!("Adam's state names no parameter of the model: {name:?}")))?;
+            adam.restore(model.params(), id, state)?;
+        }
+    }
+    let first_step = step;
+    let mut interrupted = false;
+    let mut tape = Tape::<F>::new();
+    // A few clock reads a step: nothing beside a step's milliseconds.
+    tape.set_profiling(true);
+    let mut phases = Phases::default();
+    let table = TrainingTable::<F>::new(data);
+    let pixels = table.pixels();
+    let (mut loss, mut samples_total) = (f64::NAN, 0usize);
+    let fraction = |step: usize, seconds: f64| match settings.budget() {
+        Budget::Steps(n) => step as f64 / n as f64,
+        Budget::Seconds(s) => seconds / s,
+    };
+    let evaluate = |model: &M, occupancy: Option<&OccupancyGrid>, step, seconds, loss, samples| {
+        let renders = render_test_views(model, data, settings, occupancy)?;
+        Ok::<_, FitError>(LogEntry {
+            step,
+            seconds,
+            train_loss: loss,
+            test_psnr: test_psnr(&renders, data)?,
+            samples,
+        })
+    };
+    let mut log = vec![evaluate(
+        &model,
+        occupancy.as_ref(),
+        step,
+        seconds,
+        loss,
+        samples_total,
+    )?];
+    let mut next_eval = (fraction(step, seconds) * settings.evaluations as f64).floor() as usize + 1;
+    while fraction(step, seconds) < 1.0 {
+        if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
+            interrupted = true;
+            break;
+        }
+        let start = Instant::now();
+        if next_stage < stages.len() && fraction(step, seconds) >= stages[next_stage].0 {
+            model = model.resampled(stages[next_stage].1)?;
+            adam = Adam::new(adam_config)?;
+            next_stage += 1;
+        }
+        adam.set_lr(learning_rate(settings, fraction(step, seconds)))?;
+        let mut clock = Instant::now();
+        let mut lap = |phase: &mut std::time::Duration| {
+            let now = Instant::now();
+            *phase += now - clock;
+            clock = now;
+        };
+        let rows: Vec<usize> = (0..settings.batch).map(|_| rng.gen_range(0..pixels)).collect();
+        let batch = table.gather(&rows)?;
+        lap(&mut phases.batch);
+        let samples = sample_rays(&bounds, occupancy.as_ref(), &batch.rays, model.sample_step())?;
+        samples_total += samples.len();
+        lap(&mut phases.sample);
+        let target = tape.constant(batch.colors);
+        let objective = model.training_loss(&mut tape, samples, data.background, target, settings.method)?;
+        loss = tape
+            .value(objective.photometric)?
+            .iter()
+            .next()
+            .map_or(f64::NAN, |v| v.as_f64());
+        lap(&mut phases.forward);
+        let grads = tape.backward(objective.objective)?;
+        lap(&mut phases.backward);
+        tape.clear();
+        adam.step(model.params_mut(), &grads)?;
+        tape.recycle(grads);
+        lap(&mut phases.optimiser);
+        step += 1;
+        if let Some(grid) = &mut occupancy {
+            let m = &model;
+            let points = CellPoints::CentreAndRandom { seed: step as u64 };
+            grid.update_every_n_steps(step, |p| m.densities(p), points)?;
+        }
+        lap(&mut phases.occupancy);
+        seconds += start.elapsed().as_secs_f64();
+        progress(Progress {
+            step,
+            fraction: fraction(step, seconds).min(1.0),
+        });
+        let done = fraction(step, seconds) >= 1.0;
+        if done || fraction(step, seconds) * settings.evaluations as f64 >= next_eval as f64 {
+            log.push(evaluate(
+                &model,
+                occupancy.as_ref(),
+                step,
+                seconds,
+                loss,
+                samples_total,
+            )?);
+            next_eval = (fraction(step, seconds) * settings.evaluations as f64).floor() as usize + 1;
+        }
+    }
+    let renders = render_test_views(&model, data, settings, occupancy.as_ref())?;
+    let mut adam_states = Vec::new();
+    for id in model.params().ids() {
+        if let Some(state) = adam.state(model.params(), id)? {
+            adam_states.push((model.params().name(id)?.to_string(), state));
+        }
+    }
+    let training = TrainingState {
+        step,
+        seconds,
+        stage: next_stage - 1,
+        batch_stream: rng.get_word_pos(),
+        adam: adam_states,
+        occupancy: occupancy.as_ref().map(OccupancyGrid::state),
+    };
+    let occupied_fraction = occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction());
+    Ok(FitResult {
+        final_test_psnr: test_psnr(&renders, data)?,
+        log,
+        seconds,
+        samples_per_ray_mean: samples_total as f64 / ((step - first_step) * settings.batch) as f64,
+        occupied_fraction,
+        renders,
+        model,
+        training,
+        interrupted,
+        occupancy,
+        profile: StepProfile {
+            steps: step - first_step,
+            phases,
+            ops: tape.take_profile().unwrap_or_default(),
+        },
+    })
+}
