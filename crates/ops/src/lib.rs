@@ -10,7 +10,8 @@
 //! - [`twins`]: the same composite written with tape primitives only, in the stable form
 //!   (exclusive cumsum of optical depth, `exp`, `expm1`) and the naive form (cumulative
 //!   product of `1 - alpha`), to check the fused op against and to measure what fusing buys;
-//! - [`hard`]: the hard "first hit" renderer that the soft one generalises;
+//! - [`hard`]: the hard "first hit" renderer that the soft one generalises, and the exact
+//!   ray / ball hit test of a scene whose surface is a ball;
 //! - [`rays`]: pinhole cameras, batches of rays, and ray / box clipping;
 //! - [`sample`]: samplers that turn clipped rays into packed samples for the composite
 //!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space;

@@ -1,9 +1,10 @@
 //! Adam on one parameter, as the lesson's widget runs it: the tape's `optim::Adam` on a 0-d
 //! parameter, the offset `x`, whose gradient the soft or the hard renderer gives as a number.
+//! What is the disc's own: the flags, and the loop that asks the renderer for the gradient.
 
 use clap::Args;
 use fogray::tape::optim::{self, AdamConfig, ParamGradients};
-use fogray::tape::params::{ParamId, Params};
+use fogray::tape::params::Params;
 use fogray::tape::TapeError;
 use ndarray::arr0;
 
@@ -49,56 +50,39 @@ impl Adam {
             eps: self.adam_eps,
         }
     }
-}
 
-/// One Adam descent of the offset: the parameter and the optimiser's moments.
-#[derive(Debug)]
-pub struct Descent {
-    params: Params<f64>,
-    x: ParamId,
-    adam: optim::Adam<f64>,
-}
-
-impl Descent {
-    /// A descent from `start`; an error if a setting is out of range.
-    pub fn new(opts: &Adam, start: f64) -> Result<Self, TapeError> {
-        let mut params = Params::new();
-        let x = params.add("x", arr0(start))?;
-        Ok(Descent {
-            params,
-            x,
-            adam: optim::Adam::new(opts.config())?,
-        })
-    }
-
-    /// The offset now.
-    pub fn x(&self) -> Result<f64, TapeError> {
-        Ok(self.params.get(self.x)?[[]])
-    }
-
-    /// One step for gradient `g` at learning rate `lr`; returns the new offset.
-    pub fn step(&mut self, g: f64, lr: f64) -> Result<f64, TapeError> {
-        self.adam.set_lr(lr)?;
-        let mut grads = ParamGradients::new();
-        grads.insert(&self.params, self.x, arr0(g))?;
-        self.adam.step(&mut self.params, &grads)?;
-        self.x()
+    /// `self.steps` steps at the fixed learning rate `self.lr` with the gradient `grad(x)`.
+    pub fn descend(
+        &self,
+        start: f64,
+        mut grad: impl FnMut(f64) -> Result<f64, TapeError>,
+    ) -> Result<Vec<f64>, TapeError> {
+        descend(self.config(), start, self.steps, |_, x| Ok((grad(x)?, self.lr)))
     }
 }
 
-/// Runs `opts.steps` steps from `start` with the gradient `grad(x)`; returns the path
-/// (start included). Stops early with an error if the gradient fails or is not finite.
+/// Runs `steps` steps of Adam (with `config`'s moments and guard) on the offset from `start`;
+/// step `k` (from 0) asks `step(k, x)` for the gradient at the offset `x` and the learning rate
+/// to take. Returns the path, start included. Stops with an error if a setting is out of
+/// range, or the gradient fails or is not finite.
 pub fn descend(
-    opts: &Adam,
+    config: AdamConfig,
     start: f64,
-    mut grad: impl FnMut(f64) -> Result<f64, TapeError>,
+    steps: usize,
+    mut step: impl FnMut(usize, f64) -> Result<(f64, f64), TapeError>,
 ) -> Result<Vec<f64>, TapeError> {
-    let mut descent = Descent::new(opts, start)?;
-    let mut path = vec![start];
-    let mut x = start;
-    for _ in 0..opts.steps {
-        x = descent.step(grad(x)?, opts.lr)?;
-        path.push(x);
+    let mut params = Params::new();
+    let x = params.add("x", arr0(start))?;
+    let mut adam = optim::Adam::new(config)?;
+    let mut path = Vec::with_capacity(steps + 1);
+    path.push(start);
+    for k in 0..steps {
+        let (g, lr) = step(k, path[k])?;
+        adam.set_lr(lr)?;
+        let mut grads = ParamGradients::new();
+        grads.insert(&params, x, arr0(g))?;
+        adam.step(&mut params, &grads)?;
+        path.push(params.get(x)?[[]]);
     }
     Ok(path)
 }
@@ -108,19 +92,34 @@ mod tests {
     use super::*;
 
     #[test]
-    fn first_step_moves_by_the_learning_rate_against_the_gradient() {
-        // With bias correction the first step is lr * g / (|g| + eps) = lr * sign(g).
-        let opts = Adam::default();
-        let mut d = Descent::new(&opts, 1.0).unwrap();
-        let x = d.step(3.0, 0.05).unwrap();
-        assert!((x - 0.95).abs() < 1e-9);
+    fn steps_follow_adams_closed_form() {
+        // With a constant gradient g the bias-corrected moments are exactly g and g^2, so every
+        // step moves by lr * g / (|g| + eps): lr against the gradient's sign, at each step's lr.
+        let config = Adam::default().config();
+        let lrs = [0.1, 0.2, 0.05];
+        let path = descend(config, 1.0, 3, |k, _| Ok((3.0, lrs[k]))).unwrap();
+        for (x, want) in path.iter().zip([1.0, 0.9, 0.7, 0.65]) {
+            assert!((x - want).abs() < 1e-8, "{path:?}");
+        }
         // A zero gradient never moves (the hard renderer's case).
-        let path = descend(&opts, -2.8, |_| Ok(0.0)).unwrap();
+        let path = Adam::default().descend(-2.8, |_| Ok(0.0)).unwrap();
+        assert_eq!(path.len(), 81);
         assert!(path.iter().all(|&p| p == -2.8));
-        // It finds the minimum of a parabola.
-        let path = descend(&Adam { steps: 500, ..opts }, 2.0, |x| Ok(2.0 * (x - 0.5))).unwrap();
+        // It finds the minimum of the parabola (x - 0.5)^2.
+        let path = Adam {
+            steps: 500,
+            ..Adam::default()
+        }
+        .descend(2.0, |x| Ok(2.0 * (x - 0.5)))
+        .unwrap();
         assert!((path.last().unwrap() - 0.5).abs() < 1e-2);
         // Settings out of range are an error, not a diverging descent.
-        assert!(Descent::new(&Adam { beta1: 1.0, ..opts }, 0.0).is_err());
+        let bad = Adam {
+            beta1: 1.0,
+            ..Adam::default()
+        };
+        assert!(bad.descend(0.0, |_| Ok(1.0)).is_err());
+        assert!(descend(config, 0.0, 1, |_, _| Ok((1.0, -0.1))).is_err());
+        assert!(descend(config, 0.0, 1, |_, _| Ok((f64::NAN, 0.1))).is_err());
     }
 }

@@ -16,7 +16,7 @@
 use clap::Args;
 use fogray::tape::TapeError;
 
-use crate::adam::{Adam, Descent};
+use crate::adam::{descend, Adam};
 use crate::error::DiscError;
 use crate::experiments::{Fit, Renderer};
 use crate::hard;
@@ -89,26 +89,24 @@ impl Schedule {
     }
 }
 
-/// Adam on the soft loss with the softness and learning rate of `schedule`.
+/// Adam on the soft loss with the softness and learning rate of `schedule` (`adam`'s moments
+/// and guard; its learning rate and number of steps are the schedule's).
 pub fn fit_annealed(setup: &Setup, start: f64, schedule: &Schedule, adam: &Adam) -> Result<Fit, TapeError> {
-    let mut descent = Descent::new(adam, start)?;
-    let mut x = start;
-    let mut path = vec![start];
-    let mut taus = Vec::with_capacity(schedule.anneal_steps + 1);
-    for k in 0..schedule.anneal_steps {
+    let path = descend(adam.config(), start, schedule.anneal_steps, |k, x| {
         let (tau, lr) = schedule.at(k);
-        taus.push(tau);
-        let g = setup.soft(x, tau)?.slope;
-        x = descent.step(g, lr)?;
-        path.push(x);
-    }
-    taus.push(schedule.tau_end);
+        Ok((setup.soft(x, tau)?.slope, lr))
+    })?;
+    let end = *path.last().unwrap_or(&start);
+    let tau = (0..schedule.anneal_steps)
+        .map(|k| schedule.at(k).0)
+        .chain([schedule.tau_end])
+        .collect();
     Ok(Fit {
         renderer: Renderer::Soft,
         start,
-        end: x,
+        end,
         path,
-        tau: taus,
-        pixels_wrong: hard::mismatches(&setup.rays, x, setup.scene.radius, &setup.truth, hard::hits),
+        tau,
+        pixels_wrong: hard::mismatches(&setup.rays, end, setup.scene.radius, &setup.truth, hard::hits),
     })
 }

@@ -5,7 +5,7 @@ use std::collections::BTreeSet;
 use fogray::tape::{Tape, TapeError};
 use serde::Serialize;
 
-use crate::adam::{descend, Adam};
+use crate::adam::Adam;
 use crate::error::DiscError;
 use crate::hard;
 use crate::setup::Setup;
@@ -224,9 +224,9 @@ pub struct Fit {
 /// Adam from `start` at fixed softness `tau` (the lesson's descents).
 pub fn fit(setup: &Setup, renderer: Renderer, start: f64, tau: f64, adam: &Adam) -> Result<Fit, TapeError> {
     let path = match renderer {
-        Renderer::Soft => descend(adam, start, |x| setup.soft(x, tau).map(|e| e.slope))?,
+        Renderer::Soft => adam.descend(start, |x| setup.soft(x, tau).map(|e| e.slope))?,
         // The hard renderer's exact derivative is 0 almost everywhere.
-        Renderer::Hard => descend(adam, start, |x| Ok::<f64, TapeError>(hard_slope(setup, x)))?,
+        Renderer::Hard => adam.descend(start, |x| Ok(hard_slope(setup, x)))?,
     };
     let end = *path.last().unwrap_or(&start);
     Ok(Fit {

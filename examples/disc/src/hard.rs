@@ -1,24 +1,17 @@
 //! The hard renderer of lesson 7: a pixel shows the disc's colour iff its ray meets the disc
-//! in front of the camera.
+//! in front of the camera, by fogray's exact hit test [`fogray::ops::hard::ray_meets_ball`].
+
+use fogray::ops::hard::ray_meets_ball;
 
 use crate::scene::{Ray, Scene};
 
 /// Whether `ray` meets the closed disc of `radius` centred at `(cx, 0)` in front of its origin.
 ///
-/// Tangent rays count as hits. The squared perpendicular distance comes from the cross product
-/// (not `|w|^2 - (w.d)^2`, which cancels) and is compared with `radius^2` with a relative
-/// allowance of 1e-12, far above the rounding of its terms (~1e-16) and far below any
-/// geometric gap the 1 mm sweep produces: rays that are tangent in exact arithmetic (two pairs
-/// are, at x = +-1.325 with the default scene) are all hits, whatever the rounding of their
-/// individual terms, so ties are treated consistently.
+/// Tangent rays count as hits, however their terms round (see [`ray_meets_ball`]): rays that
+/// are tangent in exact arithmetic (two pairs are, at x = +-1.325 with the default scene) are
+/// all hits, so ties are treated consistently.
 pub fn hits(ray: &Ray, cx: f64, radius: f64) -> bool {
-    let w = [cx - ray.origin[0], -ray.origin[1]];
-    let along = w[0] * ray.dir[0] + w[1] * ray.dir[1];
-    let cross = ray.dir[0] * w[1] - ray.dir[1] * w[0];
-    let r2 = radius * radius;
-    let inside = cross * cross - r2 <= 1e-12 * r2;
-    // In front: the nearest point is ahead, or the origin itself is inside the disc.
-    inside && (along > 0.0 || w[0] * w[0] + w[1] * w[1] <= radius * radius)
+    ray_meets_ball(ray.origin, ray.dir, [cx, 0.0], radius)
 }
 
 /// The textbook test, `|w|^2 - (w.d)^2 <= radius^2`, with no care for ties: used only to show
@@ -51,25 +44,4 @@ pub fn loss(image: &[f64], photo: &[f64]) -> f64 {
 /// times `|disc - background|^2 / (pixels * channels)`, so distinct losses are distinct counts.
 pub fn mismatches(rays: &[Ray], cx: f64, radius: f64, truth: &[bool], hit: fn(&Ray, f64, f64) -> bool) -> usize {
     rays.iter().zip(truth).filter(|(r, &t)| hit(r, cx, radius) != t).count()
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn hits_and_misses() {
-        let r = Ray {
-            origin: [0.0, 5.0],
-            dir: [0.0, -1.0],
-        };
-        assert!(hits(&r, 0.0, 1.0));
-        assert!(hits(&r, 1.0, 1.0), "tangent counts as a hit");
-        assert!(!hits(&r, 1.0 + 1e-9, 1.0));
-        let behind = Ray {
-            origin: [0.0, -5.0],
-            dir: [0.0, -1.0],
-        };
-        assert!(!hits(&behind, 0.0, 1.0), "a disc behind the camera is not seen");
-    }
 }
