@@ -39,8 +39,7 @@ pub enum Sampling {
     /// Every half voxel across the box.
     Uniform,
     /// Every half voxel, but only in the cells of an occupancy grid (one cell per voxel) that
-    /// the current density marks as occupied; refreshed as its
-    /// [`Refresh`](fogray_ops::sample::Refresh) policy says.
+    /// the current density marks as occupied, refreshed every few steps.
     Occupancy,
 }
 
@@ -49,9 +48,9 @@ pub enum Sampling {
 #[serde(rename_all = "lowercase")]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum Precision {
-    /// `f32`.
+    /// 32-bit floats.
     F32,
-    /// `f64`.
+    /// 64-bit floats.
     F64,
 }
 
@@ -145,7 +144,7 @@ pub struct FitSettings {
     pub lr_final: f64,
     /// Weight of the total-variation prior on the raw grid (the mean squared difference of
     /// neighbouring nodes) added to the loss; 0 for none.
-    #[cfg_attr(feature = "cli", arg(long = "tv", default_value_t = FitSettings::DEFAULT.smoothness))]
+    #[cfg_attr(feature = "cli", arg(long = "tv", value_name = "WEIGHT", default_value_t = FitSettings::DEFAULT.smoothness))]
     pub smoothness: f64,
     /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
     /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).

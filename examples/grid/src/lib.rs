@@ -25,6 +25,20 @@
 //! assert_eq!(db, f64::INFINITY); // a photograph is its own perfect render
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! A fit of the scene is the pipeline's, on this crate's data (`fogray-grid fit` is this with
+//! a command line, pictures and checkpoints; here a small grid for 40 steps):
+//!
+//! ```
+//! use fogray::fit::{dense::DenseGrid, train::fit, FitSettings};
+//! use fogray_grid::{ring::Ring, scene::Scene, views::dataset};
+//!
+//! let data = dataset(&Scene::default(), &Ring::new(16, 2, 24)?)?;
+//! let settings = FitSettings { grid: 24, batch: 2048, steps: Some(40), ..FitSettings::default() };
+//! let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {})?;
+//! assert!(result.final_test_psnr > result.log[0].test_psnr + 3.0);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
 
 #![warn(missing_docs)]
 

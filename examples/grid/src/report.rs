@@ -10,7 +10,7 @@
 //! - [`run`]: running the fits; [`markdown`] and [`mod@write`]: the report's files.
 //!
 //! ```
-//! use fogray_grid::fit::LogEntry;
+//! use fogray::fit::train::LogEntry;
 //! use fogray_grid::report::reach::{psnr_at, reach};
 //!
 //! let e = |step, seconds, test_psnr| LogEntry { step, seconds, train_loss: 0.0, test_psnr, samples: 100 * step };

@@ -4,13 +4,12 @@ use approx::assert_relative_eq;
 
 use super::anchor::Anchor;
 use super::compare::{against_anchor, fused_vs_taped, occupancy_vs_uniform};
-use super::configuration::{Precision, RunConfig, DEFAULT_CONFIGS};
+use super::configuration::{RunConfig, DEFAULT_CONFIGS};
 use super::markdown::{checkpoints, config_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows};
 use super::reach::{psnr_at, reach};
 use super::run::{best, ConfigRun, FinalPictures};
 use super::ReportError;
-use fogray::fit::settings::Method;
-use fogray::fit::settings::{Budget, Sampling};
+use fogray::fit::settings::{Budget, Method, Precision, Sampling};
 use fogray::fit::train::LogEntry;
 
 fn entry(step: usize, seconds: f64, test_psnr: f64, samples: usize) -> LogEntry {

@@ -46,7 +46,7 @@ fn photographs_json_is_view_row_column_channel() {
     ]);
     let v: serde_json::Value = serde_json::from_str(&out).unwrap();
     let images = v["images"].as_array().unwrap();
-    let want = photographs(&Scene::default(), &Ring::new(3, 1, 5).unwrap());
+    let want = photographs(&Scene::default(), &Ring::new(3, 1, 5).unwrap()).unwrap();
     assert_eq!(images.len(), 4);
     for (view, image) in want.iter().enumerate() {
         for ((a, b, c), value) in image.indexed_iter() {

@@ -6,7 +6,9 @@ use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-use fogray_grid::checkpoint::{load, read_info};
+use fogray::fit::checkpoint::{load, read_info};
+use fogray::fit::dense::DenseGrid;
+use fogray::fit::settings::Budget;
 
 use crate::common;
 use common::{grid, ok, temp_dir};
@@ -103,7 +105,7 @@ fn saved_models_render_as_the_fit_and_resume() {
     assert_eq!(v["log"][0]["step"], 6);
     assert_eq!(v["log"].as_array().unwrap().last().unwrap()["step"], 10);
     let info = read_info(&resumed).unwrap();
-    assert_eq!((info.step, info.nodes, info.fit.config.batch), (10, 8, 128));
+    assert_eq!((info.step, info.nodes, info.settings.batch), (10, 8, 128));
     let _ = std::fs::remove_dir_all(&dir);
 }
 
@@ -153,9 +155,9 @@ fn ctrl_c_saves_the_fit_and_exits_130() {
         rest.contains("interrupted after step") && rest.contains("m.safetensors"),
         "{rest}"
     );
-    let saved = load::<f32>(&model).unwrap();
+    let saved = load::<f32, DenseGrid<f32>>(&model).unwrap();
     assert!(saved.start.training.step >= 1);
-    assert_eq!(saved.fit.config.budget, fogray_grid::fit::Budget::Steps(100000000));
+    assert_eq!(saved.settings.budget(), Budget::Steps(100000000));
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -2,9 +2,11 @@
 //! `fit` runs, its tables read their logs, and its files are there.
 
 use crate::common::default_scene_data;
+use fogray::fit::dataset::Dataset;
+use fogray::fit::dense::DenseGrid;
+use fogray::fit::settings::{Budget, FitSettings, Sampling};
+use fogray::fit::train::{fit, LogEntry};
 use fogray::machine::Bandwidth;
-use fogray_grid::dataset::Dataset;
-use fogray_grid::fit::{fit, Budget, FitConfig, Sampling};
 use fogray_grid::report::anchor::{Anchor, AnchorPoint};
 use fogray_grid::report::configuration::DEFAULT_CONFIGS;
 use fogray_grid::report::markdown::fused_vs_taped_rows;
@@ -15,17 +17,17 @@ use fogray_grid::report::ReportError;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
-fn tiny() -> (Scene, Dataset, FitConfig) {
+fn tiny() -> (Scene, Dataset, FitSettings) {
     let scene = Scene::default();
     let data = default_scene_data(&Ring::new(6, 1, 10).unwrap());
-    let config = FitConfig {
+    let config = FitSettings {
         grid: 10,
         batch: 128,
-        budget: Budget::Steps(70),
         lr: 0.3,
         evaluations: 5,
-        ..FitConfig::default()
-    };
+        ..FitSettings::default()
+    }
+    .with_budget(Budget::Steps(70));
     (scene, data, config)
 }
 
@@ -47,9 +49,9 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     );
     // Each run is the fit of its configuration: the same steps and test PSNRs.
     for (run, c) in runs.iter().zip(DEFAULT_CONFIGS) {
-        let alone = fit::<f32>(
+        let alone = fit::<f32, DenseGrid<f32>>(
             &data,
-            &FitConfig {
+            &FitSettings {
                 method: c.method,
                 sampling: c.sampling,
                 ..config
@@ -58,9 +60,7 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
         )
         .unwrap();
         assert_eq!(run.name, c.to_string());
-        let steps = |log: &[fogray_grid::fit::LogEntry]| {
-            log.iter().map(|e| (e.step, e.test_psnr, e.samples)).collect::<Vec<_>>()
-        };
+        let steps = |log: &[LogEntry]| log.iter().map(|e| (e.step, e.test_psnr, e.samples)).collect::<Vec<_>>();
         assert_eq!(steps(&run.log), steps(&alone.log), "{}", run.name);
         assert_eq!(run.steps, 70);
         assert_eq!(run.pictures.renders.len(), 1);
@@ -125,7 +125,7 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     let setup = ReportSetup {
         stamp: &stamp,
         reproduce: "cargo run --release -p fogray-grid -- report --steps 70",
-        budget: config.budget,
+        budget: config.budget(),
         batch: config.batch,
         problem: "A tiny problem.",
         evaluations: config.evaluations,
@@ -254,7 +254,7 @@ fn bad_options_fail_before_any_fit() {
     assert!(!ran);
     // A fit's own check (a zero batch) comes back as the fit's error.
     let options = ReportOptions {
-        fit: FitConfig { batch: 0, ..config },
+        fit: FitSettings { batch: 0, ..config },
         configs: vec![DEFAULT_CONFIGS[0]],
         slice_pixels: 8,
     };
@@ -268,10 +268,7 @@ fn bad_options_fail_before_any_fit() {
 fn with_a_budget_of_seconds_each_pair_trains_again_for_the_taped_runs_steps() {
     let (_, data, config) = tiny();
     let options = ReportOptions {
-        fit: FitConfig {
-            budget: Budget::Seconds(0.3),
-            ..config
-        },
+        fit: config.with_budget(Budget::Seconds(0.3)),
         configs: vec![DEFAULT_CONFIGS[2], DEFAULT_CONFIGS[3]],
         slice_pixels: 12,
     };

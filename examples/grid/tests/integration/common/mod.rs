@@ -5,10 +5,10 @@ use std::path::PathBuf;
 use std::process::Command;
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use fogray_grid::dataset::Dataset;
-use fogray_grid::photographs::photographs;
+use fogray::fit::dataset::Dataset;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
+use fogray_grid::views::dataset;
 
 /// Runs the binary with `args`: its exit status, stdout and stderr.
 pub fn grid(args: &[&str]) -> (i32, String, String) {
@@ -42,6 +42,5 @@ pub fn temp_dir(name: &str) -> PathBuf {
 
 /// The exact photographs of the built-in scene from `ring`'s cameras.
 pub fn default_scene_data(ring: &Ring) -> Dataset {
-    let scene = Scene::default();
-    Dataset::new(ring, &photographs(&scene, ring), scene.background).unwrap()
+    dataset(&Scene::default(), ring).unwrap()
 }

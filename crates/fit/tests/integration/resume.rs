@@ -1,0 +1,135 @@
+//! A fit stopped at step k, saved, reloaded and continued takes the same steps, bit for bit,
+//! as one never stopped: with a constant rate or through growth and the anneal, stopped by its
+//! budget or by its flag, in f32 and f64, with uniform or occupancy sampling.
+
+use std::collections::BTreeMap;
+
+use fogray_fit::checkpoint::{load, save};
+use fogray_fit::dataset::Dataset;
+use fogray_fit::dense::DenseGrid;
+use fogray_fit::model::RadianceField;
+use fogray_fit::settings::{Budget, FitSettings, Precision, Sampling};
+use fogray_ops::sample::Refresh;
+use fogray_tape::Float;
+
+use crate::common::{ball_dataset, grid_bits, image_bits, run, temp};
+
+fn data() -> Dataset {
+    ball_dataset(8, 2, 10)
+}
+
+/// A fit of `total` steps against one of `k` steps saved to a file, reloaded and continued
+/// to `total`: the first part is a fit with a budget of `k` steps, or (`stopped`) a fit to
+/// `total` stopped by its flag after step `k`.
+fn split_equals_whole<F: Float>(settings: FitSettings, total: usize, k: usize, stopped: bool, name: &str) {
+    let data = data();
+    let settings = FitSettings {
+        precision: Precision::of::<F>(),
+        ..settings
+    };
+    let whole_settings = settings.with_budget(Budget::Steps(total));
+    let whole = run::<F>(&data, &whole_settings, None, None);
+    let first_settings = if stopped {
+        whole_settings
+    } else {
+        settings.with_budget(Budget::Steps(k))
+    };
+    let first = run::<F>(&data, &first_settings, None, stopped.then_some(k));
+    assert_eq!(first.training.step, k);
+    assert_eq!(first.interrupted, stopped);
+    let file = temp(name);
+    save(&file, &first.model, &first.training, &first_settings, &BTreeMap::new()).unwrap();
+    let back = load::<F, DenseGrid<F>>(&file).unwrap();
+    assert_eq!(back.start.training, first.training);
+    assert_eq!(back.settings, first_settings);
+    let second = run::<F>(&data, &whole_settings, Some(back.start), None);
+    assert_eq!(second.training.step, total);
+    assert_eq!(second.model.nodes(), whole.model.nodes());
+    assert_eq!(grid_bits(&second.model), grid_bits(&whole.model), "{name}");
+    // Everything but the training seconds, which are the clock's.
+    let (a, b) = (&second.training, &whole.training);
+    assert_eq!(
+        (a.step, a.stage, a.batch_stream),
+        (b.step, b.stage, b.batch_stream),
+        "{name}"
+    );
+    assert_eq!(a.adam, b.adam, "{name}");
+    assert_eq!(a.occupancy, b.occupancy, "{name}");
+    assert!(a.seconds > first.training.seconds);
+    assert_eq!(image_bits(&second.renders), image_bits(&whole.renders));
+    assert_eq!(second.log[0].step, k);
+    assert_eq!(
+        second.log.last().unwrap().test_psnr.to_bits(),
+        whole.log.last().unwrap().test_psnr.to_bits()
+    );
+    // A fresh Adam and the stream restarted would differ: the comparison can fail.
+    let mut forgetful = load::<F, DenseGrid<F>>(&file).unwrap().start;
+    assert!(!forgetful.training.adam.is_empty());
+    forgetful.training.adam = Vec::new();
+    forgetful.training.batch_stream = 0;
+    let differs = run::<F>(&data, &whole_settings, Some(forgetful), None);
+    assert_ne!(grid_bits(&differs.model), grid_bits(&whole.model));
+    let _ = std::fs::remove_file(&file);
+}
+
+#[test]
+fn k_steps_saved_and_continued_equal_2k_steps_bitwise() {
+    // A constant rate and no growth: the first part's budget of k steps does what the first k
+    // steps of the whole's do.
+    let base = FitSettings {
+        grid: 6,
+        batch: 128,
+        lr: 0.2,
+        lr_final: 0.2,
+        grow: false,
+        sampling: Sampling::Uniform,
+        ..FitSettings::default()
+    };
+    split_equals_whole::<f32>(base, 12, 6, false, "split-f32.safetensors");
+    split_equals_whole::<f64>(base, 12, 6, false, "split-f64.safetensors");
+    // A growing grid (3, 5 then 10 nodes from steps 2 and 6 of 20) with an annealed rate,
+    // stopped between stages after step 4 and continued through the growth and the anneal.
+    let growing = FitSettings {
+        grid: 10,
+        grow: true,
+        lr_final: 0.02,
+        ..base
+    };
+    split_equals_whole::<f32>(growing, 20, 4, true, "split-grow.safetensors");
+    split_equals_whole::<f32>(base, 8, 3, true, "split-stop.safetensors");
+}
+
+#[test]
+fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
+    // The occupancy grid is first refreshed at step 64, then every 16 steps: saved at step 72
+    // (one refresh in), continued through the refreshes at 80 and 96.
+    let occupancy = FitSettings {
+        grid: 6,
+        batch: 64,
+        lr: 0.2,
+        lr_final: 0.2,
+        grow: false,
+        sampling: Sampling::Occupancy,
+        ..FitSettings::default()
+    };
+    let refresh = Refresh::default();
+    assert!(refresh.warmup < 72 && 72 < refresh.warmup + 2 * refresh.every);
+    split_equals_whole::<f32>(occupancy, 100, 72, false, "split-occupancy.safetensors");
+    // The grid in the file is the one the fit had, and it is not the fresh grid a file
+    // without one would give.
+    let data = data();
+    let first_settings = occupancy.with_budget(Budget::Steps(72));
+    let first = run::<f32>(&data, &first_settings, None, None);
+    let fraction = first.occupancy.as_ref().unwrap().occupied_fraction();
+    assert!(fraction < 1.0, "{fraction}");
+    let file = temp("occupancy.safetensors");
+    save(&file, &first.model, &first.training, &first_settings, &BTreeMap::new()).unwrap();
+    let back = load::<f32, DenseGrid<f32>>(&file)
+        .unwrap()
+        .start
+        .training
+        .occupancy
+        .unwrap();
+    assert_eq!(Some(back), first.occupancy.map(|g| g.state()));
+    let _ = std::fs::remove_file(&file);
+}

@@ -1,0 +1,119 @@
+//! The training loop: the learning rate's schedule and its checks, and the step profile.
+
+use fogray_fit::dense::DenseGrid;
+use fogray_fit::schedule::{learning_rate, ANNEAL_START};
+use fogray_fit::settings::{Budget, FitSettings, Method};
+use fogray_fit::train::fit;
+
+use crate::common::ball_dataset;
+
+#[test]
+fn the_learning_rate_anneals_geometrically_over_the_end_of_the_budget() {
+    let settings = FitSettings {
+        lr: 0.2,
+        lr_final: 0.02,
+        ..FitSettings::default()
+    };
+    for f in [0.0, 0.3, ANNEAL_START] {
+        assert_eq!(learning_rate(&settings, f), 0.2);
+    }
+    // Halfway through the anneal the rate is the geometric mean, sqrt(0.2 * 0.02).
+    let mid = ANNEAL_START + 0.5 * (1.0 - ANNEAL_START);
+    assert!((learning_rate(&settings, mid) - 0.004f64.sqrt()).abs() < 1e-15);
+    assert!((learning_rate(&settings, 1.0) - 0.02).abs() < 1e-15);
+    assert!((learning_rate(&settings, 1.5) - 0.02).abs() < 1e-15);
+    let constant = FitSettings {
+        lr_final: 0.2,
+        ..settings
+    };
+    assert_eq!(learning_rate(&constant, 0.9), 0.2);
+    // Bad rates are refused before any step.
+    let data = ball_dataset(4, 1, 4);
+    for bad in [
+        FitSettings {
+            lr_final: 0.0,
+            ..settings
+        },
+        FitSettings {
+            lr: f64::NAN,
+            ..settings
+        },
+    ] {
+        let e = fit::<f32, DenseGrid<f32>>(&data, &bad, &mut |_| {}).unwrap_err();
+        assert!(e.to_string().contains("must be finite and positive"), "{e}");
+    }
+}
+
+#[test]
+fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
+    let data = ball_dataset(6, 1, 8);
+    for method in [Method::Fused, Method::Taped] {
+        let settings = FitSettings {
+            grid: 8,
+            batch: 64,
+            method,
+            evaluations: 1,
+            ..FitSettings::default()
+        }
+        .with_budget(Budget::Steps(7));
+        let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {}).unwrap();
+        let profile = &result.profile;
+        assert_eq!(profile.steps, 7);
+        let calls = |name: &str| profile.ops.get(name).map(|t| (t.forward_calls, t.backward_calls));
+        // One render, loss and prior a step; the prior is the same op either way. The fused
+        // method composites and takes the loss in one op, the taped one through `mean`.
+        assert_eq!(calls("total_variation"), Some((7, 7)), "{method:?}");
+        let fused_ops = [calls("grid_field"), calls("composite_mse"), calls("density_color")];
+        match method {
+            Method::Fused => {
+                assert_eq!(fused_ops, [Some((7, 7)); 3]);
+                assert_eq!((calls("mean"), calls("composite")), (None, None));
+            }
+            Method::Taped => {
+                assert_eq!(fused_ops, [None; 3], "the twins are built of taped ops");
+                assert_eq!(calls("mean"), Some((7, 7)));
+            }
+        }
+        // The phases are parts of the training clock.
+        let p = profile.phases;
+        let phases = p.batch + p.sample + p.forward + p.backward + p.optimiser + p.occupancy;
+        assert!(
+            phases.as_secs_f64() <= result.seconds,
+            "{phases:?} > {} s",
+            result.seconds
+        );
+        // The ops run inside the step's forward and backward phases.
+        assert!(
+            profile.ops.forward() <= p.forward,
+            "{:?} > {:?}",
+            profile.ops.forward(),
+            p.forward
+        );
+        assert!(
+            profile.ops.backward() <= p.backward,
+            "{:?} > {:?}",
+            profile.ops.backward(),
+            p.backward
+        );
+        // The table holds the same figures as means per step, in the profile's order.
+        let table = profile.table();
+        let steps = profile.steps as f64;
+        let ms = |d: std::time::Duration| 1e3 * d.as_secs_f64() / steps;
+        let names: Vec<_> = table.phases.iter().map(|r| r.name).collect();
+        assert_eq!(
+            names,
+            ["batch", "sample", "forward", "backward", "optimiser", "occupancy"]
+        );
+        assert_eq!(table.phases[2].ms, ms(p.forward));
+        assert_eq!(table.ops.len(), profile.ops.iter().count());
+        for (row, (name, t)) in table.ops.iter().zip(profile.ops.by_time()) {
+            assert_eq!(row.name, name);
+            assert_eq!(row.calls_per_step, t.forward_calls as f64 / steps, "{name}");
+            assert_eq!(
+                (row.forward_ms, row.backward_ms),
+                (ms(t.forward), ms(t.backward)),
+                "{name}"
+            );
+        }
+    }
+}
