@@ -24,7 +24,7 @@ use fogray::fit::metrics::psnr;
 use fogray::fit::plots;
 use fogray::fit::render::{render_picture, RenderOptions};
 use fogray::fit::sampling::occupancy_grid;
-use fogray::fit::settings::{Budget, FitSettings, Precision, Sampling};
+use fogray::fit::settings::{FitSettings, Precision, Sampling};
 use fogray::fit::train::{fit_from, FitResult, Progress};
 use fogray::fit::RadianceField;
 use fogray::ops::sample::CellPoints;
@@ -148,38 +148,6 @@ enum Command {
     },
 }
 
-/// The grid, the budget, the batch and the seed: what `fit` trains with, and `report` gives
-/// every configuration.
-#[derive(Args)]
-struct TrainingArgs {
-    /// Nodes per axis of the grid.
-    #[arg(long, default_value_t = 64)]
-    grid: usize,
-    /// Training seconds (evaluations excluded; for `report`, of each configuration); 60 unless
-    /// --steps is given.
-    #[arg(long, conflicts_with = "steps", allow_negative_numbers = true)]
-    seconds: Option<f64>,
-    /// Training steps (for `report`, of each configuration) instead of seconds.
-    #[arg(long)]
-    steps: Option<usize>,
-    /// Training rays per step.
-    #[arg(long, default_value_t = 8192)]
-    batch: usize,
-    /// Seed of the batches (for `report`, the same for every configuration).
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-}
-
-impl TrainingArgs {
-    /// --steps if given, else --seconds (60 if absent).
-    fn budget(&self) -> Budget {
-        match (self.steps, self.seconds) {
-            (Some(n), _) => Budget::Steps(n),
-            (None, s) => Budget::Seconds(s.unwrap_or(60.0)),
-        }
-    }
-}
-
 #[derive(Args)]
 struct FitArgs {
     #[command(flatten)]
@@ -252,12 +220,11 @@ struct ReportArgs {
     scene: SceneArg,
     #[command(flatten)]
     ring: RingArgs,
+    /// The settings every configuration trains with (the budget is each configuration's;
+    /// --evaluations is 60 unless given, so that the time to a PSNR is read between close
+    /// evaluations); --configs sets the method, the sampling and the precision.
     #[command(flatten)]
-    training: TrainingArgs,
-    /// Test evaluations of each run, evenly spaced over the budget (excluded from its clock):
-    /// the PSNR at a time and the time to a PSNR are read between two of them.
-    #[arg(long, default_value_t = 60)]
-    evaluations: usize,
+    settings: FitSettings,
     /// Configurations to run, in order, comma-separated: METHOD-SAMPLING[-PRECISION] with
     /// METHOD fused|taped, SAMPLING uniform|occupancy, PRECISION f32 (default)|f64.
     #[arg(
@@ -277,7 +244,10 @@ struct ReportArgs {
     out: PathBuf,
 }
 
-fn run_report(args: ReportArgs) -> Result<()> {
+/// Test evaluations of each run of the report unless --evaluations is given.
+const REPORT_EVALUATIONS: usize = 60;
+
+fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     use fogray_grid::report::anchor::Anchor;
     use fogray_grid::report::configuration::RunConfig;
     use fogray_grid::report::run::{run_configs, ReportOptions};
@@ -293,16 +263,21 @@ fn run_report(args: ReportArgs) -> Result<()> {
         .collect::<Result<Vec<_>, _>>()?;
     let (scene, ring) = (args.scene.load()?, args.ring.ring()?);
     let anchor = args.anchor.as_deref().map(Anchor::read).transpose()?;
-    let budget = args.training.budget();
+    if let Some(flag) = ["method", "sampling", "precision"].into_iter().find(|f| given(f)) {
+        anyhow::bail!("--{flag} is set by --configs in a report");
+    }
+    let settings = FitSettings {
+        evaluations: if given("evaluations") {
+            args.settings.evaluations
+        } else {
+            REPORT_EVALUATIONS
+        },
+        ..args.settings
+    };
+    settings.check()?;
+    let budget = settings.budget();
     let options = ReportOptions {
-        fit: FitSettings {
-            grid: args.training.grid,
-            batch: args.training.batch,
-            seed: args.training.seed,
-            evaluations: args.evaluations,
-            ..FitSettings::default()
-        }
-        .with_budget(budget),
+        fit: settings,
         configs,
         slice_pixels: 128,
     };
@@ -341,7 +316,7 @@ fn run_report(args: ReportArgs) -> Result<()> {
     };
     let problem = format!(
         "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",
-        g = args.training.grid,
+        g = settings.grid,
         v = args.ring.views,
         s = args.ring.size,
         scene = match &args.scene.scene {
@@ -349,16 +324,16 @@ fn run_report(args: ReportArgs) -> Result<()> {
             None => "the built-in scene".into(),
         },
         t = data.test.len(),
-        b = args.training.batch,
-        seed = args.training.seed,
+        b = settings.batch,
+        seed = settings.seed,
     );
     let setup = ReportSetup {
         stamp: &stamp,
         reproduce: &reproduce,
         budget,
-        batch: args.training.batch,
+        batch: settings.batch,
         problem: &problem,
-        evaluations: args.evaluations,
+        evaluations: settings.evaluations,
         anchor: anchor.as_ref(),
         same_steps: &pairs,
         bandwidth: Some(bandwidth),
@@ -703,7 +678,11 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
             run_fit(args, &given)?
         }
         Command::Render(args) => run_render(args)?,
-        Command::Report(args) => run_report(args)?,
+        Command::Report(args) => {
+            let report = matches.subcommand_matches("report");
+            let given = |id: &str| report.and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine);
+            run_report(args, &given)?
+        }
         Command::Scene { out } => {
             let text = Scene::default().to_json_pretty() + "\n";
             match out {
