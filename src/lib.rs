@@ -2,8 +2,9 @@
 //!
 //! Differentiable volume rendering in Rust: this facade re-exports the reverse-mode tape
 //! ([`tape`], the `fogray-tape` crate) and the volume-rendering ops ([`ops`], `fogray-ops`),
-//! and holds what the command line and the examples share ([`stamp`]: the provenance written
-//! at the top of every generated report).
+//! and holds what the command line (the `fogray-cli` crate) and the examples share
+//! ([`machine`]: the memory bandwidth they measure; [`stamp`]: the provenance written at the
+//! top of every generated report).
 
 pub use fogray_fit as fit;
 pub use fogray_ops as ops;

@@ -3,11 +3,16 @@
 //! not a file beside this one).
 
 mod activation;
+mod composite_common;
 mod composite_mse;
 mod composite_packs;
+mod fused_vs_taped;
 mod grid_common;
 mod grid_into;
 mod grid_threads;
 mod grid_twin;
 mod grid_values;
+mod hard_cases;
+mod into_buffers;
+mod lesson_tables;
 mod prior;

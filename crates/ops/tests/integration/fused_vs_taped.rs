@@ -5,11 +5,11 @@
 // Index loops mirror the formulas' subscripts in these tests.
 #![allow(clippy::needless_range_loop)]
 
-use crate::common;
+use crate::composite_common;
 
-use common::{assert_close_scaled, grad_scale, run, worst_scaled, Method, Rays};
-use fogray::ops::{twins, Background, Composite, CompositeInputs};
-use fogray::tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
+use composite_common::{assert_close_scaled, grad_scale, run, worst_scaled, Method, Rays};
+use fogray_ops::{twins, Background, Composite, CompositeInputs};
+use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{Array1, ArrayD};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};

@@ -1,7 +1,5 @@
 //! `fogray`: the command line of the fogray workspace (contracts in `docs/cli.md`).
 
-mod cli;
-
 use std::alloc::System;
 use std::io::Read;
 use std::path::PathBuf;
@@ -10,8 +8,9 @@ use std::process::ExitCode;
 use clap::{Parser, Subcommand, ValueEnum};
 use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
-use cli::error::CliError;
-use cli::evaluate::Method;
+use fogray_cli::error::CliError;
+use fogray_cli::evaluate::Method;
+use fogray_cli::{bench, composite, gradcheck, grid_bench, heap, input, markdown, tape_cost};
 
 /// Counts allocated bytes, so that `fogray bench` can report each method's peak extra memory.
 /// (A counter that forwards `alloc_zeroed` and `realloc` to the system allocator: one that
@@ -30,7 +29,7 @@ enum BenchOp {
     Grid,
 }
 
-impl cli::bench::Memory for Allocator {
+impl bench::Memory for Allocator {
     fn reset(&self) {
         PEAK.reset_peak_memory();
     }
@@ -65,7 +64,7 @@ enum Command {
         /// Print only these fields of each ray (comma-separated, in output order whatever the
         /// order given); default: every field.
         #[arg(long, value_enum, value_delimiter = ',', conflicts_with = "per_ray")]
-        fields: Vec<cli::composite::Field>,
+        fields: Vec<composite::Field>,
         /// Print only the per-ray fields: color, opacity, depth, grad_background (no array
         /// as long as the ray). The same as --fields color,opacity,depth,grad_background.
         #[arg(long)]
@@ -173,9 +172,9 @@ impl Publish<'_> {
         let stamp = fogray::stamp::Stamp::now(&self.command);
         std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
         let path = dir.join(format!("bench-{name}.md"));
-        std::fs::write(&path, cli::markdown::report(title, &stamp, tables)).map_err(CliError::file("write", &path))?;
+        std::fs::write(&path, markdown::report(title, &stamp, tables)).map_err(CliError::file("write", &path))?;
         match self.readme {
-            Some(readme) => cli::markdown::update_readme(readme, name, &headline(&stamp)),
+            Some(readme) => markdown::update_readme(readme, name, &headline(&stamp)),
             None => Ok(()),
         }
     }
@@ -253,9 +252,9 @@ fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish
                 "grid workload {w:?} is not a node count of at least 2 (for example 128)"
             ))
         })?],
-        None => cli::grid_bench::GRIDS.to_vec(),
+        None => grid_bench::GRIDS.to_vec(),
     };
-    let mut log = |m: &cli::grid_bench::GridMeasurement| {
+    let mut log = |m: &grid_bench::GridMeasurement| {
         if !json {
             eprintln!(
                 "  grid {} {} {} thread(s) {}^3x{}: {:.2} M lookups/s",
@@ -268,28 +267,28 @@ fn bench_grid(quick: bool, json: bool, workload: Option<&str>, publish: &Publish
             );
         }
     };
-    let results = cli::grid_bench::run(&grids, quick, &Allocator, &mut log)?;
+    let results = grid_bench::run(&grids, quick, &Allocator, &mut log)?;
     publish.write(
         "grid",
         "The grid field: lookups per second and errors",
-        &cli::grid_bench::table(&results),
-        |s| cli::markdown::grid_headline(&results, s),
+        &grid_bench::table(&results),
+        |s| markdown::grid_headline(&results, s),
     )?;
     if json {
         Ok(serde_json::to_string_pretty(
             &serde_json::json!({ "results": results }),
         )?)
     } else {
-        Ok(cli::grid_bench::table(&results))
+        Ok(grid_bench::table(&results))
     }
 }
 
-fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, CliError> {
+fn bench_composite(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> Result<String, CliError> {
     let workloads = match workload {
-        Some(w) => vec![cli::bench::parse_workload(w)?],
-        None => cli::bench::WORKLOADS.to_vec(),
+        Some(w) => vec![bench::parse_workload(w)?],
+        None => bench::WORKLOADS.to_vec(),
     };
-    let mut log = |m: &cli::bench::Measurement| {
+    let mut log = |m: &bench::Measurement| {
         if !json {
             eprintln!(
                 "  {} {} {} thread(s) {}x{}: {:.1} M samples/s",
@@ -302,16 +301,16 @@ fn bench(quick: bool, json: bool, workload: Option<&str>, publish: &Publish) -> 
             );
         }
     };
-    let mut results = cli::bench::run(&workloads, quick, &Allocator, &mut log)?;
-    let bandwidth = cli::bench::bandwidths(quick)?;
-    cli::bench::attach_bounds(&mut results, &bandwidth);
-    let tape = cli::tape_cost::run(quick)?;
-    let tables = cli::bench::bandwidth_table(&bandwidth) + &cli::bench::table(&results) + &cli::tape_cost::table(&tape);
+    let mut results = bench::run(&workloads, quick, &Allocator, &mut log)?;
+    let bandwidth = bench::bandwidths(quick)?;
+    bench::attach_bounds(&mut results, &bandwidth);
+    let tape = tape_cost::run(quick)?;
+    let tables = bench::bandwidth_table(&bandwidth) + &bench::table(&results) + &tape_cost::table(&tape);
     publish.write(
         "composite",
         "The composite: samples per second and errors",
         &tables,
-        |s| cli::markdown::composite_headline(&results, s),
+        |s| markdown::composite_headline(&results, s),
     )?;
     if json {
         Ok(serde_json::to_string_pretty(
@@ -346,12 +345,12 @@ fn main() -> ExitCode {
         } => (
             "bench",
             if *keep_freed_memory {
-                cli::heap::keep_freed_memory()
+                heap::keep_freed_memory()
             } else {
                 Ok(())
             }
             .and_then(|()| match op {
-                BenchOp::Composite => bench(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
+                BenchOp::Composite => bench_composite(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
                 BenchOp::Grid => bench_grid(*quick, *json, workload.as_deref(), &publish(markdown, readme)),
             }),
         ),
@@ -361,7 +360,7 @@ fn main() -> ExitCode {
             fields,
             per_ray,
         } => {
-            use cli::composite::Field;
+            use composite::Field;
             let fields: &[Field] = match (fields.is_empty(), per_ray) {
                 (_, true) => &Field::PER_RAY,
                 (true, false) => &Field::ALL,
@@ -370,8 +369,8 @@ fn main() -> ExitCode {
             (
                 "composite",
                 read_input(input)
-                    .and_then(|t| Ok(cli::input::parse(&t)?))
-                    .and_then(|p| cli::composite::run(&p, *method, fields)),
+                    .and_then(|t| Ok(input::parse(&t)?))
+                    .and_then(|p| composite::run(&p, *method, fields)),
             )
         }
         Command::Gradcheck {
@@ -384,7 +383,7 @@ fn main() -> ExitCode {
             worst,
             json,
         } => {
-            let settings = cli::gradcheck::Settings {
+            let settings = gradcheck::Settings {
                 atol: *atol,
                 rtol: *rtol,
                 fast: *fast,
@@ -394,8 +393,8 @@ fn main() -> ExitCode {
                 worst: *worst,
             };
             let outcome = read_input(input)
-                .and_then(|t| Ok(cli::input::parse(&t)?))
-                .and_then(|p| cli::gradcheck::run(p, &settings));
+                .and_then(|t| Ok(input::parse(&t)?))
+                .and_then(|p| gradcheck::run(p, &settings));
             match outcome {
                 // Exit status 1: the check ran and found a disagreement.
                 Ok(o) => {

@@ -8,7 +8,7 @@ use ndarray::{Array1, Array2, ArrayD};
 
 use super::super::input::{Packed, Precision};
 use super::{subject, Loss, NAMES};
-use crate::cli::error::CliError;
+use crate::error::CliError;
 
 pub(super) fn options(inputs: usize) -> GradcheckOptions {
     GradcheckOptions {

@@ -2,7 +2,7 @@
 //! garbage (so every value must be written, zeros included), shape errors that write nothing,
 //! and the named wanted gradients: exactly those asked for, the bits of the full call.
 
-use fogray::ops::{
+use fogray_ops::{
     Background, Composite, CompositeArrays, CompositeError, CompositeGradientBuffers, CompositeGradients,
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeWanted,
 };

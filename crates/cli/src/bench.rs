@@ -1,6 +1,10 @@
 //! `fogray bench`: samples per second of the fused op (1 thread and all) and of the stable and
 //! naive taped twins, in f32 and f64, each beside its error against an independent f64
 //! reference on the same rays and its peak extra memory (`docs/performance.md`).
+//!
+//! The rays ([`data`], [`typed`]) and the timed steps ([`fused_step`], [`fused_step_into`],
+//! [`fused_step_one_pass`], [`taped_step`], [`taped_step_reused`]) are public so that the
+//! criterion bench (`benches/composite.rs`) times the same calls on the same rays.
 
 use std::hint::black_box;
 use std::time::Instant;
@@ -108,7 +112,7 @@ impl MemoryBound {
 
 /// Random packed rays as the anchors measure them: sigma ~ U[0, 5], delta = 2 / samples
 /// (total optical depth about 5), RGB colours and background ~ U[0, 1], dL/dC ~ U[-1, 1].
-struct Data {
+pub struct Data {
     sigma: Vec<f64>,
     delta: Vec<f64>,
     color: Vec<f64>,
@@ -117,9 +121,28 @@ struct Data {
     offsets: Vec<usize>,
 }
 
-fn data(rays: usize, samples: usize) -> Data {
+impl Data {
+    /// The composite of these rays, over their shared background.
+    pub fn op(&self) -> Result<Composite, CliError> {
+        Ok(Composite::new(&self.offsets)?.background(Background::Shared))
+    }
+
+    /// Samples in all.
+    pub fn samples(&self) -> usize {
+        self.sigma.len()
+    }
+}
+
+/// `rays` rays of `samples` samples each (the workload `RxS`).
+pub fn data(rays: usize, samples: usize) -> Data {
+    let offsets: Vec<usize> = (0..=rays).map(|r| r * samples).collect();
+    data_on(&offsets, samples)
+}
+
+/// Rays of the lengths that `offsets` give, `samples` being their mean length (for delta).
+pub fn data_on(offsets: &[usize], samples: usize) -> Data {
     let mut rng = rand::rngs::StdRng::seed_from_u64(2026);
-    let n = rays * samples;
+    let (rays, n) = (offsets.len() - 1, offsets[offsets.len() - 1]);
     // Rounded to f32 so that both precisions see the same inputs.
     let mut u = |lo: f64, hi: f64| f64::from(rng.gen_range(lo..hi) as f32);
     Data {
@@ -128,7 +151,7 @@ fn data(rays: usize, samples: usize) -> Data {
         color: (0..n * CHANNELS).map(|_| u(0.0, 1.0)).collect(),
         background: (0..CHANNELS).map(|_| u(0.0, 1.0)).collect(),
         grad_color: (0..rays * CHANNELS).map(|_| u(-1.0, 1.0)).collect(),
-        offsets: (0..=rays).map(|r| r * samples).collect(),
+        offsets: offsets.to_vec(),
     }
 }
 
@@ -137,12 +160,13 @@ fn cast<F: Float>(v: &[f64]) -> Vec<F> {
 }
 
 /// The inputs in precision F.
-struct Typed<F: Float> {
+pub struct Typed<F: Float> {
     sigma: Array1<F>,
     delta: Array1<F>,
     color: Array2<F>,
     background: Array1<F>,
-    grad_color: ArrayD<F>,
+    /// dL/dC, `[R, 3]` (also a target colour of the same shape).
+    pub grad_color: ArrayD<F>,
 }
 
 impl<F: Float> Typed<F> {
@@ -162,7 +186,8 @@ impl<F: Float> Typed<F> {
     }
 }
 
-fn typed<F: Float>(d: &Data) -> Result<Typed<F>, CliError> {
+/// The rays of `d` in precision F.
+pub fn typed<F: Float>(d: &Data) -> Result<Typed<F>, CliError> {
     let n = d.sigma.len();
     let rays = d.offsets.len() - 1;
     Ok(Typed {
@@ -240,7 +265,9 @@ fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result
     })
 }
 
-fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), CliError> {
+/// The fused op's forward, and with `backward` its gradients for sigma and colour, each call
+/// allocating what it returns.
+pub fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), CliError> {
     let views = x.views();
     let (outs, res) = op.evaluate(&views)?;
     if backward {
@@ -252,7 +279,7 @@ fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<
 }
 
 /// Output and gradient buffers kept across fused runs (colour, opacity; dL/dsigma, dL/dcolour).
-struct Buffers<F: Float> {
+pub struct Buffers<F: Float> {
     color: ArrayD<F>,
     opacity: ArrayD<F>,
     grad_sigma: ArrayD<F>,
@@ -260,7 +287,8 @@ struct Buffers<F: Float> {
 }
 
 impl<F: Float> Buffers<F> {
-    fn new(x: &Typed<F>) -> Self {
+    /// Zeroed buffers for the outputs and gradients of `x`.
+    pub fn new(x: &Typed<F>) -> Self {
         let (n, rays) = (x.sigma.len(), x.grad_color.shape()[0]);
         Buffers {
             color: ArrayD::zeros(vec![rays, CHANNELS]),
@@ -292,7 +320,7 @@ const SIGMA_AND_COLOR: CompositeWanted = CompositeWanted {
 };
 
 /// [`fused_step`] through the `_into` API, forward and backward, into `b`.
-fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
+pub fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
     let views = x.views();
     let (mut outputs, mut gradients) = b.split();
     let res = op.evaluate_into(&views, &mut outputs)?;
@@ -303,7 +331,7 @@ fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -
 
 /// [`fused_step_into`] in one pass per ray (`evaluate_vjp_into`), the upstream gradient of
 /// each ray handed over by the callback.
-fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
+pub fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
     let views = x.views();
     let upstream = x
         .grad_color
@@ -328,7 +356,9 @@ fn tape_with_inputs<F: Float>(x: &Typed<F>) -> (Tape<F>, CompositeInputs) {
     (tape, inputs)
 }
 
-fn put_inputs<F: Float>(tape: &mut Tape<F>, x: &Typed<F>) -> CompositeInputs {
+/// The inputs on `tape`: sigma and colour as parameters (gradients wanted), delta and the
+/// background as constants.
+pub fn put_inputs<F: Float>(tape: &mut Tape<F>, x: &Typed<F>) -> CompositeInputs {
     CompositeInputs {
         sigma: tape.param(x.sigma.clone()),
         delta: tape.constant(x.delta.clone()),
@@ -347,7 +377,9 @@ fn twin<F: Float>(tape: &mut Tape<F>, op: &Composite, inputs: &CompositeInputs, 
     Ok(out?.color)
 }
 
-fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), CliError> {
+/// The stable (or with `naive` the naive) taped twin on a new tape, forward and with `backward`
+/// its backward from dL/dC.
+pub fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), CliError> {
     let (mut tape, inputs) = tape_with_inputs(x);
     let color = twin(&mut tape, op, &inputs, naive)?;
     if backward {
@@ -360,7 +392,12 @@ fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: boo
 
 /// [`taped_step`] on one tape kept across runs: cleared first, its gradients handed back to it
 /// after use (a training loop's steady state).
-fn taped_step_reused<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, tape: &mut Tape<F>) -> Result<(), CliError> {
+pub fn taped_step_reused<F: Float>(
+    op: &Composite,
+    x: &Typed<F>,
+    naive: bool,
+    tape: &mut Tape<F>,
+) -> Result<(), CliError> {
     tape.clear();
     let inputs = put_inputs(tape, x);
     let color = twin(tape, op, &inputs, naive)?;
@@ -406,7 +443,7 @@ fn measure<F: Float>(
     let x = typed::<F>(d)?;
     let rays = d.offsets.len() - 1;
     let n = d.sigma.len() as f64;
-    let op = Composite::new(&d.offsets)?.background(Background::Shared);
+    let op = d.op()?;
     let all = rayon::current_num_threads();
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
     let mut push = |method: &'static str,

@@ -19,7 +19,7 @@ use serde_json::json;
 
 use super::evaluate::{evaluate, InputGrads, Method, Upstream, Wanted};
 use super::input::{Packed, Precision};
-use crate::cli::error::CliError;
+use crate::error::CliError;
 use problem::{batch_problem, check_in, options, ray_problem};
 use tally::{Against, Comparison, Place, Tally};
 

@@ -6,9 +6,9 @@
 // Index loops mirror the formulas' subscripts in these tests.
 #![allow(clippy::needless_range_loop)]
 
-use crate::common;
+use crate::composite_common;
 
-use common::{run, Method, Rays, Run};
+use composite_common::{run, Method, Rays, Run};
 
 /// `|got - printed| <= half a unit in the last printed place` (plus 1e-12 for the edge).
 fn assert_printed(what: &str, got: f64, printed: f64, decimals: i32) {

@@ -1,11 +1,11 @@
 //! Hard numerical cases: every one must give finite, accurate outputs and gradients. Where a
 //! numerics choice is tested, the naive form is shown failing on the same case.
 
-use crate::common;
+use crate::composite_common;
 
-use common::{all_finite, assert_close_scaled, grad_scale, run, run_with, worst_scaled, Method, Rays};
-use fogray::ops::{Background, Composite, CompositeError, CompositeInputs};
-use fogray::tape::{gradcheck, GradcheckOptions, Tape, TapeError};
+use composite_common::{all_finite, assert_close_scaled, grad_scale, run, run_with, worst_scaled, Method, Rays};
+use fogray_ops::{Background, Composite, CompositeError, CompositeInputs};
+use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError};
 use ndarray::{arr1, arr2, Array1, Array2, ArrayD};
 use rand::{Rng, SeedableRng};
 

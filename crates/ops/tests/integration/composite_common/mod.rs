@@ -1,10 +1,11 @@
-//! Shared helpers for the cross-crate tests: packed rays in f64, and one function that runs
-//! the fused op or a taped twin on them in either precision and returns every output and
-//! gradient as f64.
+//! Helpers shared by the composite tests: packed rays in f64, and one function that runs the
+//! fused op or a taped twin on them in either precision and returns every output and gradient
+//! as f64.
+
 #![allow(dead_code)]
 
-use fogray::ops::{twins, Background, Composite, CompositeInputs};
-use fogray::tape::{Float, Tape};
+use fogray_ops::{twins, Background, Composite, CompositeInputs};
+use fogray_tape::{Float, Tape};
 use ndarray::{Array1, Array2};
 
 /// Packed rays, stored in f64 (tests build them from f32-representable values when they

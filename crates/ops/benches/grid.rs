@@ -7,15 +7,16 @@
 //! lookups fall in neighbouring cells; `fused-rays-into` runs them through `evaluate_into` and
 //! `vjp_into` into buffers kept across runs.
 //!
-//! `cargo bench --bench grid` runs them all; `cargo bench --bench grid -- fused/f32` selects.
+//! `cargo bench -p fogray-ops --bench grid` runs them all; `cargo bench -p fogray-ops --bench grid
+//! -- fused/f32` selects.
 //! `fogray bench --op grid` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use fogray::ops::grid::twin;
-use fogray::ops::{GridBox, GridField, GridGradientBuffers, GridWanted};
-use fogray::tape::{Float, Tape};
+use fogray_ops::grid::twin;
+use fogray_ops::{GridBox, GridField, GridGradientBuffers, GridWanted};
+use fogray_tape::{Float, Tape};
 use ndarray::{Array2, ArrayD, IxDyn};
 use rand::{Rng, SeedableRng};
 

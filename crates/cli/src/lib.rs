@@ -1,0 +1,17 @@
+//! The code of the `fogray` command line (its contracts are in `docs/cli.md`; the binary is
+//! `src/main.rs`), one module per command and what they share. A library so that the
+//! criterion bench (`benches/composite.rs`) times the very steps `fogray bench` times, on the
+//! same rays ([`bench`]); the command line, not this crate's API, is the contract.
+
+pub mod bandwidth;
+pub mod bench;
+pub mod composite;
+pub mod error;
+pub mod evaluate;
+pub mod gradcheck;
+pub mod grid_bench;
+pub mod heap;
+pub mod input;
+pub mod markdown;
+pub mod reference;
+pub mod tape_cost;

@@ -1,0 +1,4 @@
+//! The integration tests of the `fogray` binary, one module per topic, in one binary (add a
+//! module here, not a file beside this one).
+
+mod cli;
