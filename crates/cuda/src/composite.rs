@@ -1,0 +1,531 @@
+//! The composite on the device: the context, the compiled kernels, device batches and the
+//! launches, and the host-to-host convenience calls built on them.
+
+use std::sync::Arc;
+
+use cudarc::driver::{
+    CudaContext, CudaFunction, CudaModule, CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg,
+    ValidAsZeroBits,
+};
+
+use crate::error::CudaError;
+use crate::kernel::compile;
+use crate::packing::{check_packing, residual_len, BLOCK, CHANNELS};
+
+mod sealed {
+    pub trait Sealed {}
+    impl Sealed for f32 {}
+    impl Sealed for f64 {}
+}
+
+/// The element types the kernels are built for: `f32` and `f64` (every value inside the
+/// kernels is an `f64` either way, as in the CPU op).
+pub trait DeviceFloat: DeviceRepr + ValidAsZeroBits + Copy + Default + Send + Sync + sealed::Sealed + 'static {
+    /// The suffix of the kernels' names for this type.
+    const SUFFIX: &'static str;
+    /// The value as an `f64` (host-side checks).
+    fn to_f64(self) -> f64;
+}
+
+impl DeviceFloat for f32 {
+    const SUFFIX: &'static str = "f32";
+    fn to_f64(self) -> f64 {
+        f64::from(self)
+    }
+}
+
+impl DeviceFloat for f64 {
+    const SUFFIX: &'static str = "f64";
+    fn to_f64(self) -> f64 {
+        self
+    }
+}
+
+/// One element type's three kernels.
+struct Kernels {
+    forward: CudaFunction,
+    backward: CudaFunction,
+    reduce: CudaFunction,
+}
+
+impl Kernels {
+    fn load(module: &Arc<CudaModule>, suffix: &str) -> Result<Self, CudaError> {
+        Ok(Kernels {
+            forward: module.load_function(&format!("composite_forward_{suffix}"))?,
+            backward: module.load_function(&format!("composite_backward_{suffix}"))?,
+            reduce: module.load_function(&format!("composite_reduce_background_{suffix}"))?,
+        })
+    }
+}
+
+/// A GPU, its stream and the composite kernels compiled for it.
+pub struct CudaComposite {
+    ctx: Arc<CudaContext>,
+    stream: Arc<CudaStream>,
+    f32: Kernels,
+    f64: Kernels,
+    name: String,
+    capability: (i32, i32),
+}
+
+impl std::fmt::Debug for CudaComposite {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CudaComposite")
+            .field("device", &self.name)
+            .field("capability", &self.capability)
+            .finish()
+    }
+}
+
+/// A batch of packed rays on the device: `offsets [R + 1]`, `sigma [n]`, `delta [n]`,
+/// `color [n, 3]`, `background [3]` (shared by every ray).
+#[derive(Debug)]
+pub struct DeviceRays<F> {
+    offsets: CudaSlice<u64>,
+    sigma: CudaSlice<F>,
+    delta: CudaSlice<F>,
+    color: CudaSlice<F>,
+    background: CudaSlice<F>,
+    rays: usize,
+    samples: usize,
+}
+
+impl<F> DeviceRays<F> {
+    /// The number of rays.
+    pub fn rays(&self) -> usize {
+        self.rays
+    }
+
+    /// The number of samples.
+    pub fn samples(&self) -> usize {
+        self.samples
+    }
+}
+
+/// The forward's outputs on the device, and its residual for the backward.
+#[derive(Debug)]
+pub struct DeviceForward<F> {
+    /// `[R, 3]`.
+    pub color: CudaSlice<F>,
+    /// `[R]`.
+    pub opacity: CudaSlice<F>,
+    /// The exact optical depth before every 8th sample of each ray (the backward's residual).
+    chunk_depth: CudaSlice<f64>,
+    /// Nonzero when some sample value was out of its domain.
+    invalid: CudaSlice<u32>,
+}
+
+/// The upstream gradients on the device: `dL/dC [R, 3]` and, optionally, `dL/dopacity [R]`.
+#[derive(Debug)]
+pub struct DeviceUpstream<F> {
+    color: CudaSlice<F>,
+    opacity: Option<CudaSlice<F>>,
+}
+
+/// The input gradients on the device.
+#[derive(Debug)]
+pub struct DeviceGradients<F> {
+    /// `[n]`.
+    pub sigma: CudaSlice<F>,
+    /// `[n]`.
+    pub delta: CudaSlice<F>,
+    /// `[n, 3]`.
+    pub color: CudaSlice<F>,
+    /// `[3]`.
+    pub background: CudaSlice<F>,
+    /// Per-block sums of the background gradient, `[blocks, 3]`.
+    partial: CudaSlice<f64>,
+}
+
+/// The forward's outputs on the host.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostOutputs<F> {
+    /// `[R, 3]`, row-major.
+    pub color: Vec<F>,
+    /// `[R]`.
+    pub opacity: Vec<F>,
+}
+
+/// The input gradients on the host.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostGradients<F> {
+    /// `[n]`.
+    pub sigma: Vec<F>,
+    /// `[n]`.
+    pub delta: Vec<F>,
+    /// `[n, 3]`, row-major.
+    pub color: Vec<F>,
+    /// `[3]`.
+    pub background: Vec<F>,
+}
+
+/// A batch of packed rays on the host, borrowed: what [`CudaComposite::upload`] and the host
+/// calls take.
+#[derive(Debug, Clone, Copy)]
+pub struct HostRays<'a, F> {
+    /// `[R + 1]`: ray `r` owns samples `offsets[r]..offsets[r + 1]`.
+    pub offsets: &'a [usize],
+    /// Density per sample, `[n]`, finite and non-negative.
+    pub sigma: &'a [F],
+    /// Length per sample, `[n]`, finite and non-negative.
+    pub delta: &'a [F],
+    /// Colour per sample, `[n, 3]` row-major, finite.
+    pub color: &'a [F],
+    /// The background colour shared by every ray, `[3]`, finite.
+    pub background: &'a [F],
+}
+
+fn blocks(rays: usize, block: usize) -> u32 {
+    // `check_packing` bounds the block count by i32::MAX; at least one block so that the
+    // background reduction always has its (zero) partial sums.
+    u32::try_from(rays.div_ceil(block).max(1)).unwrap_or(u32::MAX)
+}
+
+fn config(rays: usize) -> LaunchConfig {
+    LaunchConfig {
+        grid_dim: (blocks(rays, BLOCK), 1, 1),
+        block_dim: (BLOCK as u32, 1, 1),
+        shared_mem_bytes: 0,
+    }
+}
+
+fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), CudaError> {
+    if expected == got {
+        Ok(())
+    } else {
+        Err(CudaError::Shape { what, expected, got })
+    }
+}
+
+impl CudaComposite {
+    /// Opens device `ordinal` and compiles the kernels for it with NVRTC.
+    ///
+    /// Errors: [`CudaError::NoDriver`] where no NVIDIA driver is installed (what callers and
+    /// tests test for to skip), [`CudaError::NoDevice`], [`CudaError::NoNvrtc`],
+    /// [`CudaError::Compile`], [`CudaError::Driver`].
+    pub fn new(ordinal: usize) -> Result<Self, CudaError> {
+        // cudarc's dynamic loading panics when a library is missing; ask first.
+        // SAFETY: only tries to open the library by its usual names.
+        if !unsafe { cudarc::driver::sys::is_culib_present() } {
+            return Err(CudaError::NoDriver);
+        }
+        // SAFETY: as above.
+        if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
+            return Err(CudaError::NoNvrtc);
+        }
+        let count = match CudaContext::device_count() {
+            Ok(c) => usize::try_from(c).unwrap_or(0),
+            // cuInit fails with CUDA_ERROR_NO_DEVICE where a driver is installed but no GPU.
+            Err(e) if e.0 == cudarc::driver::sys::CUresult::CUDA_ERROR_NO_DEVICE => 0,
+            Err(e) => return Err(e.into()),
+        };
+        if ordinal >= count {
+            return Err(CudaError::NoDevice { ordinal, count });
+        }
+        let ctx = CudaContext::new(ordinal)?;
+        let capability = ctx.compute_capability()?;
+        let name = ctx.name()?;
+        let ptx = compile(capability)?;
+        let module = ctx.load_module(ptx)?;
+        let stream = ctx.default_stream();
+        Ok(CudaComposite {
+            f32: Kernels::load(&module, "f32")?,
+            f64: Kernels::load(&module, "f64")?,
+            ctx,
+            stream,
+            name,
+            capability,
+        })
+    }
+
+    /// The device's name, as the driver reports it.
+    pub fn device_name(&self) -> &str {
+        &self.name
+    }
+
+    /// The device's compute capability (major, minor).
+    pub fn compute_capability(&self) -> (i32, i32) {
+        self.capability
+    }
+
+    /// The context, for callers that allocate or time on the same device.
+    pub fn context(&self) -> &Arc<CudaContext> {
+        &self.ctx
+    }
+
+    /// The stream every launch of this object goes to.
+    pub fn stream(&self) -> &Arc<CudaStream> {
+        &self.stream
+    }
+
+    /// Each kernel's name, registers per thread and local memory (stack) per thread in bytes,
+    /// as the driver reports them after compiling the PTX for the device (spills show here).
+    pub fn kernel_info(&self) -> Result<Vec<(String, i32, i32)>, CudaError> {
+        let mut info = Vec::new();
+        for (suffix, k) in [("f32", &self.f32), ("f64", &self.f64)] {
+            for (name, f) in [
+                ("forward", &k.forward),
+                ("backward", &k.backward),
+                ("reduce", &k.reduce),
+            ] {
+                info.push((format!("{name}_{suffix}"), f.num_regs()?, f.local_size_bytes()?));
+            }
+        }
+        Ok(info)
+    }
+
+    fn kernels<F: DeviceFloat>(&self) -> &Kernels {
+        if F::SUFFIX == "f32" {
+            &self.f32
+        } else {
+            &self.f64
+        }
+    }
+
+    /// Checks a host batch (packing, lengths, a finite background) and uploads it.
+    pub fn upload<F: DeviceFloat>(&self, x: &HostRays<'_, F>) -> Result<DeviceRays<F>, CudaError> {
+        let rays = check_packing(x.offsets, x.sigma.len(), x.color.len(), x.background.len())?;
+        check_len("delta", x.sigma.len(), x.delta.len())?;
+        if let Some((channel, v)) = x.background.iter().enumerate().find(|(_, v)| !v.to_f64().is_finite()) {
+            return Err(CudaError::InvalidBackground {
+                channel,
+                value: v.to_f64(),
+            });
+        }
+        let offsets: Vec<u64> = x.offsets.iter().map(|&o| o as u64).collect();
+        Ok(DeviceRays {
+            offsets: self.put(&offsets)?,
+            sigma: self.put(x.sigma)?,
+            delta: self.put(x.delta)?,
+            color: self.put(x.color)?,
+            background: self.put(x.background)?,
+            rays,
+            samples: x.sigma.len(),
+        })
+    }
+
+    /// A copy of `v` on the device; an empty `v` gets one zero element, as the driver refuses
+    /// zero-length allocations (the kernels never read it).
+    fn put<T: DeviceRepr + Default + Clone>(&self, v: &[T]) -> Result<CudaSlice<T>, CudaError> {
+        if v.is_empty() {
+            Ok(self.stream.clone_htod(&[T::default()])?)
+        } else {
+            Ok(self.stream.clone_htod(v)?)
+        }
+    }
+
+    /// Output buffers for the forward of `x`.
+    pub fn forward_buffers<F: DeviceFloat>(&self, x: &DeviceRays<F>) -> Result<DeviceForward<F>, CudaError> {
+        let s = &self.stream;
+        Ok(DeviceForward {
+            color: s.alloc_zeros((x.rays * CHANNELS).max(1))?,
+            opacity: s.alloc_zeros(x.rays.max(1))?,
+            chunk_depth: s.alloc_zeros(residual_len(x.rays, x.samples))?,
+            invalid: s.alloc_zeros(1)?,
+        })
+    }
+
+    /// Gradient buffers for the backward of `x`.
+    pub fn gradient_buffers<F: DeviceFloat>(&self, x: &DeviceRays<F>) -> Result<DeviceGradients<F>, CudaError> {
+        let s = &self.stream;
+        // Zero-length device allocations are refused: at least one element each.
+        Ok(DeviceGradients {
+            sigma: s.alloc_zeros(x.samples.max(1))?,
+            delta: s.alloc_zeros(x.samples.max(1))?,
+            color: s.alloc_zeros((x.samples * CHANNELS).max(1))?,
+            background: s.alloc_zeros(CHANNELS)?,
+            partial: s.alloc_zeros(blocks(x.rays, BLOCK) as usize * CHANNELS)?,
+        })
+    }
+
+    /// Uploads the upstream gradients `dL/dC [R, 3]` and optionally `dL/dopacity [R]`.
+    pub fn upload_upstream<F: DeviceFloat>(
+        &self,
+        x: &DeviceRays<F>,
+        d_color: &[F],
+        d_opacity: Option<&[F]>,
+    ) -> Result<DeviceUpstream<F>, CudaError> {
+        check_len("dL/dcolor ([R, 3])", x.rays * CHANNELS, d_color.len())?;
+        if let Some(g) = d_opacity {
+            check_len("dL/dopacity ([R])", x.rays, g.len())?;
+        }
+        Ok(DeviceUpstream {
+            color: self.put(d_color)?,
+            opacity: d_opacity.map(|g| self.put(g)).transpose()?,
+        })
+    }
+
+    /// Launches the forward of `x` into `out` (asynchronous: nothing waits for it). The
+    /// values are not checked until [`CudaComposite::check_forward`].
+    pub fn launch_forward<F: DeviceFloat>(
+        &self,
+        x: &DeviceRays<F>,
+        out: &mut DeviceForward<F>,
+    ) -> Result<(), CudaError> {
+        check_len("forward colour buffer", (x.rays * CHANNELS).max(1), out.color.len())?;
+        check_len("forward opacity buffer", x.rays.max(1), out.opacity.len())?;
+        check_len(
+            "forward residual",
+            residual_len(x.rays, x.samples),
+            out.chunk_depth.len(),
+        )?;
+        if x.rays == 0 {
+            return Ok(());
+        }
+        self.stream.memset_zeros(&mut out.invalid)?;
+        let rays = x.rays as u64;
+        let mut launch = self.stream.launch_builder(&self.kernels::<F>().forward);
+        launch
+            .arg(&x.offsets)
+            .arg(&rays)
+            .arg(&x.sigma)
+            .arg(&x.delta)
+            .arg(&x.color)
+            .arg(&x.background)
+            .arg(&mut out.color)
+            .arg(&mut out.opacity)
+            .arg(&mut out.chunk_depth)
+            .arg(&mut out.invalid);
+        // SAFETY: the arguments are the kernel's, in its order and of its types; every buffer
+        // has the length the kernel indexes (checked above and when the buffers were made);
+        // `rays` threads do the work, the rest of the last block returns at once.
+        unsafe { launch.launch(config(x.rays)) }?;
+        Ok(())
+    }
+
+    /// Waits for the forward and reports an invalid sample value, if the kernel saw one.
+    pub fn check_forward<F: DeviceFloat>(&self, out: &DeviceForward<F>) -> Result<(), CudaError> {
+        let flag = self.stream.clone_dtoh(&out.invalid)?;
+        if flag.first().copied().unwrap_or(0) != 0 {
+            return Err(CudaError::InvalidSample);
+        }
+        Ok(())
+    }
+
+    /// Launches the backward of `x` (asynchronous) into `grads`, from the forward's residual
+    /// `fwd` and the upstream gradients `up`: every value of `grads` is overwritten.
+    pub fn launch_backward<F: DeviceFloat>(
+        &self,
+        x: &DeviceRays<F>,
+        fwd: &DeviceForward<F>,
+        up: &DeviceUpstream<F>,
+        grads: &mut DeviceGradients<F>,
+    ) -> Result<(), CudaError> {
+        check_len(
+            "forward residual",
+            residual_len(x.rays, x.samples),
+            fwd.chunk_depth.len(),
+        )?;
+        check_len("sigma gradient", x.samples.max(1), grads.sigma.len())?;
+        check_len("delta gradient", x.samples.max(1), grads.delta.len())?;
+        check_len("colour gradient", (x.samples * CHANNELS).max(1), grads.color.len())?;
+        check_len(
+            "background partial sums",
+            blocks(x.rays, BLOCK) as usize * CHANNELS,
+            grads.partial.len(),
+        )?;
+        check_len("dL/dcolor ([R, 3])", (x.rays * CHANNELS).max(1), up.color.len())?;
+        let k = self.kernels::<F>();
+        let rays = x.rays as u64;
+        let has_opacity = i32::from(up.opacity.is_some());
+        // The kernel reads dL/dopacity only when told it is there; any buffer stands in.
+        let d_opacity = up.opacity.as_ref().unwrap_or(&up.color);
+        let mut launch = self.stream.launch_builder(&k.backward);
+        launch
+            .arg(&x.offsets)
+            .arg(&rays)
+            .arg(&x.sigma)
+            .arg(&x.delta)
+            .arg(&x.color)
+            .arg(&x.background)
+            .arg(&up.color)
+            .arg(d_opacity)
+            .arg(&has_opacity)
+            .arg(&fwd.chunk_depth)
+            .arg(&mut grads.sigma)
+            .arg(&mut grads.delta)
+            .arg(&mut grads.color)
+            .arg(&mut grads.partial);
+        // SAFETY: as in `launch_forward`: the kernel's arguments and types, every buffer
+        // checked against the lengths it indexes; the block's threads past `rays` still take
+        // part in the block's reduction (with zeros), then write nothing else.
+        unsafe { launch.launch(config(x.rays)) }?;
+        let blocks = u64::from(blocks(x.rays, BLOCK));
+        let mut reduce = self.stream.launch_builder(&k.reduce);
+        reduce.arg(&grads.partial).arg(&blocks).arg(&mut grads.background);
+        // SAFETY: one block of the kernel's 256 threads reads `blocks * 3` partial sums (the
+        // buffer's length, checked above) and writes 3 values.
+        unsafe {
+            reduce.launch(LaunchConfig {
+                grid_dim: (1, 1, 1),
+                block_dim: (256, 1, 1),
+                shared_mem_bytes: 0,
+            })
+        }?;
+        Ok(())
+    }
+
+    /// The forward on host data: colour `[R, 3]` and opacity `[R]`.
+    pub fn evaluate<F: DeviceFloat>(&self, x: &HostRays<'_, F>) -> Result<HostOutputs<F>, CudaError> {
+        let d = self.upload(x)?;
+        let mut fwd = self.forward_buffers(&d)?;
+        self.launch_forward(&d, &mut fwd)?;
+        self.check_forward(&fwd)?;
+        self.download_outputs(&d, &fwd)
+    }
+
+    /// The forward and the backward on host data, given `dL/dC [R, 3]` and optionally
+    /// `dL/dopacity [R]`: the outputs and the gradients of sigma, delta, colour and the
+    /// background.
+    pub fn evaluate_vjp<F: DeviceFloat>(
+        &self,
+        x: &HostRays<'_, F>,
+        d_color: &[F],
+        d_opacity: Option<&[F]>,
+    ) -> Result<(HostOutputs<F>, HostGradients<F>), CudaError> {
+        let d = self.upload(x)?;
+        let up = self.upload_upstream(&d, d_color, d_opacity)?;
+        let mut fwd = self.forward_buffers(&d)?;
+        self.launch_forward(&d, &mut fwd)?;
+        self.check_forward(&fwd)?;
+        let mut grads = self.gradient_buffers(&d)?;
+        self.launch_backward(&d, &fwd, &up, &mut grads)?;
+        let outputs = self.download_outputs(&d, &fwd)?;
+        let s = &self.stream;
+        let (n, c) = (d.samples, d.samples * CHANNELS);
+        let mut sigma = s.clone_dtoh(&grads.sigma)?;
+        let mut delta = s.clone_dtoh(&grads.delta)?;
+        let mut color = s.clone_dtoh(&grads.color)?;
+        // Drop the stand-in element of an empty batch.
+        sigma.truncate(n);
+        delta.truncate(n);
+        color.truncate(c);
+        Ok((
+            outputs,
+            HostGradients {
+                sigma,
+                delta,
+                color,
+                background: s.clone_dtoh(&grads.background)?,
+            },
+        ))
+    }
+
+    /// Copies the forward's outputs to the host (waits for the stream).
+    pub fn download_outputs<F: DeviceFloat>(
+        &self,
+        x: &DeviceRays<F>,
+        fwd: &DeviceForward<F>,
+    ) -> Result<HostOutputs<F>, CudaError> {
+        if x.rays == 0 {
+            return Ok(HostOutputs {
+                color: Vec::new(),
+                opacity: Vec::new(),
+            });
+        }
+        Ok(HostOutputs {
+            color: self.stream.clone_dtoh(&fwd.color)?,
+            opacity: self.stream.clone_dtoh(&fwd.opacity)?,
+        })
+    }
+}

@@ -1,0 +1,116 @@
+//! Checks of a batch of packed rays on the host, before anything is uploaded (no device needed).
+
+use crate::error::CudaError;
+
+/// The number of colour channels the kernels composite.
+pub const CHANNELS: usize = 3;
+
+/// Samples per residual chunk: the forward keeps the exact optical depth before every
+/// `CHUNK`-th sample of a ray (the kernel source's `CHUNK`; see `kernels/composite.cu`).
+pub(crate) const CHUNK: usize = 8;
+
+/// Threads per block of the forward and backward kernels (the kernel source's `BLOCK`).
+pub(crate) const BLOCK: usize = 128;
+
+/// The residual's length for `rays` rays over `samples` samples: ray `r` starting at sample
+/// `s` keeps its chunk depths from index `s / CHUNK + r`, and has at most `len / CHUNK + 1`
+/// chunks.
+pub(crate) fn residual_len(rays: usize, samples: usize) -> usize {
+    samples / CHUNK + rays + 1
+}
+
+/// Checks that `offsets` packs `samples` samples into rays (starts at 0, never decreases, ends
+/// at `samples`) and that the per-sample and per-ray arrays have the lengths that packing
+/// needs; returns the number of rays.
+///
+/// ```
+/// use fogray_cuda::check_packing;
+/// assert_eq!(check_packing(&[0, 2, 2, 5], 5, 15, 3).unwrap(), 3);
+/// assert!(check_packing(&[0, 3, 2], 3, 9, 3).is_err());
+/// ```
+pub fn check_packing(
+    offsets: &[usize],
+    sigma_and_delta: usize,
+    color: usize,
+    background: usize,
+) -> Result<usize, CudaError> {
+    let Some((&first, _)) = offsets.split_first() else {
+        return Err(CudaError::Offsets("empty: there must be at least the leading 0".into()));
+    };
+    if first != 0 {
+        return Err(CudaError::Offsets(format!("must start at 0, starts at {first}")));
+    }
+    if let Some(r) = offsets.windows(2).position(|w| w[1] < w[0]) {
+        return Err(CudaError::Offsets(format!(
+            "ray {r} ends at {} before it starts at {}",
+            offsets[r + 1],
+            offsets[r]
+        )));
+    }
+    let rays = offsets.len() - 1;
+    let n = offsets[rays];
+    if n != sigma_and_delta {
+        return Err(CudaError::Shape {
+            what: "sigma/delta (offsets end at the sample count)",
+            expected: n,
+            got: sigma_and_delta,
+        });
+    }
+    if color != n * CHANNELS {
+        return Err(CudaError::Shape {
+            what: "color ([n, 3])",
+            expected: n * CHANNELS,
+            got: color,
+        });
+    }
+    if background != CHANNELS {
+        return Err(CudaError::Shape {
+            what: "background ([3])",
+            expected: CHANNELS,
+            got: background,
+        });
+    }
+    // Every block index of a launch must fit the grid's 2^31 - 1 blocks.
+    if rays.div_ceil(BLOCK) > i32::MAX as usize {
+        return Err(CudaError::TooLarge(format!(
+            "{rays} rays is more than one launch covers"
+        )));
+    }
+    Ok(rays)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packings_are_checked() {
+        assert_eq!(check_packing(&[0], 0, 0, 3).unwrap(), 0);
+        assert_eq!(check_packing(&[0, 0, 4], 4, 12, 3).unwrap(), 2);
+        assert!(matches!(check_packing(&[], 0, 0, 3), Err(CudaError::Offsets(_))));
+        assert!(matches!(check_packing(&[1, 2], 2, 6, 3), Err(CudaError::Offsets(_))));
+        assert!(matches!(check_packing(&[0, 4, 3], 3, 9, 3), Err(CudaError::Offsets(_))));
+        assert!(matches!(check_packing(&[0, 4], 5, 15, 3), Err(CudaError::Shape { .. })));
+        assert!(matches!(check_packing(&[0, 4], 4, 8, 3), Err(CudaError::Shape { .. })));
+        assert!(matches!(check_packing(&[0, 4], 4, 12, 1), Err(CudaError::Shape { .. })));
+    }
+
+    #[test]
+    fn every_ray_has_room_for_its_chunks() {
+        // Ray r's chunks [s/CHUNK + r, s/CHUNK + r + ceil(len/CHUNK)) never overlap the next
+        // ray's and end inside the buffer.
+        let lens = [0usize, 1, 7, 8, 9, 15, 16, 17, 0, 3, 64, 1, 0];
+        let mut offsets = vec![0];
+        for l in lens {
+            offsets.push(offsets.last().unwrap() + l);
+        }
+        let n = *offsets.last().unwrap();
+        let mut end = 0;
+        for r in 0..lens.len() {
+            let base = offsets[r] / CHUNK + r;
+            assert!(base >= end, "ray {r}");
+            end = base + lens[r].div_ceil(CHUNK);
+        }
+        assert!(end <= residual_len(lens.len(), n));
+    }
+}

@@ -1,0 +1,153 @@
+//! Throughput of the GPU composite, forward and backward, on 1,048,576 rays of 64 f32 samples,
+//! against the device-to-device copy bandwidth, with the CPU op's time beside it. Ignored by
+//! default (it needs a GPU and some seconds):
+//!
+//! ```text
+//! cargo test --release -p fogray-cuda --test integration bench -- --ignored --nocapture
+//! ```
+//!
+//! `FOGRAY_BENCH_CPU=0` leaves out the CPU op (its time, and the check of the GPU's results
+//! against it on the same batch).
+
+use std::time::Instant;
+
+use crate::common::{scales, worst, Case, Typed};
+use fogray_cuda::cudarc::driver::sys::CUevent_flags;
+use fogray_cuda::{device_for_tests, CudaComposite, CudaError, HostGradients, HostOutputs};
+use rand::Rng;
+
+const RAYS: usize = 1 << 20;
+const LEN: usize = 64;
+const REPS: usize = 10;
+
+/// Milliseconds per call of `f`, timed with events on the stream (after one warm-up call).
+fn time_ms(gpu: &CudaComposite, mut f: impl FnMut() -> Result<(), CudaError>) -> Result<f64, CudaError> {
+    f()?;
+    let ctx = gpu.context();
+    let (start, end) = (
+        ctx.new_event(Some(CUevent_flags::CU_EVENT_DEFAULT))?,
+        ctx.new_event(Some(CUevent_flags::CU_EVENT_DEFAULT))?,
+    );
+    start.record(gpu.stream())?;
+    for _ in 0..REPS {
+        f()?;
+    }
+    end.record(gpu.stream())?;
+    end.synchronize()?;
+    Ok(f64::from(start.elapsed_ms(&end)?) / REPS as f64)
+}
+
+#[test]
+#[ignore = "needs a GPU; prints throughput"]
+fn throughput_of_a_million_rays_of_64_samples() -> Result<(), CudaError> {
+    let Some(gpu) = device_for_tests()? else { return Ok(()) };
+    println!(
+        "device: {} (compute capability {:?})",
+        gpu.device_name(),
+        gpu.compute_capability()
+    );
+    for (name, regs, local) in gpu.kernel_info()? {
+        println!("kernel {name}: {regs} registers, {local} bytes of local memory per thread");
+    }
+    let n = RAYS * LEN;
+    let mut rng = crate::common::rng(2024);
+    let case = Case {
+        name: "bench",
+        offsets: (0..=RAYS).map(|r| r * LEN).collect(),
+        sigma: (0..n).map(|_| rng.gen_range(0.0..5.0)).collect(),
+        delta: (0..n).map(|_| rng.gen_range(0.005..0.03)).collect(),
+        color: (0..3 * n).map(|_| rng.gen_range(0.0..1.0)).collect(),
+        background: [1.0, 1.0, 1.0],
+        d_color: (0..3 * RAYS).map(|_| rng.gen_range(-1.0..1.0)).collect(),
+        d_opacity: None,
+    };
+    let t = Typed::<f32>::of(&case);
+    let x = gpu.upload(&t.host(&case))?;
+    let up = gpu.upload_upstream(&x, &t.d_color, None)?;
+    let mut fwd = gpu.forward_buffers(&x)?;
+    let mut grads = gpu.gradient_buffers(&x)?;
+    gpu.launch_forward(&x, &mut fwd)?;
+    gpu.check_forward(&fwd)?;
+
+    let t_fwd = time_ms(&gpu, || gpu.launch_forward(&x, &mut fwd))?;
+    // The backward reads the forward's residual, computed above.
+    let t_bwd = time_ms(&gpu, || gpu.launch_backward(&x, &fwd, &up, &mut grads))?;
+    let t_both = time_ms(&gpu, || {
+        gpu.launch_forward(&x, &mut fwd)?;
+        gpu.launch_backward(&x, &fwd, &up, &mut grads)
+    })?;
+
+    // Bytes each pass must move at least: the forward reads sigma, delta and colour (20 B per
+    // sample) and the offsets, writes colour and opacity and its residual (8 B per 8 samples);
+    // the backward reads the same inputs, the residual and dL/dC, and writes three gradients
+    // (20 B per sample).
+    let (n64, r64) = (n as f64, RAYS as f64);
+    let fwd_bytes = n64 * 20.0 + r64 * 8.0 + r64 * 16.0 + n64;
+    let bwd_bytes = n64 * 20.0 + r64 * 8.0 + n64 + r64 * 12.0 + n64 * 20.0;
+    let report = |what: &str, ms: f64, bytes: f64| {
+        println!(
+            "{what}: {ms:.3} ms, {:.0} M samples/s, {:.0} GB/s effective ({:.2} GB moved)",
+            n64 / ms / 1e3,
+            bytes / ms / 1e6,
+            bytes / 1e9
+        );
+    };
+    report("GPU forward", t_fwd, fwd_bytes);
+    report("GPU backward", t_bwd, bwd_bytes);
+    report("GPU forward+backward", t_both, fwd_bytes + bwd_bytes);
+
+    // The reference: a device-to-device copy of 1 GiB, counting bytes read and written.
+    let stream = gpu.stream();
+    let words = 1usize << 28;
+    let src = stream.alloc_zeros::<f32>(words)?;
+    let mut dst = stream.alloc_zeros::<f32>(words)?;
+    let t_copy = time_ms(&gpu, || Ok(stream.memcpy_dtod(&src, &mut dst)?))?;
+    println!(
+        "device-to-device copy of 1 GiB: {t_copy:.3} ms, {:.0} GB/s (read + write)",
+        2.0 * (words * 4) as f64 / t_copy / 1e6
+    );
+    drop((src, dst));
+
+    if std::env::var("FOGRAY_BENCH_CPU").is_ok_and(|v| v == "0") {
+        return Ok(());
+    }
+    // The CPU op on the same batch: its time, and the GPU's results against it.
+    let start = Instant::now();
+    let (c_out, c_grad) = crate::common::cpu(&case, &t);
+    let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
+    println!(
+        "CPU op (fogray_ops::Composite evaluate + vjp, {} threads, allocating): {cpu_ms:.0} ms, {:.0} M samples/s",
+        rayon_threads(),
+        n64 / cpu_ms / 1e3
+    );
+    let g_out = gpu.download_outputs(&x, &fwd)?;
+    let g_grad = HostGradients {
+        sigma: stream.clone_dtoh(&grads.sigma)?,
+        delta: stream.clone_dtoh(&grads.delta)?,
+        color: stream.clone_dtoh(&grads.color)?,
+        background: stream.clone_dtoh(&grads.background)?,
+    };
+    let s = scales(&case, &t);
+    let floor = 1e-30;
+    let errors = [
+        ("colour", worst(&g_out.color, &c_out.color, &s.color, floor)),
+        ("opacity", worst(&g_out.opacity, &c_out.opacity, &s.opacity, floor)),
+        ("dsigma", worst(&g_grad.sigma, &c_grad.sigma, &s.sigma, floor)),
+        ("ddelta", worst(&g_grad.delta, &c_grad.delta, &s.delta, floor)),
+        ("dcolor", worst(&g_grad.color, &c_grad.color, &s.g_color, floor)),
+        (
+            "dbackground",
+            worst(&g_grad.background, &c_grad.background, &s.background, floor),
+        ),
+    ];
+    for (what, (e, i)) in errors {
+        println!("bench batch, GPU vs CPU, {what}: max scaled error {e:.2e} at {i}");
+        assert!(e <= 1e-6, "{what}: {e}");
+    }
+    let _: &HostOutputs<f32> = &g_out;
+    Ok(())
+}
+
+fn rayon_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, usize::from)
+}

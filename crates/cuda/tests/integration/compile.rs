@@ -1,0 +1,26 @@
+//! The kernels compile with NVRTC (no GPU needed; skipped where libnvrtc does not load).
+
+use fogray_cuda::{compile, CudaError};
+
+#[test]
+fn the_kernels_compile_for_hopper_ampere_and_turing() {
+    for capability in [(7, 5), (8, 0), (9, 0)] {
+        match compile(capability) {
+            Ok(ptx) => {
+                let src = ptx.to_src();
+                for name in [
+                    "composite_forward_f32",
+                    "composite_backward_f64",
+                    "composite_reduce_background_f32",
+                ] {
+                    assert!(src.contains(name), "{name} missing from the PTX for {capability:?}");
+                }
+            }
+            Err(CudaError::NoNvrtc) => {
+                eprintln!("SKIPPED: libnvrtc could not be loaded (put the CUDA toolkit's lib64 on LD_LIBRARY_PATH)");
+                return;
+            }
+            Err(e) => panic!("{e}"),
+        }
+    }
+}
