@@ -63,7 +63,7 @@ impl SceneArg {
 }
 
 /// The cameras.
-#[derive(Args)]
+#[derive(Args, Clone, Copy)]
 struct RingArgs {
     /// Training views.
     #[arg(long, default_value_t = 32)]
@@ -411,7 +411,7 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
             args.settings,
             Problem {
                 scene: args.scene.load()?,
-                ring: RingArgs { ..args.ring },
+                ring: args.ring,
             },
         ),
         Some(r) => resumed_settings(&args, r, given)?,
