@@ -101,6 +101,19 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
     if (!ok) atomicOr(invalid, 1u);
 }
 
+// The backward's global loads and stores are staged through shared memory, a warp at a time,
+// so that they are coalesced: in step j every lane of a warp takes its ray's j-th chunk from
+// the back (each a contiguous span of at most CHUNK samples), the warp copies the 32 spans'
+// densities, lengths and colours into shared memory with consecutive lanes on consecutive
+// elements of a span, each lane then runs its ray's recurrence on its own span exactly as
+// before (same operations, same order, same bits), writing its gradients over the span in
+// shared memory, and the warp copies the 32 spans' gradients out the same way. A lane's span
+// is padded to an odd stride (CHUNK + 1, 3 CHUNK + 1 elements) so that the lanes' reads of
+// their spans do not conflict on banks.
+#define WARPS (BLOCK / 32)
+#define SPAN (CHUNK + 1)
+#define CSPAN (3 * CHUNK + 1)
+
 template <typename T>
 __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 rays, const T* __restrict__ sigma,
                                          const T* __restrict__ delta, const T* __restrict__ color,
@@ -110,20 +123,64 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
                                          T* __restrict__ g_delta, T* __restrict__ g_color,
                                          double* __restrict__ bg_partial) {
     __shared__ double red[3][BLOCK];
+    __shared__ T st_sigma[WARPS][32 * SPAN];
+    __shared__ T st_delta[WARPS][32 * SPAN];
+    __shared__ T st_color[WARPS][32 * CSPAN];
+    __shared__ u64 st_s0[WARPS][32];
+    __shared__ int st_m[WARPS][32];
+    unsigned lane = threadIdx.x & 31u, wid = threadIdx.x >> 5;
     u64 r = (u64)blockIdx.x * blockDim.x + threadIdx.x;
-    double gb0 = 0.0, gb1 = 0.0, gb2 = 0.0;
-    if (r < rays) {
-        u64 start = offsets[r], end = offsets[r + 1];
-        u64 base = chunk_base(start, r);
-        double g0 = (double)d_color[3 * r], g1 = (double)d_color[3 * r + 1], g2 = (double)d_color[3 * r + 2];
-        double go = has_d_opacity ? (double)d_opacity[r] : 0.0;
-        double behind = g0 * (double)background[0] + g1 * (double)background[1] + g2 * (double)background[2];
-        double t_end = 1.0, t_next = 1.0;
-        u64 len = end - start;
-        u64 chunks = (len + CHUNK - 1) / CHUNK;
-        for (u64 c = chunks; c-- > 0;) {
-            u64 s0 = start + c * CHUNK;
-            int m = (end - s0 < CHUNK) ? (int)(end - s0) : CHUNK;
+    bool active = r < rays;
+    u64 start = 0, end = 0, base = 0, chunks = 0;
+    double g0 = 0.0, g1 = 0.0, g2 = 0.0, go = 0.0, behind = 0.0;
+    if (active) {
+        start = offsets[r];
+        end = offsets[r + 1];
+        base = chunk_base(start, r);
+        chunks = (end - start + CHUNK - 1) / CHUNK;
+        g0 = (double)d_color[3 * r];
+        g1 = (double)d_color[3 * r + 1];
+        g2 = (double)d_color[3 * r + 2];
+        go = has_d_opacity ? (double)d_opacity[r] : 0.0;
+        behind = g0 * (double)background[0] + g1 * (double)background[1] + g2 * (double)background[2];
+    }
+    // The warp's steps: its longest ray's chunk count.
+    u64 steps = chunks;
+#pragma unroll
+    for (int o = 16; o > 0; o >>= 1) {
+        u64 other = __shfl_xor_sync(0xffffffffu, steps, o);
+        steps = other > steps ? other : steps;
+    }
+    T* my_sigma = &st_sigma[wid][lane * SPAN];
+    T* my_delta = &st_delta[wid][lane * SPAN];
+    T* my_color = &st_color[wid][lane * CSPAN];
+    double t_end = 1.0, t_next = 1.0;
+    for (u64 j = 0; j < steps; ++j) {
+        // This lane's chunk: the j-th from the back, or none (m = 0).
+        bool has = j < chunks;
+        u64 c = has ? chunks - 1 - j : 0;
+        u64 s0 = start + c * CHUNK;
+        int m = has ? ((end - s0 < CHUNK) ? (int)(end - s0) : CHUNK) : 0;
+        st_s0[wid][lane] = s0;
+        st_m[wid][lane] = m;
+        __syncwarp();
+        // Coalesced loads of the warp's spans.
+#pragma unroll
+        for (int t = 0; t < CHUNK; ++t) {
+            unsigned idx = t * 32 + lane, src = idx / CHUNK, i = idx % CHUNK;
+            if ((int)i < st_m[wid][src]) {
+                u64 k = st_s0[wid][src] + i;
+                st_sigma[wid][src * SPAN + i] = sigma[k];
+                st_delta[wid][src * SPAN + i] = delta[k];
+            }
+        }
+#pragma unroll
+        for (int t = 0; t < 3 * CHUNK; ++t) {
+            unsigned idx = t * 32 + lane, src = idx / (3 * CHUNK), i = idx % (3 * CHUNK);
+            if ((int)i < 3 * st_m[wid][src]) st_color[wid][src * CSPAN + i] = color[3 * st_s0[wid][src] + i];
+        }
+        __syncwarp();
+        if (has) {
             // Depths before each sample of the chunk, front to back in registers (unrolled:
             // constant indices), grouped as in the forward so that they have its bits.
             double dep[CHUNK];
@@ -132,8 +189,8 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
 #pragma unroll
             for (int g = 0; g < CHUNK; g += 4) {
                 if (g + 4 <= m) {
-                    double t0 = tau_of(sigma, delta, s0 + g, unused), t1 = tau_of(sigma, delta, s0 + g + 1, unused);
-                    double t2 = tau_of(sigma, delta, s0 + g + 2, unused), t3 = tau_of(sigma, delta, s0 + g + 3, unused);
+                    double t0 = tau_of(my_sigma, my_delta, g, unused), t1 = tau_of(my_sigma, my_delta, g + 1, unused);
+                    double t2 = tau_of(my_sigma, my_delta, g + 2, unused), t3 = tau_of(my_sigma, my_delta, g + 3, unused);
                     double p1 = t0 + t1, p2 = p1 + t2, p3 = p2 + t3;
                     dep[g] = running;
                     dep[g + 1] = running + t0;
@@ -146,12 +203,12 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
                     for (int i = g; i < g + 4; ++i) {
                         if (i < m) {
                             dep[i] = running;
-                            running += tau_of(sigma, delta, s0 + i, unused);
+                            running += tau_of(my_sigma, my_delta, i, unused);
                         }
                     }
                 }
             }
-            if (c + 1 == chunks) {
+            if (j == 0) {
                 // `running` is now the whole ray's optical depth.
                 t_end = exp(-running);
                 t_next = t_end;
@@ -159,27 +216,49 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
 #pragma unroll
             for (int i = CHUNK - 1; i >= 0; --i) {
                 if (i < m) {
-                    u64 k = s0 + i;
-                    T s = sigma[k], d = delta[k];
+                    T s = my_sigma[i], d = my_delta[i];
                     double tau = (double)s * (double)d;
                     double alpha = -expm1(-tau);
                     double t_k = exp(-dep[i]);
-                    double c0 = (double)color[3 * k], c1 = (double)color[3 * k + 1], c2 = (double)color[3 * k + 2];
+                    double c0 = (double)my_color[3 * i], c1 = (double)my_color[3 * i + 1];
+                    double c2 = (double)my_color[3 * i + 2];
                     double v = g0 * c0 + g1 * c1 + g2 * c2 + go;
                     double diff = v - behind;
                     // What the sample adds minus what it hides.
                     double g_tau = t_next * diff;
-                    g_sigma[k] = (T)((double)d * g_tau);
-                    g_delta[k] = (T)((double)s * g_tau);
+                    // The gradients over the sample's inputs, which it no longer needs.
+                    my_sigma[i] = (T)((double)d * g_tau);
+                    my_delta[i] = (T)((double)s * g_tau);
                     double w = t_k * alpha;
-                    g_color[3 * k] = (T)(w * g0);
-                    g_color[3 * k + 1] = (T)(w * g1);
-                    g_color[3 * k + 2] = (T)(w * g2);
+                    my_color[3 * i] = (T)(w * g0);
+                    my_color[3 * i + 1] = (T)(w * g1);
+                    my_color[3 * i + 2] = (T)(w * g2);
                     behind = fma(alpha, diff, behind);
                     t_next = t_k;
                 }
             }
         }
+        __syncwarp();
+        // Coalesced stores of the warp's gradients.
+#pragma unroll
+        for (int t = 0; t < CHUNK; ++t) {
+            unsigned idx = t * 32 + lane, src = idx / CHUNK, i = idx % CHUNK;
+            if ((int)i < st_m[wid][src]) {
+                u64 k = st_s0[wid][src] + i;
+                g_sigma[k] = st_sigma[wid][src * SPAN + i];
+                g_delta[k] = st_delta[wid][src * SPAN + i];
+            }
+        }
+#pragma unroll
+        for (int t = 0; t < 3 * CHUNK; ++t) {
+            unsigned idx = t * 32 + lane, src = idx / (3 * CHUNK), i = idx % (3 * CHUNK);
+            if ((int)i < 3 * st_m[wid][src]) g_color[3 * st_s0[wid][src] + i] = st_color[wid][src * CSPAN + i];
+        }
+        // Before the next step overwrites the spans and the lanes' chunk bounds.
+        __syncwarp();
+    }
+    double gb0 = 0.0, gb1 = 0.0, gb2 = 0.0;
+    if (active) {
         gb0 = t_end * g0;
         gb1 = t_end * g1;
         gb2 = t_end * g2;
