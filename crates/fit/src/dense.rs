@@ -87,11 +87,6 @@ impl<F: Float> DenseGrid<F> {
         self.grid
     }
 
-    /// The activation (its shift).
-    pub fn activation(&self) -> &DensityColor {
-        &self.activation
-    }
-
     /// Records the lookup of `samples` in `grid` and the activation, and returns the composite
     /// over the samples' rays with its inputs (the background `background`, shared).
     fn composite_inputs(

@@ -36,36 +36,12 @@ impl RunConfig {
             precision: Precision::F32,
         }
     }
-
-    /// `"fused"` or `"taped"`.
-    pub fn method_name(&self) -> &'static str {
-        match self.method {
-            Method::Fused => "fused",
-            Method::Taped => "taped",
-        }
-    }
-
-    /// `"uniform"` or `"occupancy"`.
-    pub fn sampling_name(&self) -> &'static str {
-        match self.sampling {
-            Sampling::Uniform => "uniform",
-            Sampling::Occupancy => "occupancy",
-        }
-    }
-
-    /// `"f32"` or `"f64"`.
-    pub fn precision_name(&self) -> &'static str {
-        match self.precision {
-            Precision::F32 => "f32",
-            Precision::F64 => "f64",
-        }
-    }
 }
 
 impl fmt::Display for RunConfig {
     /// The name that [`RunConfig::from_str`] reads back (`-f32` left out).
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{}-{}", self.method_name(), self.sampling_name())?;
+        write!(f, "{}-{}", self.method.name(), self.sampling.name())?;
         match self.precision {
             Precision::F32 => Ok(()),
             Precision::F64 => write!(f, "-f64"),

@@ -95,9 +95,9 @@ fn keep<F: Float>(
     };
     Ok(ConfigRun {
         name: config.to_string(),
-        method: config.method_name(),
-        sampling: config.sampling_name(),
-        precision: config.precision_name(),
+        method: config.method.name(),
+        sampling: config.sampling.name(),
+        precision: config.precision.name(),
         steps: result.log.last().map_or(0, |e| e.step),
         log: result.log,
         final_test_psnr: result.final_test_psnr,
