@@ -64,4 +64,6 @@ pub use composite::{
 };
 pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted};
-pub use rays::{rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, PinholeCamera, RayBatch, RayIntervals};
+pub use rays::{
+    rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, PinholeCamera, RayBatch, RayIntervals,
+};

@@ -3,11 +3,13 @@
 //! Convention (OpenCV): in the camera frame x points right, y down and z forward (the viewing
 //! direction); pixel (row `a`, column `b`) has its centre at image coordinates
 //! `(b + 0.5, a + 0.5)` and its ray the camera-frame direction
-//! `((b + 0.5 - cx) / fx, (a + 0.5 - cy) / fy, 1)`. Pixel index `a * width + b` (row-major).
+//! `((b + 0.5 - cx) / fx, (a + 0.5 - cy) / fy, 1)`, undistorted first when the camera has a
+//! lens [`Distortion`]. Pixel index `a * width + b` (row-major).
 
 use fogray_tape::Float;
 
 use super::batch::{normalise, RayBatch};
+use super::distortion::Distortion;
 use super::frame::{checked_transform, Frame};
 use crate::error::GeometryError;
 
@@ -96,6 +98,7 @@ impl Intrinsics {
 pub struct PinholeCamera {
     intrinsics: Intrinsics,
     frame: Frame,
+    distortion: Distortion,
 }
 
 impl PinholeCamera {
@@ -111,6 +114,7 @@ impl PinholeCamera {
         Ok(PinholeCamera {
             intrinsics,
             frame: checked_transform(camera_to_world)?,
+            distortion: Distortion::NONE,
         })
     }
 
@@ -140,7 +144,40 @@ impl PinholeCamera {
     ) -> Result<Self, GeometryError> {
         intrinsics.check()?;
         let frame = Frame::look_at(eye, target, up)?;
-        Ok(PinholeCamera { intrinsics, frame })
+        Ok(PinholeCamera {
+            intrinsics,
+            frame,
+            distortion: Distortion::NONE,
+        })
+    }
+
+    /// The same camera seen through a lens with `distortion`: each pixel's ray goes where the
+    /// lens sent it (the pixel's normalised coordinates undistorted, then rotated).
+    ///
+    /// Errors: a coefficient that is not finite.
+    pub fn with_distortion(self, distortion: Distortion) -> Result<Self, GeometryError> {
+        distortion.check()?;
+        Ok(PinholeCamera { distortion, ..self })
+    }
+
+    /// The lens distortion ([`Distortion::NONE`] unless set).
+    pub fn distortion(&self) -> &Distortion {
+        &self.distortion
+    }
+
+    /// Where the world point `point` appears in the image, as image coordinates `[x, y]`
+    /// (column and row positions: pixel (row `a`, column `b`) spans `[b, b + 1] x [a, a + 1]`
+    /// and its centre is `(b + 0.5, a + 0.5)`), through the lens; `None` for a point on or
+    /// behind the camera's plane. The point may fall outside the image.
+    pub fn project(&self, point: [f64; 3]) -> Option<[f64; 2]> {
+        let [x, y, z] = self.frame.to_camera(point)?;
+        // NaN (a non-finite point) is refused with the points behind.
+        if z.is_nan() || z <= 0.0 {
+            return None;
+        }
+        let [xd, yd] = self.distortion.distort([x / z, y / z]);
+        let k = &self.intrinsics;
+        Some([k.fx * xd + k.cx, k.fy * yd + k.cy])
     }
 
     /// The intrinsics.
@@ -159,10 +196,13 @@ impl PinholeCamera {
     }
 
     /// The unit world direction through the centre of pixel (`row`, `col`) (which may lie
-    /// outside the image: no check).
+    /// outside the image: no check), through the lens. Where the lens model cannot be inverted
+    /// (far outside a calibrated lens's field) the pinhole direction is used.
     pub fn direction(&self, row: usize, col: usize) -> [f64; 3] {
         let k = &self.intrinsics;
-        let cam = [(col as f64 + 0.5 - k.cx) / k.fx, (row as f64 + 0.5 - k.cy) / k.fy, 1.0];
+        let distorted = [(col as f64 + 0.5 - k.cx) / k.fx, (row as f64 + 0.5 - k.cy) / k.fy];
+        let [x, y] = self.distortion.undistort(distorted).unwrap_or(distorted);
+        let cam = [x, y, 1.0];
         // An invertible R maps a non-zero vector to a non-zero one.
         normalise(self.frame.rotate(cam)).unwrap_or([0.0, 0.0, 1.0])
     }

@@ -190,3 +190,90 @@ fn bad_cameras_are_errors() {
     ));
     assert!(look([f64::INFINITY, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0]).is_err());
 }
+
+/// A camera at (0, 0, 4) (OpenGL axes: looking down -Z, +Y up) with fx = fy = 100, the
+/// principal point off centre at (37, 21): the origin lands on the principal point, (1, 0, 0)
+/// at x = 37 + 100 * 1/4, and (0, 1, 0) above it (y = 21 - 25, rows grow downwards).
+#[test]
+fn known_points_project_where_the_pinhole_formula_puts_them() {
+    let k = Intrinsics {
+        fx: 100.0,
+        fy: 100.0,
+        cx: 37.0,
+        cy: 21.0,
+        width: 64,
+        height: 48,
+    };
+    let c2w = [
+        [1.0, 0.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0, 0.0],
+        [0.0, 0.0, 1.0, 4.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let cam = PinholeCamera::from_opengl(k, c2w).unwrap();
+    let close = |a: [f64; 2], b: [f64; 2]| (a[0] - b[0]).abs() < 1e-12 && (a[1] - b[1]).abs() < 1e-12;
+    assert!(close(cam.project([0.0; 3]).unwrap(), [37.0, 21.0]));
+    assert!(close(cam.project([1.0, 0.0, 0.0]).unwrap(), [62.0, 21.0]));
+    assert!(close(cam.project([0.0, 1.0, 0.0]).unwrap(), [37.0, -4.0]));
+    assert_eq!(cam.project([0.0, 0.0, 5.0]), None, "behind the camera");
+}
+
+/// Every pixel's ray, followed to any depth and projected back through the lens, lands on
+/// that pixel's centre: the ray is undistorted exactly as the projection distorts. Without the
+/// undistortion (the pinhole ray), border pixels land pixels away.
+#[test]
+fn a_distorted_cameras_rays_project_back_onto_their_pixels() {
+    let k = Intrinsics {
+        fx: 60.0,
+        fy: 58.0,
+        cx: 33.0,
+        cy: 22.5,
+        width: 64,
+        height: 48,
+    };
+    let lens = Distortion {
+        k1: -0.2,
+        k2: 0.05,
+        k3: 0.0,
+        k4: 0.0,
+        p1: 0.002,
+        p2: -0.001,
+    };
+    let cam = PinholeCamera::look_at(k, [2.0, -3.0, 1.0], [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
+    let pinhole = cam.clone();
+    let cam = cam.with_distortion(lens).unwrap();
+    assert_eq!(*cam.distortion(), lens);
+    let c = cam.centre();
+    let mut worst_pinhole = 0.0f64;
+    for row in 0..48 {
+        for col in 0..64 {
+            let want = [col as f64 + 0.5, row as f64 + 0.5];
+            for (camera, t) in [(&cam, 0.7), (&cam, 3.0), (&pinhole, 3.0)] {
+                let d = camera.direction(row, col);
+                let p = [c[0] + t * d[0], c[1] + t * d[1], c[2] + t * d[2]];
+                let got = cam.project(p).unwrap();
+                let off = (got[0] - want[0]).abs().max((got[1] - want[1]).abs());
+                if std::ptr::eq(camera, &pinhole) {
+                    worst_pinhole = worst_pinhole.max(off);
+                } else {
+                    assert!(off < 1e-9, "pixel ({row}, {col}) at t = {t}: {got:?}");
+                }
+            }
+        }
+    }
+    assert!(worst_pinhole > 1.0, "{worst_pinhole}");
+}
+
+#[test]
+fn a_non_finite_distortion_is_refused() {
+    let k = Intrinsics::from_vertical_fov(8, 8, 0.8).unwrap();
+    let cam = PinholeCamera::look_at(k, [0.0, -3.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
+    let lens = Distortion {
+        k1: f64::INFINITY,
+        ..Distortion::NONE
+    };
+    assert!(matches!(
+        cam.with_distortion(lens),
+        Err(GeometryError::InvalidValue { .. })
+    ));
+}

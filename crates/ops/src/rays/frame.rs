@@ -93,6 +93,24 @@ impl Frame {
         self.rotation.map(|row| dot(row, v))
     }
 
+    /// `R⁻¹ (p - c)`: the world point `p` in camera coordinates, by Cramer's rule (`R` may
+    /// scale or shear); `None` if `R` has no usable inverse (not after `checked_transform`).
+    pub(crate) fn to_camera(&self, p: [f64; 3]) -> Option<[f64; 3]> {
+        let r = &self.rotation;
+        let v = [p[0] - self.centre[0], p[1] - self.centre[1], p[2] - self.centre[2]];
+        let col = |j: usize| [r[0][j], r[1][j], r[2][j]];
+        let det = dot(col(0), cross(col(1), col(2)));
+        if det == 0.0 || !det.is_finite() {
+            return None;
+        }
+        // x_j = det(R with column j replaced by v) / det(R).
+        Some([
+            dot(v, cross(col(1), col(2))) / det,
+            dot(col(0), cross(v, col(2))) / det,
+            dot(col(0), cross(col(1), v)) / det,
+        ])
+    }
+
     /// The 4x4 camera-to-world matrix.
     pub(crate) fn matrix(&self) -> [[f64; 4]; 4] {
         let r = &self.rotation;

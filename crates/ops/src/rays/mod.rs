@@ -36,8 +36,10 @@ pub(crate) mod batch;
 pub mod camera;
 #[cfg(test)]
 mod camera_tests;
+mod distortion;
 mod frame;
 
 pub use aabb::{Aabb, RayIntervals};
 pub use batch::RayBatch;
 pub use camera::{rays_for_camera_pixels, CameraPixel, Intrinsics, PinholeCamera};
+pub use distortion::Distortion;
