@@ -1,6 +1,10 @@
-//! The data of a fit: every training pixel's ray with its colour, and the held-out views'
-//! rays and images. Any source of cameras and pictures (a synthetic scene, a dataset on disk)
-//! builds one from [`View`]s.
+//! The data of a fit: the training views (a camera and its picture each) and the held-out
+//! views. Any source of cameras and pictures (a synthetic scene, a dataset on disk) builds one
+//! from [`View`]s.
+//!
+//! A view keeps its camera, not a ray per pixel: rays are built when a batch or a render asks
+//! for them (a few multiplications each, and a lens's undistortion), so a dataset costs its
+//! pictures' memory and no more (a ray per pixel in `f64` would triple it).
 //!
 //! ```
 //! use fogray_fit::dataset::{Dataset, View};
@@ -12,33 +16,33 @@
 //!     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0])?;
 //!     Ok(View::new(name, &camera, Array3::from_elem((3, 4, 3), 0.5))?)
 //! };
-//! let train = [view([3.0, 0.0, 0.0], "a")?, view([0.0, 3.0, 0.0], "b")?];
-//! let data = Dataset::new(&train, vec![view([0.0, -3.0, 0.0], "c")?], [1.0; 3])?;
-//! assert_eq!(data.colors.nrows(), 2 * 12); // every pixel of the two training views
+//! let train = vec![view([3.0, 0.0, 0.0], "a")?, view([0.0, 3.0, 0.0], "b")?];
+//! let data = Dataset::new(train, vec![view([0.0, -3.0, 0.0], "c")?], [1.0; 3])?;
+//! assert_eq!(data.training_pixels(), 2 * 12); // every pixel of the two training views
+//! let (origins, directions) = data.test[0].rays();
+//! assert_eq!((origins.nrows(), directions[[0, 1]] > 0.0), (12, true)); // the camera looks along +y
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
 use fogray_ops::PinholeCamera;
 use ndarray::{Array2, Array3};
+use rayon::prelude::*;
 
 use crate::error::FitError;
 
-/// One picture with the ray of each of its pixels.
+/// One picture and the camera that took it.
 #[derive(Debug, Clone)]
 pub struct View {
     /// What the view is called in file names and reports.
     pub name: String,
-    /// Origins `[H*W, 3]`, row-major over the pixels.
-    pub origins: Array2<f64>,
-    /// Unit directions `[H*W, 3]`.
-    pub directions: Array2<f64>,
+    /// The camera (its image size is the picture's).
+    pub camera: PinholeCamera,
     /// The picture `[H][W][3]`, RGB in `[0, 1]`.
     pub image: Array3<f64>,
 }
 
 impl View {
-    /// The view of `camera` with picture `image` (`[H][W][3]`, the camera's image size): one
-    /// ray through each pixel's centre.
+    /// The view of `camera` with picture `image` (`[H][W][3]`, the camera's image size).
     ///
     /// Errors: [`FitError::Config`] if the picture's size is not the camera's.
     pub fn new(name: impl Into<String>, camera: &PinholeCamera, image: Array3<f64>) -> Result<View, FitError> {
@@ -52,18 +56,9 @@ impl View {
                 k.width
             )));
         }
-        let pixels = k.pixels();
-        let centre = camera.centre();
-        let origins = Array2::from_shape_fn((pixels, 3), |(_, a)| centre[a]);
-        let mut directions = Array2::zeros((pixels, 3));
-        for (p, mut row) in directions.rows_mut().into_iter().enumerate() {
-            let d = camera.direction(p / k.width, p % k.width);
-            row.iter_mut().zip(d).for_each(|(r, d)| *r = d);
-        }
         Ok(View {
             name,
-            origins,
-            directions,
+            camera: camera.clone(),
             image,
         })
     }
@@ -72,17 +67,36 @@ impl View {
     pub fn size(&self) -> [usize; 2] {
         [self.image.shape()[0], self.image.shape()[1]]
     }
+
+    /// The ray through each pixel's centre, row-major: origins and unit directions `[H*W, 3]`
+    /// (built in parallel, a row of the picture at a time).
+    pub fn rays(&self) -> (Array2<f64>, Array2<f64>) {
+        let [h, w] = self.size();
+        let centre = self.camera.centre();
+        let origins = Array2::from_shape_fn((h * w, 3), |(_, a)| centre[a]);
+        let mut directions = Array2::zeros((h * w, 3));
+        if let Some(values) = directions.as_slice_mut() {
+            values.par_chunks_mut(3 * w.max(1)).enumerate().for_each(|(row, line)| {
+                for (col, d) in line.chunks_exact_mut(3).enumerate() {
+                    d.copy_from_slice(&self.camera.direction(row, col));
+                }
+            });
+        }
+        (origins, directions)
+    }
+
+    /// Pixels of the picture.
+    pub fn pixels(&self) -> usize {
+        let [h, w] = self.size();
+        h * w
+    }
 }
 
-/// The training rays with their colours, and the test views.
+/// The training views and the held-out views of a fit.
 #[derive(Debug, Clone)]
 pub struct Dataset {
-    /// Origins `[P, 3]` of every training pixel's ray.
-    pub origins: Array2<f64>,
-    /// Unit directions `[P, 3]`.
-    pub directions: Array2<f64>,
-    /// Colours `[P, 3]`.
-    pub colors: Array2<f64>,
+    /// The views trained on.
+    pub train: Vec<View>,
     /// The held-out views, in order.
     pub test: Vec<View>,
     /// The background composited behind the model.
@@ -90,41 +104,40 @@ pub struct Dataset {
 }
 
 impl Dataset {
-    /// The pixels of the training views `train`, and the held-out views `test`.
+    /// The training views `train` and the held-out views `test`.
     ///
     /// Errors: [`FitError::Config`] if there is no training pixel or no test view, or a view's
-    /// rays do not match its picture.
-    pub fn new(train: &[View], test: Vec<View>, background: [f64; 3]) -> Result<Dataset, FitError> {
+    /// picture is not its camera's size (possible only if its fields were changed after
+    /// [`View::new`]).
+    pub fn new(train: Vec<View>, test: Vec<View>, background: [f64; 3]) -> Result<Dataset, FitError> {
         if test.is_empty() {
             return Err(FitError::Config("the fit needs at least one test view".into()));
         }
         for v in train.iter().chain(&test) {
-            let [h, w] = v.size();
-            if v.origins.dim() != (h * w, 3) || v.directions.dim() != (h * w, 3) {
+            let k = v.camera.intrinsics();
+            if v.size() != [k.height, k.width] || v.image.shape()[2] != 3 {
                 return Err(FitError::Config(format!(
-                    "view {}: {} rays for a picture of {h} x {w}",
+                    "view {}: picture {:?} for a camera of {} x {}",
                     v.name,
-                    v.origins.nrows()
+                    v.image.shape(),
+                    k.height,
+                    k.width
                 )));
             }
         }
-        let pixels: usize = train.iter().map(|v| v.origins.nrows()).sum();
-        if pixels == 0 {
-            return Err(FitError::Config("the fit needs at least one training pixel".into()));
-        }
-        let (mut o, mut d, mut c) = (Vec::new(), Vec::new(), Vec::new());
-        for v in train {
-            o.extend(v.origins.iter().copied());
-            d.extend(v.directions.iter().copied());
-            c.extend(v.image.iter().copied());
-        }
-        let shape = |v| Array2::from_shape_vec((pixels, 3), v).map_err(|e| FitError::Config(e.to_string()));
-        Ok(Dataset {
-            origins: shape(o)?,
-            directions: shape(d)?,
-            colors: shape(c)?,
+        let data = Dataset {
+            train,
             test,
             background,
-        })
+        };
+        if data.training_pixels() == 0 {
+            return Err(FitError::Config("the fit needs at least one training pixel".into()));
+        }
+        Ok(data)
+    }
+
+    /// Pixels of all training views.
+    pub fn training_pixels(&self) -> usize {
+        self.train.iter().map(View::pixels).sum()
     }
 }

@@ -1,4 +1,5 @@
-//! The dense grid: `N^3` nodes over `[-1, 1]^3` of raw density and raw RGB, looked up
+//! The dense grid: `N^3` nodes over the scene's box (`[-1, 1]^3` unless the settings name
+//! another) of raw density and raw RGB, looked up
 //! trilinearly by fogray-ops' grid field, activated (density `softplus(raw + shift)`, colour
 //! `sigmoid(raw)`, view-independent) and composited over packed samples, either with the fused
 //! ops or with their taped twins; a total-variation prior on the raw grid joins the training
@@ -36,13 +37,10 @@ use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
 
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingLoss};
-use crate::settings::{FitSettings, Method};
+use crate::settings::{FitSettings, Method, SceneBox};
 
 /// Channels of a raw grid value: density, then red, green, blue.
 pub const CHANNELS: usize = 4;
-
-/// The box the grid covers.
-pub const BOUNDS: ([f64; 3], [f64; 3]) = ([-1.0; 3], [1.0; 3]);
 
 /// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
 pub const GRID: &str = "grid";
@@ -60,19 +58,23 @@ pub struct DenseGrid<F: Float> {
 }
 
 impl<F: Float> DenseGrid<F> {
-    /// A grid of `nodes^3` nodes (at least 2) over `[-1, 1]^3`, every raw value 0: density
+    /// A grid of `nodes^3` nodes (at least 2) over `scene_box`, every raw value 0: density
     /// `softplus(shift)` and colour grey (0.5) everywhere; `smoothness` weighs its
     /// total-variation prior (0 for none).
     ///
-    /// Errors: fewer than 2 nodes, more than memory can address, a shift that is not finite, a
-    /// smoothness that is negative or not finite.
-    pub fn new(nodes: usize, shift: f64, smoothness: f64) -> Result<Self, FitError> {
-        let field = GridField::new(GridBox::new(&BOUNDS.0, &BOUNDS.1)?, &[nodes, nodes, nodes, CHANNELS])?;
+    /// Errors: fewer than 2 nodes, more than memory can address, a bad box, a shift that is
+    /// not finite, a smoothness that is negative or not finite.
+    pub fn new(scene_box: SceneBox, nodes: usize, shift: f64, smoothness: f64) -> Result<Self, FitError> {
+        scene_box.check()?;
+        let field = GridField::new(
+            GridBox::new(&scene_box.min, &scene_box.max)?,
+            &[nodes, nodes, nodes, CHANNELS],
+        )?;
         let mut params = Params::new();
         let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, CHANNELS)))?;
         let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
         Ok(DenseGrid {
-            bounds: Aabb::new(BOUNDS.0, BOUNDS.1)?,
+            bounds: Aabb::new(scene_box.min, scene_box.max)?,
             params,
             grid,
             field,
@@ -80,6 +82,14 @@ impl<F: Float> DenseGrid<F> {
             prior,
             nodes,
         })
+    }
+
+    /// The box the grid covers.
+    pub fn scene_box(&self) -> SceneBox {
+        SceneBox {
+            min: self.bounds.min(),
+            max: self.bounds.max(),
+        }
     }
 
     /// The raw grid's id in the store.
@@ -123,19 +133,23 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     const KIND: &'static str = "dense-grid";
 
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
-        DenseGrid::new(nodes, settings.shift, settings.smoothness)
+        DenseGrid::new(settings.model_box(), nodes, settings.shift, settings.smoothness)
     }
 
     /// Each new node takes the trilinear interpolation of this grid's raw values at its
     /// position.
     fn resampled(&self, nodes: usize) -> Result<Self, FitError> {
-        let mut grown = DenseGrid::<F>::new(nodes, self.activation.shift(), self.prior.weight())?;
-        let spacing = 2.0 / (nodes - 1) as f64;
-        let at = |i: usize| F::lit(BOUNDS.0[0] + i as f64 * spacing);
+        let scene_box = self.scene_box();
+        let mut grown = DenseGrid::<F>::new(scene_box, nodes, self.activation.shift(), self.prior.weight())?;
+        let at = |i: usize, axis: usize| {
+            let (lo, hi) = (scene_box.min[axis], scene_box.max[axis]);
+            let spacing = (hi - lo) / (nodes - 1) as f64;
+            F::lit(lo + i as f64 * spacing)
+        };
         let positions = Array2::from_shape_fn((nodes * nodes * nodes, 3), |(p, axis)| match axis {
-            0 => at(p / (nodes * nodes)),
-            1 => at(p / nodes % nodes),
-            _ => at(p % nodes),
+            0 => at(p / (nodes * nodes), 0),
+            1 => at(p / nodes % nodes, 1),
+            _ => at(p % nodes, 2),
         });
         let grid = self.params.get(self.grid)?;
         let raw = self.field.evaluate(&grid, &positions.view().into_dyn())?;
@@ -154,9 +168,12 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         self.bounds
     }
 
-    /// Half the spacing of the nodes, `1 / (nodes - 1)`.
+    /// Half the spacing of the nodes along the box's shortest side (`1 / (nodes - 1)` for
+    /// `[-1, 1]^3`).
     fn sample_step(&self) -> f64 {
-        1.0 / (self.nodes - 1) as f64
+        let b = self.scene_box();
+        let side = (0..3).map(|a| b.max[a] - b.min[a]).fold(f64::INFINITY, f64::min);
+        side / (2 * (self.nodes - 1)) as f64
     }
 
     fn params(&self) -> &Params<F> {

@@ -40,7 +40,7 @@
 //!     views.push(View::new(format!("{i}"), &camera, Array3::from_elem((16, 16, 3), 0.5))?);
 //! }
 //! let test = vec![views.pop().unwrap()];
-//! let data = Dataset::new(&views, test, [1.0; 3])?;
+//! let data = Dataset::new(views, test, [1.0; 3])?;
 //!
 //! let settings = FitSettings { grid: 16, batch: 1024, steps: Some(60), ..FitSettings::default() };
 //! let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {})?;
@@ -53,7 +53,8 @@
 //! let view = &data.test[0];
 //! let options = RenderOptions { depth: true, ..RenderOptions::default() };
 //! let occupancy = result.occupancy.as_ref();
-//! let picture = render_picture(&saved.start.model, occupancy, &view.origins, &view.directions, view.size(), &options)?;
+//! let (origins, directions) = view.rays();
+//! let picture = render_picture(&saved.start.model, occupancy, &origins, &directions, view.size(), &options)?;
 //! assert_eq!(picture.color, result.renders[0]); // the saved model renders as the fitted one
 //! # std::fs::remove_file(&file)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())

@@ -93,6 +93,75 @@ impl Sampling {
     }
 }
 
+/// The box a model covers: `min` to `max` on each axis (world units).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SceneBox {
+    /// The lower corner.
+    pub min: [f64; 3],
+    /// The upper corner.
+    pub max: [f64; 3],
+}
+
+impl SceneBox {
+    /// `[-1, 1]^3`, the box of a model whose settings name none.
+    pub const UNIT: SceneBox = SceneBox {
+        min: [-1.0; 3],
+        max: [1.0; 3],
+    };
+
+    /// The cube `[-half, half]^3`.
+    pub fn cube(half: f64) -> SceneBox {
+        SceneBox {
+            min: [-half; 3],
+            max: [half; 3],
+        }
+    }
+
+    /// Errors: [`FitError::Config`] for a bound that is not finite or an axis whose minimum is
+    /// not below its maximum.
+    pub fn check(&self) -> Result<(), FitError> {
+        for a in 0..3 {
+            let (lo, hi) = (self.min[a], self.max[a]);
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(FitError::Config(format!(
+                    "--box: axis {a} runs from {lo} to {hi} (must be finite and increasing)"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl std::fmt::Display for SceneBox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [a, b, c] = self.min;
+        let [d, e, g] = self.max;
+        write!(f, "{a},{b},{c},{d},{e},{g}")
+    }
+}
+
+impl std::str::FromStr for SceneBox {
+    type Err = String;
+
+    /// `H` for the cube `[-H, H]^3`, or `x0,y0,z0,x1,y1,z1` for the lower and upper corners.
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let values = text
+            .split(',')
+            .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let scene_box = match values[..] {
+            [h] => SceneBox::cube(h),
+            [a, b, c, d, e, g] => SceneBox {
+                min: [a, b, c],
+                max: [d, e, g],
+            },
+            _ => return Err(format!("{text:?}: give H (the cube [-H, H]^3) or x0,y0,z0,x1,y1,z1")),
+        };
+        scene_box.check().map_err(|e| e.to_string())?;
+        Ok(scene_box)
+    }
+}
+
 /// When training stops.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Budget {
@@ -156,6 +225,14 @@ pub struct FitSettings {
     /// Test evaluations, evenly spaced over the budget (plus one at the start and the end).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.evaluations))]
     pub evaluations: usize,
+    /// The box the model covers: H for [-H, H]^3, or x0,y0,z0,x1,y1,z1; the data's own box
+    /// when not given ([-1, 1]^3 for data that names none).
+    #[cfg_attr(
+        feature = "cli",
+        arg(long = "box", value_name = "BOX", allow_negative_numbers = true)
+    )]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub scene_box: Option<SceneBox>,
 }
 
 impl FitSettings {
@@ -176,7 +253,13 @@ impl FitSettings {
         grow: true,
         shift: -4.0,
         evaluations: 20,
+        scene_box: None,
     };
+
+    /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].
+    pub fn model_box(&self) -> SceneBox {
+        self.scene_box.unwrap_or(SceneBox::UNIT)
+    }
 
     /// `steps` if set, else `seconds` (60 if neither).
     pub fn budget(&self) -> Budget {
@@ -215,6 +298,9 @@ impl FitSettings {
         }
         if !self.shift.is_finite() {
             return bad("--shift must be finite");
+        }
+        if let Some(b) = self.scene_box {
+            b.check()?;
         }
         match self.budget() {
             Budget::Steps(0) => bad("--steps must be at least 1"),

@@ -17,6 +17,7 @@ pub fn view(i: usize, eye: [f64; 3]) -> View {
 /// Three training views and one test view on a circle of radius 3, white background.
 pub fn small_dataset() -> Dataset {
     let eyes = [[3.0, 0.0, 0.5], [0.0, 3.0, 0.5], [-3.0, 0.0, 0.5], [0.0, -3.0, 0.5]];
-    let views: Vec<View> = eyes.iter().enumerate().map(|(i, &e)| view(i, e)).collect();
-    Dataset::new(&views[..3], vec![views[3].clone()], [1.0; 3]).unwrap()
+    let mut views: Vec<View> = eyes.iter().enumerate().map(|(i, &e)| view(i, e)).collect();
+    let test = views.split_off(3);
+    Dataset::new(views, test, [1.0; 3]).unwrap()
 }

@@ -95,7 +95,10 @@ pub fn render_test_views<F: Float, M: RadianceField<F>>(
     };
     data.test
         .iter()
-        .map(|t| Ok(render_picture(model, occupancy, &t.origins, &t.directions, t.size(), &options)?.color))
+        .map(|t| {
+            let (origins, directions) = t.rays();
+            Ok(render_picture(model, occupancy, &origins, &directions, t.size(), &options)?.color)
+        })
         .collect()
 }
 
@@ -123,7 +126,8 @@ pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitErro
 ///     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
 ///     View::new("v", &camera, Array3::from_elem((8, 8, 3), 0.25)).unwrap()
 /// });
-/// let data = Dataset::new(&views[..2], vec![views[2].clone()], [1.0; 3])?;
+/// let [a, b, c] = views;
+/// let data = Dataset::new(vec![a, b], vec![c], [1.0; 3])?;
 /// let settings = FitSettings { grid: 12, batch: 64, steps: Some(5), ..FitSettings::default() };
 /// let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {})?;
 /// assert_eq!(result.log.last().unwrap().step, 5);
@@ -209,7 +213,7 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
     // A few clock reads a step: nothing beside a step's milliseconds.
     tape.set_profiling(true);
     let mut phases = Phases::default();
-    let table = TrainingTable::<F>::new(data);
+    let table = TrainingTable::new(data);
     let pixels = table.pixels();
     let (mut loss, mut samples_total) = (f64::NAN, 0usize);
     let fraction = |step: usize, seconds: f64| match settings.budget() {
@@ -254,7 +258,7 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
             clock = now;
         };
         let rows: Vec<usize> = (0..settings.batch).map(|_| rng.gen_range(0..pixels)).collect();
-        let batch = table.gather(&rows)?;
+        let batch = table.gather::<F>(&rows)?;
         lap(&mut phases.batch);
         let samples = sample_rays(&bounds, occupancy.as_ref(), &batch.rays, model.sample_step())?;
         samples_total += samples.len();

@@ -770,11 +770,12 @@ fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &
     for &view in views {
         let camera = ring.camera(view)?;
         let view_data = fogray::fit::dataset::View::new(view.to_string(), &camera, photograph(scene, &camera))?;
+        let (origins, directions) = view_data.rays();
         let r = render_picture(
             &model,
             occupancy.as_ref(),
-            &view_data.origins,
-            &view_data.directions,
+            &origins,
+            &directions,
             view_data.size(),
             &options,
         )?;

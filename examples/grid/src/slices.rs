@@ -16,8 +16,9 @@
 
 use std::path::Path;
 
-use fogray::fit::dense::{DenseGrid, BOUNDS};
+use fogray::fit::dense::DenseGrid;
 use fogray::fit::images::ImageError;
+use fogray::fit::settings::SceneBox;
 use fogray::fit::{FitError, RadianceField};
 use fogray::ops::sample::{GridAxis, OccupancyGrid};
 use fogray::ops::SampleError;
@@ -69,7 +70,8 @@ pub fn in_plane_axes(axis: GridAxis) -> (usize, usize) {
 /// The point at the centre of pixel `(row, column)` of an `n x n` image of the plane across
 /// `axis` through the box's centre.
 pub fn pixel_point(axis: GridAxis, n: usize, row: usize, column: usize) -> [f64; 3] {
-    let (lo, hi) = BOUNDS;
+    // The grid example's models cover the unit box.
+    let SceneBox { min: lo, max: hi } = SceneBox::UNIT;
     let (across, up) = in_plane_axes(axis);
     let mut p = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
     p[across] = lo[across] + (column as f64 + 0.5) / n as f64 * (hi[across] - lo[across]);

@@ -7,7 +7,7 @@
 //!
 //! let ring = Ring::new(4, 1, 6)?;
 //! let data = dataset(&Scene::default(), &ring)?;
-//! assert_eq!(data.colors.nrows(), 4 * 36); // every pixel of the four training views
+//! assert_eq!(data.training_pixels(), 4 * 36); // every pixel of the four training views
 //! assert_eq!(data.test[0].name, "002"); // e = 5 / 1 = 5, so view 2 is held out
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
@@ -47,5 +47,5 @@ pub fn dataset(scene: &Scene, ring: &Ring) -> Result<Dataset, FitError> {
         .into_iter()
         .map(|i| view(scene, ring, i))
         .collect::<Result<Vec<_>, _>>()?;
-    Dataset::new(&train, test, scene.background)
+    Dataset::new(train, test, scene.background)
 }

@@ -44,7 +44,8 @@ fn a_reloaded_model_renders_bitwise_as_the_fit_and_as_render_picture() {
         ..RenderOptions::default()
     };
     for (t, want) in data.test.iter().zip(&result.renders) {
-        let r = render_picture(&back.start.model, None, &t.origins, &t.directions, t.size(), &options).unwrap();
+        let (origins, directions) = t.rays();
+        let r = render_picture(&back.start.model, None, &origins, &directions, t.size(), &options).unwrap();
         assert_eq!(image_bits(&[r.color]), image_bits(std::slice::from_ref(want)));
         assert_eq!(r.depth.unwrap().dim(), (10, 10));
     }

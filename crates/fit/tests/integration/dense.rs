@@ -3,7 +3,7 @@
 
 use fogray_fit::dense::DenseGrid;
 use fogray_fit::model::RadianceField;
-use fogray_fit::settings::Method;
+use fogray_fit::settings::{Method, SceneBox};
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{PackedSamples, Spacing, Uniform};
 use fogray_tape::gradcheck::{gradcheck, GradcheckOptions};
@@ -38,7 +38,7 @@ fn raw_grid() -> ArrayD<f64> {
 
 /// A 3^3 grid of shift -1 holding `raw`, with the prior's weight `smoothness`.
 fn model(raw: &ArrayD<f64>, smoothness: f64) -> DenseGrid<f64> {
-    let mut model = DenseGrid::<f64>::new(3, -1.0, smoothness).unwrap();
+    let mut model = DenseGrid::<f64>::new(SceneBox::UNIT, 3, -1.0, smoothness).unwrap();
     let id = model.grid_id();
     model.params_mut().get_mut(id).unwrap().assign(raw);
     model
@@ -144,7 +144,7 @@ fn resampling_keeps_a_linear_field_exactly() {
 fn densities_are_the_softplus_of_the_shifted_raw_density() {
     // Raw densities from -30 to 30 at the nodes of a 3^3 grid; the model reads them at the
     // nodes, so its densities are ln(1 + exp(raw - 2)), computed here through the C library.
-    let mut model = DenseGrid::<f64>::new(3, -2.0, 0.0).unwrap();
+    let mut model = DenseGrid::<f64>::new(SceneBox::UNIT, 3, -2.0, 0.0).unwrap();
     let id = model.grid_id();
     let raw = |i: usize, j: usize, k: usize| (i * 9 + j * 3 + k) as f64 * (60.0 / 26.0) - 30.0;
     model
@@ -172,5 +172,5 @@ fn densities_are_the_softplus_of_the_shifted_raw_density() {
     // Outside the box the raw value is 0: softplus(-2).
     let outside = model.densities(arr2(&[[2.0, 0.0, 0.0]]).view()).unwrap();
     assert!((outside[0] - (-2f64).exp().ln_1p()).abs() < 1e-16);
-    assert!(DenseGrid::<f32>::new(3, f64::NAN, 0.0).is_err());
+    assert!(DenseGrid::<f32>::new(SceneBox::UNIT, 3, f64::NAN, 0.0).is_err());
 }

@@ -9,6 +9,7 @@ use super::*;
 use crate::scene::Scene;
 use fogray::fit::dense::DenseGrid;
 use fogray::fit::images::ImageError;
+use fogray::fit::settings::SceneBox;
 
 #[test]
 fn pixel_centres_run_right_along_the_first_axis_and_up_the_second() {
@@ -33,7 +34,7 @@ fn the_scene_density_adds_where_primitives_overlap() {
 
 #[test]
 fn a_fresh_model_has_the_shifted_density_everywhere() {
-    let model = DenseGrid::<f32>::new(5, -4.0, 0.0).unwrap();
+    let model = DenseGrid::<f32>::new(SceneBox::UNIT, 5, -4.0, 0.0).unwrap();
     let planes = model_density_planes(&model, 6).unwrap();
     assert_eq!(planes.iter().map(|p| p.axis).collect::<Vec<_>>(), AXES.to_vec());
     let want = softplus(-4.0); // 0.01815

@@ -11,7 +11,7 @@ use fogray::fit::checkpoint::{load, read_info, save};
 use fogray::fit::dense::DenseGrid;
 use fogray::fit::model::RadianceField;
 use fogray::fit::render::{render_picture, RenderOptions, BACKGROUND_OPACITY};
-use fogray::fit::settings::{Budget, FitSettings, Method, Sampling};
+use fogray::fit::settings::{Budget, FitSettings, Method, Sampling, SceneBox};
 use fogray::fit::state::TrainingState;
 use fogray::fit::train::fit;
 use fogray_grid::ring::Ring;
@@ -77,7 +77,8 @@ fn a_saved_fit_gives_back_its_cameras_and_scene_and_renders_from_the_ring_as_the
     for ((i, want), test) in ring.test_views().into_iter().zip(&result.renders).zip(&data.test) {
         let v = view(&scene, &ring, i).unwrap();
         assert_eq!((&v.name, &v.image), (&test.name, &test.image), "view {i}");
-        let r = render_picture(&back.start.model, None, &v.origins, &v.directions, v.size(), &options).unwrap();
+        let (origins, directions) = v.rays();
+        let r = render_picture(&back.start.model, None, &origins, &directions, v.size(), &options).unwrap();
         assert_eq!(
             image_bits(&[r.color]),
             image_bits(std::slice::from_ref(want)),
@@ -122,7 +123,7 @@ fn the_depth_of_a_homogeneous_box_is_its_closed_form() {
     // and leaving at t1 = t0 + L stops at t0 + s with density e^-s on [0, L], so its expected
     // depth given that it stops is t0 + 1 - L e^-L / (1 - e^-L).
     let shift = -4.0;
-    let mut model = DenseGrid::<f64>::new(41, shift, 0.0).unwrap();
+    let mut model = DenseGrid::<f64>::new(SceneBox::UNIT, 41, shift, 0.0).unwrap();
     let raw = (1f64.exp() - 1.0).ln() - shift;
     let id = model.grid_id();
     model

@@ -31,8 +31,9 @@ pub fn ball_view(i: usize, eye: [f64; 3], size: usize) -> View {
     let k = Intrinsics::from_vertical_fov(size, size, 40f64.to_radians()).unwrap();
     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
     let mut view = View::new(format!("{i:03}"), &camera, Array3::zeros((size, size, 3))).unwrap();
+    let rays = view.rays();
     for p in 0..size * size {
-        let (o, d) = (view.origins.row(p), view.directions.row(p));
+        let (o, d) = (rays.0.row(p), rays.1.row(p));
         // The distance of the line o + t d (unit d) from the origin.
         let along = o.dot(&d);
         let miss: f64 = (0..3).map(|a| (o[a] - along * d[a]).powi(2)).sum::<f64>().sqrt();
@@ -66,7 +67,7 @@ pub fn ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
             training.push(view);
         }
     }
-    Dataset::new(&training, held_out, BACKGROUND).unwrap()
+    Dataset::new(training, held_out, BACKGROUND).unwrap()
 }
 
 /// A fresh path `name` in this process's temporary directory: the tests share one process and
