@@ -1,0 +1,240 @@
+//! Why a dataset could not be read or written: every variant names the file at fault, and its
+//! message is one line, so that a user with hundreds of frames knows which one to fix.
+
+use std::fmt;
+use std::path::PathBuf;
+
+use fogray_ops::GeometryError;
+use thiserror::Error;
+
+/// What is wrong with a `transform_matrix`.
+#[derive(Debug, Clone, PartialEq)]
+#[non_exhaustive]
+pub enum MatrixProblem {
+    /// Not an array of 4 arrays of 4 numbers.
+    NotFourByFour,
+    /// An entry that is NaN or infinite.
+    NotFinite,
+    /// The last row is not `0 0 0 1` (a projective transform, not a camera pose).
+    LastRow,
+    /// The 3x3 part is not orthonormal: `max |RᵀR - I|` exceeds `1e-3` (a scaled or sheared
+    /// pose, which the formats do not allow).
+    NotOrthonormal {
+        /// `max |RᵀR - I|` over the nine entries.
+        deviation: f64,
+    },
+    /// The 3x3 part is orthonormal but its determinant is negative (a mirror).
+    Reflection {
+        /// The determinant.
+        det: f64,
+    },
+}
+
+impl fmt::Display for MatrixProblem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            MatrixProblem::NotFourByFour => write!(f, "is not a 4x4 array of numbers"),
+            MatrixProblem::NotFinite => write!(f, "has an entry that is not finite"),
+            MatrixProblem::LastRow => write!(f, "has a last row other than 0 0 0 1"),
+            MatrixProblem::NotOrthonormal { deviation } => write!(
+                f,
+                "has a 3x3 part that is not a rotation: not orthonormal (max |R^T R - I| = {deviation:.3e} > 1e-3)"
+            ),
+            MatrixProblem::Reflection { det } => {
+                write!(
+                    f,
+                    "has a 3x3 part that is not a rotation: determinant {det} is negative"
+                )
+            }
+        }
+    }
+}
+
+/// Why a dataset could not be read or written. Nothing is returned alongside it.
+#[derive(Debug, Error)]
+#[non_exhaustive]
+pub enum DataError {
+    /// A file or folder that could not be read or written.
+    #[error("{path}: {message}", path = .path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The operating system's reason, on one line.
+        message: String,
+    },
+    /// A transforms file that is not valid JSON (truncated, a stray comma...).
+    #[error("{path}: invalid JSON at line {line}, column {column}: {message}", path = .path.display())]
+    Json {
+        /// The transforms file.
+        path: PathBuf,
+        /// 1-based line of the error.
+        line: usize,
+        /// 1-based column of the error.
+        column: usize,
+        /// The parser's reason.
+        message: String,
+    },
+    /// A key that the format requires is absent.
+    #[error("{path}: missing key `{key}`", path = .path.display())]
+    MissingKey {
+        /// The transforms file.
+        path: PathBuf,
+        /// The key, with where it was looked for (`frames[3].transform_matrix`).
+        key: String,
+    },
+    /// A key whose value has the wrong type (a string where a number belongs...).
+    #[error("{path}: `{key}` must be {expected}", path = .path.display())]
+    WrongType {
+        /// The transforms file.
+        path: PathBuf,
+        /// The key, with where it was found.
+        key: String,
+        /// What it must be.
+        expected: &'static str,
+    },
+    /// A camera pose that is not a rigid camera-to-world transform.
+    #[error("{path}: `{key}` {problem}", path = .path.display())]
+    BadMatrix {
+        /// The transforms file.
+        path: PathBuf,
+        /// The key (`frames[3].transform_matrix`).
+        key: String,
+        /// What is wrong with it.
+        problem: MatrixProblem,
+    },
+    /// A number outside its domain: a focal length or field of view that is not positive and
+    /// finite, an image size that is not a positive integer, a principal point that is not
+    /// finite...
+    #[error("{path}: `{key}` is {value} ({rule})", path = .path.display())]
+    BadValue {
+        /// The transforms file.
+        path: PathBuf,
+        /// The key, with where it was found.
+        key: String,
+        /// The offending value.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
+    },
+    /// A transforms file whose `frames` list is empty.
+    #[error("{path}: no frames", path = .path.display())]
+    NoFrames {
+        /// The transforms file.
+        path: PathBuf,
+    },
+    /// A folder with no transforms file in it.
+    #[error("{path}: no transforms file (expected transforms.json or transforms_train.json)", path = .path.display())]
+    NoTransforms {
+        /// The folder.
+        path: PathBuf,
+    },
+    /// Image files named by frames that do not exist (and the load did not ask to skip them).
+    #[error("{path}: {count} image file(s) missing: {}{}", list(.first), if *.count > .first.len() { ", ..." } else { "" }, path = .path.display())]
+    MissingImages {
+        /// The transforms file.
+        path: PathBuf,
+        /// How many are missing.
+        count: usize,
+        /// The first few of them.
+        first: Vec<PathBuf>,
+    },
+    /// An image file that exists but does not decode.
+    #[error("{path}: cannot decode image: {message}", path = .path.display())]
+    Decode {
+        /// The image file.
+        path: PathBuf,
+        /// The decoder's reason, on one line.
+        message: String,
+    },
+    /// An image whose size differs from the first image of its Blender split (the format has
+    /// one `camera_angle_x` per split, so one size).
+    #[error("{path}: image is {}x{} but {first} in the same split is {}x{}", .size.0, .size.1, .first_size.0, .first_size.1, path = .path.display(), first = .first.display())]
+    MixedSizes {
+        /// The image file.
+        path: PathBuf,
+        /// Its width and height.
+        size: (usize, usize),
+        /// The split's first image.
+        first: PathBuf,
+        /// Its width and height.
+        first_size: (usize, usize),
+    },
+    /// An image whose size disagrees with the `w` / `h` of its transforms file.
+    #[error("{path}: image is {}x{} but {transforms} says w = {}, h = {}", .size.0, .size.1, .expected.0, .expected.1, path = .path.display(), transforms = .transforms.display())]
+    SizeMismatch {
+        /// The image file.
+        path: PathBuf,
+        /// Its width and height.
+        size: (usize, usize),
+        /// The transforms file.
+        transforms: PathBuf,
+        /// Its `w` and `h`.
+        expected: (usize, usize),
+    },
+    /// No image size could be found for cameras read without their images: no image file
+    /// exists and the transforms file has no `w` / `h`.
+    #[error("{path}: no image size: no image file of its frames exists and it has no `w` and `h`", path = .path.display())]
+    NoImageSize {
+        /// The transforms file.
+        path: PathBuf,
+    },
+    /// A `downscale` of 0, or one larger than an image.
+    #[error("{path}: downscale {downscale} {problem}", path = .path.display())]
+    BadDownscale {
+        /// The dataset (or the image too small for it).
+        path: PathBuf,
+        /// The requested factor.
+        downscale: usize,
+        /// Why it cannot be used.
+        problem: &'static str,
+    },
+    /// A feature of the file that this crate does not read (a fisheye `camera_model`...).
+    #[error("{path}: {what} is not supported", path = .path.display())]
+    Unsupported {
+        /// The transforms file.
+        path: PathBuf,
+        /// What it asks for.
+        what: String,
+    },
+    /// A camera that fogray-ops refused (an intrinsic or distortion value outside its domain).
+    #[error("{path}: {key}: {source}", path = .path.display())]
+    Camera {
+        /// The transforms file.
+        path: PathBuf,
+        /// The frame (`frames[3]`).
+        key: String,
+        /// The camera's reason.
+        source: GeometryError,
+    },
+    /// Something given to a writer that cannot be written (an image whose shape differs from
+    /// its camera's, a non-finite value, no frames...).
+    #[error("{path}: {message}", path = .path.display())]
+    BadInput {
+        /// The file that was to be written.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn list(paths: &[PathBuf]) -> String {
+    paths
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Messages from the OS, the JSON parser and the image decoders, on one line.
+pub(crate) fn one_line(message: impl fmt::Display) -> String {
+    message.to_string().split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+impl DataError {
+    pub(crate) fn io(path: impl Into<PathBuf>, err: impl fmt::Display) -> Self {
+        DataError::Io {
+            path: path.into(),
+            message: one_line(err),
+        }
+    }
+}

@@ -1,0 +1,300 @@
+//! Loading a dataset: cameras and decoded images, split into train and test.
+
+use std::path::{Path, PathBuf};
+
+use fogray_ops::PinholeCamera;
+use rayon::prelude::*;
+
+use crate::blender::{self, split_file, BLENDER_SCENE_BOX, SPLITS};
+use crate::downscale::downscale_picture;
+use crate::error::DataError;
+use crate::ngp;
+use crate::picture::{decode, dimensions, Picture};
+use crate::resolve::{resolve, Source};
+use crate::spec::FrameSpec;
+use crate::split::holdout;
+
+/// How many missing image files an error lists by name (the count says how many in all).
+const MISSING_LISTED: usize = 5;
+
+/// How to load a dataset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LoadOptions {
+    /// Integer factor (at least 1) by which images are shrunk, each `downscale x downscale`
+    /// block averaged (see [`downscale_picture`](crate::downscale_picture)), and intrinsics
+    /// divided. Default 1.
+    pub downscale: usize,
+    /// RGB in `[0, 1]` that images with alpha are composited over. Default white.
+    pub background: [f64; 3],
+    /// Drop the frames whose image file does not exist (counted in
+    /// [`SceneData::skipped`]) instead of failing. Default false.
+    pub skip_missing: bool,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions {
+            downscale: 1,
+            background: [1.0; 3],
+            skip_missing: false,
+        }
+    }
+}
+
+/// Which format a dataset was read as.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum Format {
+    /// Blender / NeRF-synthetic: `transforms_{train,val,test}.json`.
+    Blender,
+    /// instant-ngp / nerfstudio: one `transforms.json`.
+    InstantNgp,
+}
+
+/// One view: its camera and its image.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    /// `file_path` without folder and extension (`r_0` for `./train/r_0`).
+    pub name: String,
+    /// The image file read.
+    pub file: PathBuf,
+    /// The camera, its intrinsics downscaled with the image (OpenCV axes inside; see
+    /// [`PinholeCamera`]).
+    pub camera: PinholeCamera,
+    /// The image, `camera.intrinsics().height x width`.
+    pub picture: Picture,
+}
+
+/// A loaded dataset.
+#[derive(Debug, Clone)]
+pub struct SceneData {
+    /// The format it was read as.
+    pub format: Format,
+    /// The training views.
+    pub train: Vec<Frame>,
+    /// The held-out views.
+    pub test: Vec<Frame>,
+    /// The box (min, max corners, world coordinates) that holds the scene: `[-1.5, 1.5]^3`
+    /// for Blender, from `aabb_scale` for instant-ngp (see the crate docs).
+    pub scene_box: ([f64; 3], [f64; 3]),
+    /// Frames dropped because their image file did not exist (only with
+    /// [`LoadOptions::skip_missing`]).
+    pub skipped: usize,
+}
+
+/// A camera of a transforms file, read without its image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedCamera {
+    /// `file_path` without folder and extension.
+    pub name: String,
+    /// The camera.
+    pub camera: PinholeCamera,
+}
+
+/// Loads the dataset at `path`: a Blender folder, an instant-ngp / nerfstudio folder (with a
+/// `transforms.json`), or a transforms file (a `transforms_*.json` with `camera_angle_x` and no
+/// `fl_x` loads its folder as Blender; any other as instant-ngp). Images are decoded in
+/// parallel.
+///
+/// Splits: Blender's train is `transforms_train.json`, its test `transforms_test.json`, else
+/// `transforms_val.json`, else every eighth train frame (`i % 8 == 0`, then held out of
+/// train); instant-ngp's test is every eighth frame and its train the rest.
+///
+/// Errors: see [`DataError`]; each names the file at fault.
+pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneData, DataError> {
+    check_downscale(path, options.downscale)?;
+    match resolve(path)? {
+        Source::BlenderFolder(folder) => load_blender(&folder, options),
+        Source::BlenderFile(file) => load_blender(file.parent().unwrap_or(Path::new(".")), options),
+        Source::Ngp(file) => {
+            let parsed = ngp::read(&file)?;
+            let (specs, skipped) = drop_missing(&file, parsed.frames, options.skip_missing)?;
+            let frames = load_frames(&specs, options, false)?;
+            let (train, test) = holdout(frames);
+            Ok(SceneData {
+                format: Format::InstantNgp,
+                train,
+                test,
+                scene_box: parsed.scene_box,
+                skipped,
+            })
+        }
+    }
+}
+
+fn load_blender(folder: &Path, options: &LoadOptions) -> Result<SceneData, DataError> {
+    let mut skipped = 0;
+    let mut load_split = |file: &Path| -> Result<Vec<Frame>, DataError> {
+        let (specs, dropped) = drop_missing(file, blender::read(file)?.frames, options.skip_missing)?;
+        skipped += dropped;
+        load_frames(&specs, options, true)
+    };
+    let train = load_split(&split_file(folder, "train"))?;
+    let held_out = ["test", "val"]
+        .map(|s| split_file(folder, s))
+        .into_iter()
+        .find(|f| f.is_file());
+    let (train, test) = match held_out {
+        Some(file) => (train, load_split(&file)?),
+        None => holdout(train),
+    };
+    Ok(SceneData {
+        format: Format::Blender,
+        train,
+        test,
+        scene_box: BLENDER_SCENE_BOX,
+        skipped,
+    })
+}
+
+fn check_downscale(path: &Path, downscale: usize) -> Result<(), DataError> {
+    if downscale == 0 {
+        return Err(DataError::BadDownscale {
+            path: path.to_path_buf(),
+            downscale,
+            problem: "must be at least 1",
+        });
+    }
+    Ok(())
+}
+
+/// `specs` less those whose image file does not exist, and how many those were; without
+/// `skip`, any missing is an error listing the first few.
+fn drop_missing(transforms: &Path, specs: Vec<FrameSpec>, skip: bool) -> Result<(Vec<FrameSpec>, usize), DataError> {
+    let (present, missing): (Vec<_>, Vec<_>) = specs.into_iter().partition(|s| s.file.is_file());
+    if !missing.is_empty() && !skip {
+        return Err(DataError::MissingImages {
+            path: transforms.to_path_buf(),
+            count: missing.len(),
+            first: missing.iter().take(MISSING_LISTED).map(|s| s.file.clone()).collect(),
+        });
+    }
+    Ok((present, missing.len()))
+}
+
+/// A decoded image's full size, and the image downscaled.
+type Decoded = ((usize, usize), Picture);
+
+/// Decodes, checks and downscales every frame's image (in parallel) and builds its camera.
+/// With `same_size` (a Blender split) every image must have the first one's size; otherwise
+/// each must match its frame's `w` / `h` where given.
+fn load_frames(specs: &[FrameSpec], options: &LoadOptions, same_size: bool) -> Result<Vec<Frame>, DataError> {
+    let factor = options.downscale;
+    let decoded: Vec<Result<Decoded, DataError>> = specs
+        .par_iter()
+        .map(|spec| {
+            let full = decode(&spec.file, options.background)?;
+            let size = (full.width(), full.height());
+            if size.0 / factor == 0 || size.1 / factor == 0 {
+                return Err(DataError::BadDownscale {
+                    path: spec.file.clone(),
+                    downscale: factor,
+                    problem: "is larger than the image",
+                });
+            }
+            Ok((size, downscale_picture(&full, factor)))
+        })
+        .collect();
+    let mut frames = Vec::with_capacity(specs.len());
+    let mut first: Option<(&Path, (usize, usize))> = None;
+    for (spec, result) in specs.iter().zip(decoded) {
+        let (size, picture) = result?;
+        check_size(spec, size, same_size, &mut first)?;
+        frames.push(Frame {
+            name: spec.name.clone(),
+            file: spec.file.clone(),
+            camera: spec.camera(size.0, size.1, factor)?,
+            picture,
+        });
+    }
+    Ok(frames)
+}
+
+fn check_size<'a>(
+    spec: &'a FrameSpec,
+    size: (usize, usize),
+    same_size: bool,
+    first: &mut Option<(&'a Path, (usize, usize))>,
+) -> Result<(), DataError> {
+    if let Some(expected) = spec.size {
+        if expected != size {
+            return Err(DataError::SizeMismatch {
+                path: spec.file.clone(),
+                size,
+                transforms: spec.transforms.clone(),
+                expected,
+            });
+        }
+    }
+    if same_size {
+        match first {
+            None => *first = Some((&spec.file, size)),
+            Some((path, first_size)) if *first_size != size => {
+                return Err(DataError::MixedSizes {
+                    path: spec.file.clone(),
+                    size,
+                    first: path.to_path_buf(),
+                    first_size: *first_size,
+                })
+            }
+            Some(_) => {}
+        }
+    }
+    Ok(())
+}
+
+/// The cameras of every frame at `path`, without decoding any image, downscaled by
+/// `downscale`: a transforms file's frames, or a Blender folder's `train`, `val` and `test`
+/// files in that order (an instant-ngp folder: its `transforms.json`).
+///
+/// Image sizes come from the file's `w` / `h` (instant-ngp), else from the header of the image
+/// file (for Blender, the first existing image of each split file, whose size the format says
+/// all its images share), else, for Blender, the top-level `w` / `h`.
+///
+/// Errors: as [`load`], and [`DataError::NoImageSize`] where no size can be found.
+pub fn load_cameras(path: &Path, downscale: usize) -> Result<Vec<NamedCamera>, DataError> {
+    check_downscale(path, downscale)?;
+    match resolve(path)? {
+        Source::BlenderFolder(folder) => {
+            let mut all = Vec::new();
+            for split in SPLITS {
+                let file = split_file(&folder, split);
+                if split == "train" || file.is_file() {
+                    all.extend(blender_cameras(&file, downscale)?);
+                }
+            }
+            Ok(all)
+        }
+        Source::BlenderFile(file) => blender_cameras(&file, downscale),
+        Source::Ngp(file) => ngp::read(&file)?
+            .frames
+            .iter()
+            .map(|spec| {
+                let (w, h) = match spec.size {
+                    Some(size) => size,
+                    None if spec.file.is_file() => dimensions(&spec.file)?,
+                    None => return Err(DataError::NoImageSize { path: file.clone() }),
+                };
+                named(spec, w, h, downscale)
+            })
+            .collect(),
+    }
+}
+
+fn blender_cameras(file: &Path, downscale: usize) -> Result<Vec<NamedCamera>, DataError> {
+    let parsed = blender::read(file)?;
+    let (w, h) = match parsed.frames.iter().find(|s| s.file.is_file()) {
+        Some(spec) => dimensions(&spec.file)?,
+        None => parsed.size.ok_or_else(|| DataError::NoImageSize {
+            path: file.to_path_buf(),
+        })?,
+    };
+    parsed.frames.iter().map(|spec| named(spec, w, h, downscale)).collect()
+}
+
+fn named(spec: &FrameSpec, w: usize, h: usize, downscale: usize) -> Result<NamedCamera, DataError> {
+    Ok(NamedCamera {
+        name: spec.name.clone(),
+        camera: spec.camera(w, h, downscale)?,
+    })
+}
