@@ -130,6 +130,18 @@ pub enum CliError {
     /// The thread pool of a one-thread run could not be built.
     #[error("{0}")]
     ThreadPool(#[from] rayon::ThreadPoolBuildError),
+    /// A dataset or camera file that could not be read (the message names the file).
+    #[error("{0}")]
+    Data(#[from] fogray_data::DataError),
+    /// A fit that could not run.
+    #[error("{0}")]
+    Fit(#[from] fogray_fit::FitError),
+    /// A model file that could not be written or read.
+    #[error("{0}")]
+    Checkpoint(#[from] fogray_fit::checkpoint::CheckpointError),
+    /// An image that could not be written.
+    #[error("{0}")]
+    Image(#[from] fogray_fit::images::ImageError),
     /// A command-line option outside its domain, or a combination of options not offered.
     #[error("{0}")]
     Option(String),

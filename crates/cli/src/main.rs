@@ -10,7 +10,7 @@ use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use fogray_cli::error::CliError;
 use fogray_cli::evaluate::Method;
-use fogray_cli::{bench, composite, gradcheck, grid_bench, heap, input, markdown, tape_cost};
+use fogray_cli::{bench, composite, fit, gradcheck, grid_bench, heap, input, markdown, render, tape_cost};
 
 /// Counts allocated bytes, so that `fogray bench` can report each method's peak extra memory.
 /// (A counter that forwards `alloc_zeroed` and `realloc` to the system allocator: one that
@@ -51,6 +51,14 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Fit a scene from a dataset on disk (Blender / NeRF-synthetic, instant-ngp or
+    /// nerfstudio): train on its training views, measure the held-out views (the test split,
+    /// else every 8th view) at intervals off the clock, and print the log.
+    #[command(long_about = FIT_HELP)]
+    Fit(Box<fit::FitArgs>),
+    /// Render a model saved by `fogray fit --save-model` from every camera of a transforms
+    /// file: DIR/<name>.png, 8-bit RGB, over the model's background.
+    Render(render::RenderArgs),
     /// Composite packed rays given as JSON; print colour, opacity, depth, weights, transmittance
     /// and, with grad_color, the gradients, as JSON.
     #[command(long_about = COMPOSITE_HELP)]
@@ -179,6 +187,22 @@ impl Publish<'_> {
         }
     }
 }
+
+const FIT_HELP: &str = r#"Fit a scene from a dataset on disk.
+
+--data is a Blender / NeRF-synthetic folder (transforms_train.json, and transforms_test.json or
+transforms_val.json if present), an instant-ngp or nerfstudio folder (transforms.json), or a
+transforms file. Held out: the test split, else the val split, else every 8th frame (i % 8 == 0).
+Images (PNG 8 or 16 bits, JPEG; grey, RGB or RGBA) are composited over --background; the box is
+[-1.5, 1.5]^3 for Blender and instant-ngp's aabb_scale box otherwise, unless --box.
+
+The defaults are the recommended configuration: `fogray fit --data DIR --downscale 4` is a
+whole fit. Ctrl-C stops after the current step and saves the model (to --save-model, else
+fogray-model.safetensors in --out or here), exit status 130.
+
+--json prints {"final_test_psnr", "seconds", "steps", "log": [{"step", "seconds",
+"train_loss", "test_psnr", "samples"}], "views", "size", "load_seconds"}; a progress bar on
+stderr otherwise. A bad dataset: exit status 2, one line on stderr naming the file."#;
 
 const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model: w_k = T_k (1 - exp(-sigma_k delta_k)),
 C = sum w_k c_k + T_end c_bg).
@@ -334,6 +358,16 @@ fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Pu
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let (name, result) = match &cli.command {
+        Command::Fit(args) => match fit::run(args) {
+            Ok(fit::FitOutcome::Done(text)) => ("fit", Ok(text)),
+            Ok(fit::FitOutcome::Interrupted(path)) => {
+                eprintln!("fogray fit: interrupted: the model is saved to {}", path.display());
+                // 128 + SIGINT, as a shell reports a command stopped by Ctrl-C.
+                return ExitCode::from(130);
+            }
+            Err(e) => ("fit", Err(e)),
+        },
+        Command::Render(args) => ("render", render::run(args)),
         Command::Bench {
             op,
             quick,

@@ -41,7 +41,7 @@ use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
-use fogray_ops::sample::OccupancyState;
+use fogray_ops::sample::{CellPoints, OccupancyGrid, OccupancyState};
 use fogray_tape::optim::{Adam, AdamConfig, AdamState};
 use fogray_tape::Float;
 use ndarray::{Array3, ArrayD, ArrayViewD, IxDyn};
@@ -111,6 +111,26 @@ pub struct Checkpoint<F: Float, M> {
     pub settings: FitSettings,
     /// The application's own metadata (`extra.<key>` in the file, without the prefix).
     pub extra: BTreeMap<String, String>,
+}
+
+impl<F: Float, M: RadianceField<F>> Checkpoint<F, M> {
+    /// The occupancy grid to render the saved model with: the saved one for a fit with
+    /// occupancy sampling (rebuilt from the model's densities, one update at the cells'
+    /// centres, if the file has none), `None` for uniform sampling.
+    ///
+    /// Errors: the ops' (not expected for a model [`load`] accepted).
+    pub fn occupancy_grid(&self) -> Result<Option<OccupancyGrid>, crate::FitError> {
+        if self.settings.sampling == Sampling::Uniform {
+            return Ok(None);
+        }
+        let model = &self.start.model;
+        let mut grid = occupancy_grid(model.bounds(), self.settings.grid)?;
+        match &self.start.training.occupancy {
+            Some(state) => grid.restore(state)?,
+            None => grid.update(|p| model.densities(p), CellPoints::Centre)?,
+        }
+        Ok(Some(grid))
+    }
 }
 
 /// The metadata of a model file, read without its tensors' values.

@@ -36,7 +36,11 @@ pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitErr
     if grid < 2 {
         return Err(FitError::Config("--grid must be at least 2".into()));
     }
-    let final_step = 1.0 / (grid - 1) as f64;
+    // The final stage's sample step (half its node spacing along the shortest side), as the
+    // dense grid's: `1 / (grid - 1)` for [-1, 1]^3.
+    let (lo, hi) = (bounds.min(), bounds.max());
+    let side = (0..3).map(|a| hi[a] - lo[a]).fold(f64::INFINITY, f64::min);
+    let final_step = side / (2 * (grid - 1)) as f64;
     Ok(OccupancyGrid::new(
         bounds,
         grid - 1,

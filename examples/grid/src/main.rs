@@ -23,11 +23,8 @@ use fogray::fit::interrupt::StopFlag;
 use fogray::fit::metrics::psnr;
 use fogray::fit::plots;
 use fogray::fit::render::{render_picture, RenderOptions};
-use fogray::fit::sampling::occupancy_grid;
-use fogray::fit::settings::{FitSettings, Precision, Sampling};
+use fogray::fit::settings::{FitSettings, Precision};
 use fogray::fit::train::{fit_from, FitResult, Progress};
-use fogray::fit::RadianceField;
-use fogray::ops::sample::CellPoints;
 use fogray_grid::photographs::{photograph, photographs};
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
@@ -741,20 +738,8 @@ fn run_render(args: RenderArgs) -> Result<()> {
 
 fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &Scene, views: &[usize]) -> Result<()> {
     let saved = checkpoint::load::<F, DenseGrid<F>>(&args.model)?;
+    let occupancy = saved.occupancy_grid()?;
     let model = saved.start.model;
-    // An occupancy model renders with its saved grid; a file without one gets one rebuilt
-    // from the saved density, one update.
-    let occupancy = match saved.settings.sampling {
-        Sampling::Uniform => None,
-        Sampling::Occupancy => {
-            let mut grid = occupancy_grid(model.bounds(), saved.settings.grid)?;
-            match &saved.start.training.occupancy {
-                Some(state) => grid.restore(state)?,
-                None => grid.update(|p| model.densities(p), CellPoints::Centre)?,
-            }
-            Some(grid)
-        }
-    };
     let options = RenderOptions {
         background: scene.background,
         method: fogray::fit::settings::Method::Fused,

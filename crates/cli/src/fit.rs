@@ -1,0 +1,285 @@
+//! `fogray fit`: a dataset on disk (Blender, instant-ngp or nerfstudio) fitted with the
+//! recommended model and settings; the held-out views measured at intervals off the clock.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use fogray_data::{load, LoadOptions, SceneData};
+use fogray_fit::checkpoint;
+use fogray_fit::dataset::{Dataset, View};
+use fogray_fit::dense::DenseGrid;
+use fogray_fit::images::write_comparison_png;
+use fogray_fit::interrupt::StopFlag;
+use fogray_fit::plots;
+use fogray_fit::settings::{FitSettings, Precision, SceneBox};
+use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
+use fogray_tape::Float;
+use serde::Serialize;
+
+use crate::error::CliError;
+
+/// Where the data comes from and how it is read (shared by `fogray fit` and `fogray render`).
+#[derive(Debug, Clone, clap::Args)]
+pub struct DataArgs {
+    /// Average each KxK block of pixels (after compositing over the background) and divide
+    /// the focal lengths and principal point by K.
+    #[arg(long, default_value_t = 1, value_name = "K")]
+    pub downscale: usize,
+    /// The colour behind the scene, r,g,b in [0, 1]: transparent pixels are composited over
+    /// it and the model renders over it.
+    #[arg(long, default_value = "1,1,1", value_parser = parse_colour, value_name = "R,G,B")]
+    pub background: [f64; 3],
+    /// Drop the frames whose image file is missing (and say how many) instead of failing.
+    #[arg(long)]
+    pub skip_missing: bool,
+}
+
+impl DataArgs {
+    /// The loader's options.
+    pub fn options(&self) -> LoadOptions {
+        LoadOptions {
+            downscale: self.downscale,
+            background: self.background,
+            skip_missing: self.skip_missing,
+        }
+    }
+}
+
+/// `r,g,b`, each finite in [0, 1].
+pub fn parse_colour(text: &str) -> Result<[f64; 3], String> {
+    let values: Vec<f64> = text
+        .split(',')
+        .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+        .collect::<Result<_, _>>()?;
+    match values[..] {
+        [r, g, b] if values.iter().all(|v| (0.0..=1.0).contains(v)) => Ok([r, g, b]),
+        _ => Err(format!("{text:?}: give r,g,b, each in [0, 1]")),
+    }
+}
+
+/// The flags of `fogray fit`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct FitArgs {
+    /// A Blender / NeRF-synthetic folder (transforms_train.json ...), an instant-ngp or
+    /// nerfstudio folder (transforms.json), or a transforms file.
+    #[arg(long, value_name = "PATH")]
+    pub data: PathBuf,
+    #[command(flatten)]
+    pub data_args: DataArgs,
+    /// Write the fitted model here (safetensors; `fogray render --model` reads it).
+    #[arg(long, value_name = "FILE")]
+    pub save_model: Option<PathBuf>,
+    /// Write the held-out views (photograph | render | error), the PSNR curve and the log
+    /// (fit.json) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub out: Option<PathBuf>,
+    /// Print {"final_test_psnr", "seconds", "steps", "log": [...]} on stdout instead of a
+    /// table (and no progress bar).
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub settings: FitSettings,
+}
+
+/// What `fogray fit --json` prints.
+#[derive(Debug, Serialize)]
+pub struct FitSummary<'a> {
+    /// PSNR (dB) over all held-out views at the end.
+    pub final_test_psnr: f64,
+    /// Training seconds (evaluations and loading excluded).
+    pub seconds: f64,
+    /// Training steps.
+    pub steps: usize,
+    /// The evaluations, in order (`train_loss` is null before the first step).
+    pub log: &'a [LogEntry],
+    /// Training and held-out views.
+    pub views: [usize; 2],
+    /// `[height, width]` of the first training view.
+    pub size: [usize; 2],
+    /// Seconds from the command's start to the first training step (reading and decoding).
+    pub load_seconds: f64,
+}
+
+/// How a fit ended: its output for stdout, or an interruption (saved).
+pub enum FitOutcome {
+    /// The text to print.
+    Done(String),
+    /// Ctrl-C stopped the fit; it was saved to this file.
+    Interrupted(PathBuf),
+}
+
+/// The dataset's views as the pipeline's: each picture widened to `f64` and its `f32`
+/// dropped as it goes, so that the peak is one copy plus one picture.
+pub fn views(frames: Vec<fogray_data::Frame>) -> Result<Vec<View>, CliError> {
+    frames
+        .into_iter()
+        .map(|f| Ok(View::new(f.name, &f.camera, f.picture.color.mapv(f64::from))?))
+        .collect()
+}
+
+/// Runs `fogray fit`.
+///
+/// Errors: a bad dataset (naming the file), bad settings, a file that cannot be written.
+pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
+    let clock = Instant::now();
+    for file in args.save_model.iter() {
+        let parent = file
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        if !parent.is_dir() {
+            return Err(CliError::Option(format!(
+                "--save-model {}: no directory {}",
+                file.display(),
+                parent.display()
+            )));
+        }
+    }
+    args.settings.check()?;
+    let scene: SceneData = load(&args.data, &args.data_args.options())?;
+    if scene.skipped > 0 {
+        eprintln!(
+            "fogray fit: --skip-missing dropped {} frames whose image is missing",
+            scene.skipped
+        );
+    }
+    let (lo, hi) = scene.scene_box;
+    let settings = FitSettings {
+        scene_box: Some(args.settings.scene_box.unwrap_or(SceneBox { min: lo, max: hi })),
+        ..args.settings
+    };
+    let data = Dataset::new(views(scene.train)?, views(scene.test)?, args.data_args.background)?;
+    if let Some(dir) = &args.out {
+        std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
+    }
+    let stop = StopFlag::on_ctrl_c()?;
+    match settings.precision {
+        Precision::F32 => fit_and_report::<f32>(args, &settings, &data, &stop, clock),
+        Precision::F64 => fit_and_report::<f64>(args, &settings, &data, &stop, clock),
+    }
+}
+
+fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
+    if hidden {
+        return indicatif::ProgressBar::hidden();
+    }
+    let bar = indicatif::ProgressBar::new(1000);
+    if let Ok(style) = indicatif::ProgressStyle::with_template("fit [{bar:40}] {msg} ({elapsed})") {
+        bar.set_style(style.progress_chars("=> "));
+    }
+    bar
+}
+
+/// The checkpoint's own entries: what `fogray render` needs beside the model.
+fn entries(args: &FitArgs) -> Result<BTreeMap<String, String>, CliError> {
+    Ok(BTreeMap::from([
+        (
+            "background".to_string(),
+            serde_json::to_string(&args.data_args.background)?,
+        ),
+        ("data".to_string(), args.data.display().to_string()),
+        ("downscale".to_string(), args.data_args.downscale.to_string()),
+    ]))
+}
+
+fn fit_and_report<F: Float>(
+    args: &FitArgs,
+    settings: &FitSettings,
+    data: &Dataset,
+    stop: &StopFlag,
+    clock: Instant,
+) -> Result<FitOutcome, CliError> {
+    let bar = progress_bar(args.json);
+    let mut load_seconds = f64::NAN;
+    let mut progress = |p: Progress| {
+        if load_seconds.is_nan() {
+            load_seconds = clock.elapsed().as_secs_f64();
+        }
+        bar.set_position((p.fraction * 1000.0) as u64);
+        bar.set_message(format!("step {}", p.step));
+    };
+    let [h, w] = data.train[0].size();
+    if !args.json {
+        eprintln!(
+            "fogray fit: {} training and {} held-out views of {w}x{h}; Ctrl-C stops and saves",
+            data.train.len(),
+            data.test.len()
+        );
+    }
+    let result = fit_from::<F, DenseGrid<F>>(data, settings, None, Some(stop.flag()), &mut progress)?;
+    bar.finish_and_clear();
+    let save_path = match (&args.save_model, result.interrupted) {
+        (Some(p), _) => Some(p.clone()),
+        (None, true) => Some(match &args.out {
+            Some(dir) => dir.join("fogray-model.safetensors"),
+            None => PathBuf::from("fogray-model.safetensors"),
+        }),
+        (None, false) => None,
+    };
+    if let Some(path) = &save_path {
+        checkpoint::save(path, &result.model, &result.training, settings, &entries(args)?)?;
+    }
+    if let (true, Some(path)) = (result.interrupted, save_path) {
+        return Ok(FitOutcome::Interrupted(path));
+    }
+    let summary = FitSummary {
+        final_test_psnr: result.final_test_psnr,
+        seconds: result.seconds,
+        steps: result.training.step,
+        log: &result.log,
+        views: [data.train.len(), data.test.len()],
+        size: [h, w],
+        load_seconds,
+    };
+    if let Some(dir) = &args.out {
+        write_out(dir, data, &result, &summary)?;
+    }
+    if args.json {
+        return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
+    }
+    let mut text = String::from("step      seconds  train loss  test PSNR (dB)\n");
+    for e in &result.log {
+        text += &format!(
+            "{:>6} {:>10.1} {:>11.3e} {:>15.2}\n",
+            e.step, e.seconds, e.train_loss, e.test_psnr
+        );
+    }
+    text += &format!(
+        "final test PSNR {:.2} dB over {} held-out views after {:.1} s ({} steps)",
+        result.final_test_psnr,
+        data.test.len(),
+        result.seconds,
+        result.training.step
+    );
+    Ok(FitOutcome::Done(text))
+}
+
+/// `DIR/test/<name>.png` (photograph | render | error), `DIR/psnr.png`, `DIR/fit.json`.
+fn write_out<F: Float>(
+    dir: &Path,
+    data: &Dataset,
+    result: &FitResult<F, DenseGrid<F>>,
+    summary: &FitSummary,
+) -> Result<(), CliError> {
+    let views = dir.join("test");
+    std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
+    for (t, render) in data.test.iter().zip(&result.renders) {
+        write_comparison_png(
+            &views.join(format!("{}.png", t.name)),
+            t.image.view(),
+            render.view(),
+            4.0,
+            1,
+        )?;
+    }
+    plots::psnr_curves(
+        &dir.join("psnr"),
+        &[plots::Curve {
+            label: "fogray fit".into(),
+            log: &result.log,
+        }],
+    )?;
+    let path = dir.join("fit.json");
+    std::fs::write(&path, serde_json::to_string_pretty(summary)?).map_err(CliError::file("write", &path))
+}
