@@ -1,4 +1,8 @@
 //! The integration tests of the `fogray` binary, one module per topic, in one binary (add a
 //! module here, not a file beside this one).
 
+mod bad_files;
 mod cli;
+mod common;
+mod fit_render;
+mod lego;

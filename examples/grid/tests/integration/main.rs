@@ -4,6 +4,7 @@
 
 mod cli;
 mod common;
+mod datasets;
 mod fit;
 mod persist;
 mod persist_cli;
