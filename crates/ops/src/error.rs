@@ -235,6 +235,52 @@ pub enum ActivationError {
     },
 }
 
+/// Why the spherical-harmonics colour op ([`ShColor`](crate::ShColor)) rejected its
+/// configuration or its input. Nothing is computed (and nothing of the caller's is changed)
+/// when one is returned.
+#[derive(Debug, Clone, PartialEq, Error)]
+#[non_exhaustive]
+pub enum ShError {
+    /// A degree above 3 (the basis is written out to degree 3).
+    #[error("degree {degree} is not supported (must be 0, 1, 2 or 3)")]
+    Degree {
+        /// The degree given.
+        degree: usize,
+    },
+    /// An array whose shape does not fit: coefficients not `[n, 3 (degree + 1)^2]`,
+    /// directions not `[n, 3]` (with the coefficients' `n`), or an upstream gradient not
+    /// `[n, 3]`.
+    #[error("{what}: expected {expected}, got {got}")]
+    Shape {
+        /// Which input.
+        what: &'static str,
+        /// What is required.
+        expected: String,
+        /// What was given.
+        got: String,
+    },
+    /// A coefficient or a direction component that is NaN or infinite.
+    #[error("{what} at row {row}, column {column} is {value} (must be finite)")]
+    NonFinite {
+        /// `"coefficient"` or `"direction"`.
+        what: &'static str,
+        /// Row (sample).
+        row: usize,
+        /// Column.
+        column: usize,
+        /// The offending value.
+        value: f64,
+    },
+    /// A direction whose length is not 1 within `1e-3`.
+    #[error("direction at row {row} has length {norm} (must be 1 within 1e-3)")]
+    NotUnit {
+        /// Row (sample).
+        row: usize,
+        /// Its Euclidean length.
+        norm: f64,
+    },
+}
+
 /// Why a prior's configuration or input was rejected. Nothing is computed (and nothing of the
 /// caller's is changed) when one is returned.
 #[derive(Debug, Clone, PartialEq, Error)]
@@ -272,6 +318,7 @@ macro_rules! tape_error_from {
 tape_error_from! {
     PriorError => "total_variation",
     ActivationError => "density_color",
+    ShError => "sh_color",
     GridError => "grid_field",
     GeometryError => "rays",
     SampleError => "sample",

@@ -21,6 +21,9 @@
 //! - [`activation`]: the activations of a grid renderer's raw values, density
 //!   `softplus(raw_0 + shift)` and colour `sigmoid(raw_1..)`, as a fused op
 //!   ([`DensityColor`]) with a hand-written backward, and its taped twin;
+//! - [`sh`]: view-dependent colour from spherical-harmonics coefficients (degree 0 to 3, the
+//!   Plenoxels / 3D Gaussian splatting basis) through a sigmoid, as a fused op ([`ShColor`])
+//!   with a hand-written backward, and its taped twin;
 //! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]).
 //!
 //! ```
@@ -55,6 +58,7 @@ mod prefetch;
 pub mod prior;
 pub mod rays;
 pub mod sample;
+pub mod sh;
 pub mod twins;
 
 pub use activation::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
@@ -62,8 +66,9 @@ pub use composite::{
     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
-pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError};
+pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError, ShError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted};
 pub use rays::{
     rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, PinholeCamera, RayBatch, RayIntervals,
 };
+pub use sh::ShColor;

@@ -16,3 +16,4 @@ mod hard_cases;
 mod into_buffers;
 mod lesson_tables;
 mod prior;
+mod sh;
