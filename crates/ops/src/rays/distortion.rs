@@ -22,8 +22,17 @@ const MAX_STEPS: usize = 40;
 /// practical focal length) ends the iteration.
 const STEP_TOLERANCE: f64 = 1e-15;
 
-/// The radial (`k1` to `k4`) and tangential (`p1`, `p2`) coefficients of the OpenCV model (see
-/// the [module docs](self)); all zero (the default) is a perfect pinhole.
+/// The radial (`k1` to `k4`) and tangential (`p1`, `p2`) coefficients of the OpenCV model;
+/// all zero (the default) is a perfect pinhole. The lens sends the undistorted normalised point
+/// `(x, y)` (camera-frame `x / z`, `y / z`) to
+///
+/// ```text
+/// r² = x² + y²,   s = 1 + k1 r² + k2 r⁴ + k3 r⁶ + k4 r⁸
+/// x' = x s + 2 p1 x y + p2 (r² + 2 x²)
+/// y' = y s + p1 (r² + 2 y²) + 2 p2 x y
+/// ```
+///
+/// and the pixel is `(fx x' + cx, fy y' + cy)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Distortion {
     /// Radial coefficient of r².
@@ -105,7 +114,7 @@ impl Distortion {
     }
 
     /// The undistorted normalised point that the lens sends to `distorted`, by Newton's method
-    /// (see the [module docs](self)); `None` if the iteration does not settle (a point beyond
+    /// (Newton's method on the 2x2 system, started at `distorted`); `None` if the iteration does not settle (a point beyond
     /// where the model folds back on itself, which no real pixel of a calibrated lens is) or
     /// meets a singular Jacobian.
     pub fn undistort(&self, distorted: [f64; 2]) -> Option<[f64; 2]> {
