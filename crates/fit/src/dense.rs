@@ -19,7 +19,7 @@
 //! let clip = model.bounds().clip(&rays);
 //! let samples = Uniform::new(Spacing::Step(model.sample_step()))?.sample(&rays, &clip)?;
 //! let mut tape = Tape::new();
-//! let out = model.render(&mut tape, samples, [1.0; 3], Method::Fused, RenderWanted::default())?;
+//! let out = model.render(&mut tape, &rays, samples, [1.0; 3], Method::Fused, RenderWanted::default())?;
 //! // A fresh grid is a thin grey fog: density softplus(-4) = 0.018 over a length of 2.
 //! let c = tape.value(out.color)?[[0, 0]];
 //! assert!(c > 0.98 && c < 1.0);
@@ -28,9 +28,9 @@
 
 use fogray_ops::activation::{twin, DensityColor};
 use fogray_ops::prior::TotalVariation;
-use fogray_ops::rays::Aabb;
+use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::PackedSamples;
-use fogray_ops::{twins, Composite, CompositeInputs, CompositeVars, GridBox, GridField};
+use fogray_ops::{twins, Composite, CompositeInputs, CompositeVars, GridBox, GridField, ShColor};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
@@ -39,7 +39,7 @@ use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
 
-/// Channels of a raw grid value: density, then red, green, blue.
+/// Channels of a view-independent grid's raw value: density, then red, green, blue.
 pub const CHANNELS: usize = 4;
 
 /// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
@@ -55,6 +55,8 @@ pub struct DenseGrid<F: Float> {
     prior: TotalVariation,
     bounds: Aabb,
     nodes: usize,
+    /// View-dependent colour: channels `1..` of a raw value are its coefficients.
+    sh: Option<ShColor>,
 }
 
 impl<F: Float> DenseGrid<F> {
@@ -65,13 +67,44 @@ impl<F: Float> DenseGrid<F> {
     /// Errors: fewer than 2 nodes, more than memory can address, a bad box, a shift that is
     /// not finite, a smoothness that is negative or not finite.
     pub fn new(scene_box: SceneBox, nodes: usize, shift: f64, smoothness: f64) -> Result<Self, FitError> {
+        Self::with_channels(scene_box, nodes, shift, smoothness, None)
+    }
+
+    /// The grid of [`DenseGrid::new`] with a view-dependent colour: spherical harmonics of
+    /// `degree` 1 to 3 ([`ShColor`]), `3 (degree + 1)^2` coefficients a node after the density,
+    /// all 0 (grey from every direction); degree 0 is [`DenseGrid::new`]'s view-independent
+    /// colour.
+    ///
+    /// Errors: as [`DenseGrid::new`], and a degree above 3.
+    pub fn view_dependent(
+        scene_box: SceneBox,
+        nodes: usize,
+        shift: f64,
+        smoothness: f64,
+        degree: usize,
+    ) -> Result<Self, FitError> {
+        let sh = match degree {
+            0 => None,
+            d => Some(ShColor::new(d).map_err(|e| FitError::Config(format!("--sh-degree: {e}")))?),
+        };
+        Self::with_channels(scene_box, nodes, shift, smoothness, sh)
+    }
+
+    fn with_channels(
+        scene_box: SceneBox,
+        nodes: usize,
+        shift: f64,
+        smoothness: f64,
+        sh: Option<ShColor>,
+    ) -> Result<Self, FitError> {
         scene_box.check()?;
+        let channels = sh.as_ref().map_or(CHANNELS, |sh| 1 + sh.coefficient_count());
         let field = GridField::new(
             GridBox::new(&scene_box.min, &scene_box.max)?,
-            &[nodes, nodes, nodes, CHANNELS],
+            &[nodes, nodes, nodes, channels],
         )?;
         let mut params = Params::new();
-        let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, CHANNELS)))?;
+        let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, channels)))?;
         let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
         Ok(DenseGrid {
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
@@ -81,7 +114,19 @@ impl<F: Float> DenseGrid<F> {
             activation: DensityColor::new(shift)?,
             prior,
             nodes,
+            sh,
         })
+    }
+
+    /// Channels of a raw value: the density, then the colour's (3, or the spherical
+    /// harmonics' coefficients).
+    pub fn channels(&self) -> usize {
+        self.sh.as_ref().map_or(CHANNELS, |sh| 1 + sh.coefficient_count())
+    }
+
+    /// The degree of the spherical harmonics of the colour (0 for view-independent).
+    pub fn sh_degree(&self) -> usize {
+        self.sh.as_ref().map_or(0, ShColor::degree)
     }
 
     /// The box the grid covers.
@@ -99,28 +144,52 @@ impl<F: Float> DenseGrid<F> {
 
     /// Records the lookup of `samples` in `grid` and the activation, and returns the composite
     /// over the samples' rays with its inputs (the background `background`, shared).
+    #[allow(clippy::too_many_arguments)] // one call site each in render and training_loss
     fn composite_inputs(
         &self,
         tape: &mut Tape<F>,
         grid: Var,
+        rays: &RayBatch<F>,
         samples: PackedSamples<F>,
         background: [f64; 3],
         method: Method,
         depth: bool,
     ) -> Result<(Composite, CompositeInputs), TapeError> {
+        // Each sample's view direction, its ray's (a constant: no gradient).
+        let directions = self.sh.as_ref().map(|_| {
+            let d = rays.directions();
+            Array2::from_shape_fn((samples.len(), 3), |(k, a)| d[[samples.ray[k], a]])
+        });
         let (vars, offsets) = samples.into_tape(tape);
         let raw = match method {
             Method::Fused => self.field.apply(tape, grid, vars.positions)?,
             Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, vars.positions)?,
         };
+        // With spherical harmonics the activation sees the density and the first coefficient
+        // (it needs a colour channel) and only its density is used.
+        let activation_input = match &self.sh {
+            Some(_) => tape.slice(raw, 1, 0, 2)?,
+            None => raw,
+        };
         let activated = match method {
-            Method::Fused => self.activation.apply(tape, raw)?,
-            Method::Taped => twin::density_color(tape, &self.activation, raw)?,
+            Method::Fused => self.activation.apply(tape, activation_input)?,
+            Method::Taped => twin::density_color(tape, &self.activation, activation_input)?,
+        };
+        let color = match (&self.sh, directions) {
+            (Some(sh), Some(directions)) => {
+                let coefficients = tape.slice(raw, 1, 1, self.channels())?;
+                let directions = tape.constant(directions);
+                match method {
+                    Method::Fused => sh.apply(tape, coefficients, directions)?,
+                    Method::Taped => fogray_ops::sh::twin::sh_color(tape, sh, coefficients, directions)?,
+                }
+            }
+            _ => activated.color,
         };
         let inputs = CompositeInputs {
             sigma: activated.sigma,
             delta: vars.delta,
-            color: activated.color,
+            color,
             background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
             t: depth.then_some(vars.t),
         };
@@ -133,14 +202,27 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     const KIND: &'static str = "dense-grid";
 
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
-        DenseGrid::new(settings.model_box(), nodes, settings.shift, settings.smoothness)
+        DenseGrid::view_dependent(
+            settings.model_box(),
+            nodes,
+            settings.shift,
+            settings.smoothness,
+            settings.sh_degree,
+        )
     }
 
     /// Each new node takes the trilinear interpolation of this grid's raw values at its
     /// position.
     fn resampled(&self, nodes: usize) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
-        let mut grown = DenseGrid::<F>::new(scene_box, nodes, self.activation.shift(), self.prior.weight())?;
+        let mut grown = DenseGrid::<F>::with_channels(
+            scene_box,
+            nodes,
+            self.activation.shift(),
+            self.prior.weight(),
+            self.sh.clone(),
+        )?;
+        let channels = self.channels();
         let at = |i: usize, axis: usize| {
             let (lo, hi) = (scene_box.min[axis], scene_box.max[axis]);
             let spacing = (hi - lo) / (nodes - 1) as f64;
@@ -154,7 +236,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         let grid = self.params.get(self.grid)?;
         let raw = self.field.evaluate(&grid, &positions.view().into_dyn())?;
         let raw = raw
-            .into_shape_with_order(IxDyn(&[nodes, nodes, nodes, CHANNELS]))
+            .into_shape_with_order(IxDyn(&[nodes, nodes, nodes, channels]))
             .map_err(|e| FitError::Config(format!("resampled grid: {e}")))?;
         grown.params.get_mut(grown.grid)?.assign(&raw);
         Ok(grown)
@@ -187,13 +269,14 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     fn render(
         &self,
         tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
         samples: PackedSamples<F>,
         background: [f64; 3],
         method: Method,
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let (op, inputs) = self.composite_inputs(tape, grid, samples, background, method, wanted.depth)?;
+        let (op, inputs) = self.composite_inputs(tape, grid, rays, samples, background, method, wanted.depth)?;
         match method {
             Method::Fused => op.apply(tape, &inputs),
             Method::Taped => twins::stable(tape, &op, &inputs),
@@ -206,13 +289,14 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     fn training_loss(
         &self,
         tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
         samples: PackedSamples<F>,
         background: [f64; 3],
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let (op, inputs) = self.composite_inputs(tape, grid, samples, background, method, false)?;
+        let (op, inputs) = self.composite_inputs(tape, grid, rays, samples, background, method, false)?;
         let photometric = match method {
             Method::Fused => op.apply_mse(tape, &inputs, target)?,
             Method::Taped => {

@@ -5,7 +5,7 @@
 //!
 //! [`DenseGrid`]: crate::dense::DenseGrid
 
-use fogray_ops::rays::Aabb;
+use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::PackedSamples;
 use fogray_ops::CompositeVars;
 use fogray_tape::params::Params;
@@ -62,13 +62,15 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     /// The trainable parameters, for an optimiser's step or a checkpoint's load.
     fn params_mut(&mut self) -> &mut Params<F>;
 
-    /// Records the render of `samples` over `background`: colour `[R, 3]`, opacity `[R]` and,
-    /// if wanted, the depth. The samples move onto the tape.
+    /// Records the render of `samples` of `rays` (whose directions a view-dependent colour
+    /// reads) over `background`: colour `[R, 3]`, opacity `[R]` and, if wanted, the depth.
+    /// The samples move onto the tape.
     ///
     /// Errors: from the ops (a tape error naming the op).
     fn render(
         &self,
         tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
         samples: PackedSamples<F>,
         background: [f64; 3],
         method: Method,
@@ -82,6 +84,7 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     fn training_loss(
         &self,
         tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
         samples: PackedSamples<F>,
         background: [f64; 3],
         target: Var,

@@ -119,7 +119,7 @@ pub fn render_rays<F: Float, M: RadianceField<F>>(
         let end = (start + CHUNK).min(n);
         let rays = RayBatch::new(rows_of::<F>(origins, start, end), rows_of::<F>(directions, start, end))?;
         let samples = sample_rays(&bounds, occupancy, &rays, model.sample_step())?;
-        let out = model.render(&mut tape, samples, options.background, options.method, wanted)?;
+        let out = model.render(&mut tape, &rays, samples, options.background, options.method, wanted)?;
         let (c, o) = (tape.value(out.color)?, tape.value(out.opacity)?);
         for k in 0..end - start {
             for ch in 0..3 {

@@ -225,6 +225,10 @@ pub struct FitSettings {
     /// Test evaluations, evenly spaced over the budget (plus one at the start and the end).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.evaluations))]
     pub evaluations: usize,
+    /// Degree of the spherical harmonics of the colour, 0 to 3 (0: the same colour from every
+    /// direction; 1 to 3: 3 (degree + 1)^2 coefficients a node).
+    #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.sh_degree))]
+    pub sh_degree: usize,
     /// The box the model covers: H for [-H, H]^3, or x0,y0,z0,x1,y1,z1; the data's own box
     /// when not given ([-1, 1]^3 for data that names none).
     #[cfg_attr(
@@ -253,6 +257,7 @@ impl FitSettings {
         grow: true,
         shift: -4.0,
         evaluations: 20,
+        sh_degree: 0,
         scene_box: None,
     };
 
@@ -298,6 +303,9 @@ impl FitSettings {
         }
         if !self.shift.is_finite() {
             return bad("--shift must be finite");
+        }
+        if self.sh_degree > 3 {
+            return bad("--sh-degree must be 0, 1, 2 or 3");
         }
         if let Some(b) = self.scene_box {
             b.check()?;

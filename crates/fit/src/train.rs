@@ -264,7 +264,14 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
         samples_total += samples.len();
         lap(&mut phases.sample);
         let target = tape.constant(batch.colors);
-        let objective = model.training_loss(&mut tape, samples, data.background, target, settings.method)?;
+        let objective = model.training_loss(
+            &mut tape,
+            &batch.rays,
+            samples,
+            data.background,
+            target,
+            settings.method,
+        )?;
         loss = tape
             .value(objective.photometric)?
             .iter()
