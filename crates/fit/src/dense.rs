@@ -215,13 +215,8 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     /// position.
     fn resampled(&self, nodes: usize) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
-        let mut grown = DenseGrid::<F>::with_channels(
-            scene_box,
-            nodes,
-            self.activation.shift(),
-            self.prior.weight(),
-            self.sh.clone(),
-        )?;
+        let mut grown =
+            DenseGrid::<F>::with_channels(scene_box, nodes, self.activation.shift(), self.prior.weight(), self.sh)?;
         let channels = self.channels();
         let at = |i: usize, axis: usize| {
             let (lo, hi) = (scene_box.min[axis], scene_box.max[axis]);
