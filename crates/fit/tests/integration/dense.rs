@@ -45,12 +45,18 @@ fn model(raw: &ArrayD<f64>, smoothness: f64) -> DenseGrid<f64> {
 }
 
 /// The training objective of [`setup`]'s rays with the raw grid `grid` (a value on `tape`), as
-/// a function of `grid` that gradcheck can difference: the model lends its own copy of the grid
-/// to the tape, so the tape's gradient of the objective with respect to that copy, `g`, is
-/// carried to `grid` by adding `sum((grid - detach(grid)) * g)`, which is exactly 0 (the value
-/// is the objective's) and whose gradient with respect to `grid` is exactly `g`.
-fn objective(tape: &mut Tape<f64>, grid: Var, method: Method, smoothness: f64) -> Result<Var, TapeError> {
-    let model = model(&tape.value(grid)?.to_owned(), smoothness);
+/// a function of `grid` that gradcheck can difference, for the model `build` makes holding
+/// `grid`'s value: the model lends its own copy of the grid to the tape, so the tape's
+/// gradient of the objective with respect to that copy, `g`, is carried to `grid` by adding
+/// `sum((grid - detach(grid)) * g)`, which is exactly 0 (the value is the objective's) and
+/// whose gradient with respect to `grid` is exactly `g`.
+fn carried_objective(
+    tape: &mut Tape<f64>,
+    grid: Var,
+    method: Method,
+    build: impl Fn(&ArrayD<f64>) -> DenseGrid<f64>,
+) -> Result<Var, TapeError> {
+    let model = build(&tape.value(grid)?.to_owned());
     let (rays, samples, target) = setup();
     let target = tape.constant(target);
     let loss = model
@@ -63,6 +69,11 @@ fn objective(tape: &mut Tape<f64>, grid: Var, method: Method, smoothness: f64) -
     let carried = tape.mul(zero, g)?;
     let carried = tape.sum(carried)?;
     tape.add(loss, carried)
+}
+
+/// [`carried_objective`] of the view-independent grid with the prior's weight `smoothness`.
+fn objective(tape: &mut Tape<f64>, grid: Var, method: Method, smoothness: f64) -> Result<Var, TapeError> {
+    carried_objective(tape, grid, method, |raw| model(raw, smoothness))
 }
 
 #[test]
@@ -191,23 +202,6 @@ fn view_dependent_raw(degree: usize) -> ArrayD<f64> {
     .into_dyn()
 }
 
-/// The view-dependent grid's objective as a function of its raw grid (as [`objective`]).
-fn view_dependent_objective(tape: &mut Tape<f64>, grid: Var, method: Method, degree: usize) -> Result<Var, TapeError> {
-    let model = view_dependent_model(&tape.value(grid)?.to_owned(), degree);
-    let (rays, samples, target) = setup();
-    let target = tape.constant(target);
-    let loss = model
-        .training_loss(tape, &rays, samples, BACKGROUND, target, method)?
-        .objective;
-    let g = tape.backward(loss)?.param(model.grid_id()).unwrap().to_owned();
-    let g = tape.constant(g);
-    let frozen = tape.detach(grid)?;
-    let zero = tape.sub(grid, frozen)?;
-    let carried = tape.mul(zero, g)?;
-    let carried = tape.sum(carried)?;
-    tape.add(loss, carried)
-}
-
 /// Spherical-harmonics colour through the whole model: its gradient against central
 /// differences for degrees 1 and 2, fused and taped, and the fused and taped losses equal.
 #[test]
@@ -216,7 +210,7 @@ fn a_view_dependent_grid_passes_gradcheck_fused_and_taped() {
         let mut losses = Vec::new();
         for method in [Method::Fused, Method::Taped] {
             let report = gradcheck(
-                |t, v| view_dependent_objective(t, v[0], method, degree),
+                |t, v| carried_objective(t, v[0], method, |raw| view_dependent_model(raw, degree)),
                 &[view_dependent_raw(degree)],
                 &GradcheckOptions::default(),
             )
