@@ -127,18 +127,8 @@ pub fn views(frames: Vec<fogray_data::Frame>) -> Result<Vec<View>, CliError> {
 /// Errors: a bad dataset (naming the file), bad settings, a file that cannot be written.
 pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
     let clock = Instant::now();
-    for file in args.save_model.iter() {
-        let parent = file
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        if !parent.is_dir() {
-            return Err(CliError::Option(format!(
-                "--save-model {}: no directory {}",
-                file.display(),
-                parent.display()
-            )));
-        }
+    if let Some(file) = &args.save_model {
+        checkpoint::check_destination(file)?;
     }
     args.settings.check()?;
     let scene: SceneData = load(&args.data, &args.data_args.options())?;

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use fogray_data::{load_cameras, NamedCamera};
 use fogray_fit::checkpoint::{self, read_info};
-use fogray_fit::dataset::View;
+use fogray_fit::dataset::camera_rays;
 use fogray_fit::dense::DenseGrid;
 use fogray_fit::images::write_png;
 use fogray_fit::model::RadianceField;
@@ -84,14 +84,13 @@ fn render_all<F: Float>(args: &RenderArgs, cameras: &[NamedCamera], background: 
     let mut written = Vec::new();
     for c in cameras {
         let k = c.camera.intrinsics();
-        let view = View::new(c.name.clone(), &c.camera, Array3::zeros((k.height, k.width, 3)))?;
-        let (origins, directions) = view.rays();
+        let (origins, directions) = camera_rays(&c.camera);
         let picture = render_picture(
             &saved.start.model,
             occupancy.as_ref(),
             &origins,
             &directions,
-            view.size(),
+            [k.height, k.width],
             &options,
         )?;
         let path = args.out.join(format!("{}.png", c.name));

@@ -133,6 +133,25 @@ impl<F: Float, M: RadianceField<F>> Checkpoint<F, M> {
     }
 }
 
+/// Checks that a model can be written to `path` before a fit spends its budget: its
+/// directory exists (the working directory for a bare file name).
+///
+/// Errors: [`CheckpointError::Write`] naming the missing directory.
+pub fn check_destination(path: &Path) -> Result<(), CheckpointError> {
+    let parent = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
+    if parent.is_dir() {
+        Ok(())
+    } else {
+        Err(CheckpointError::Write {
+            path: path.to_path_buf(),
+            message: format!("no directory {}", parent.display()),
+        })
+    }
+}
+
 /// The metadata of a model file, read without its tensors' values.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ModelInfo {

@@ -71,18 +71,7 @@ impl View {
     /// The ray through each pixel's centre, row-major: origins and unit directions `[H*W, 3]`
     /// (built in parallel, a row of the picture at a time).
     pub fn rays(&self) -> (Array2<f64>, Array2<f64>) {
-        let [h, w] = self.size();
-        let centre = self.camera.centre();
-        let origins = Array2::from_shape_fn((h * w, 3), |(_, a)| centre[a]);
-        let mut directions = Array2::zeros((h * w, 3));
-        if let Some(values) = directions.as_slice_mut() {
-            values.par_chunks_mut(3 * w.max(1)).enumerate().for_each(|(row, line)| {
-                for (col, d) in line.chunks_exact_mut(3).enumerate() {
-                    d.copy_from_slice(&self.camera.direction(row, col));
-                }
-            });
-        }
-        (origins, directions)
+        camera_rays(&self.camera)
     }
 
     /// Pixels of the picture.
@@ -90,6 +79,26 @@ impl View {
         let [h, w] = self.size();
         h * w
     }
+}
+
+/// The ray through each pixel's centre of `camera`'s image, row-major: origins and unit
+/// directions `[H*W, 3]` in `f64`, as [`render_picture`](crate::render::render_picture) takes
+/// them (built in parallel, a row of the image at a time; the same values as
+/// [`PinholeCamera::rays`]).
+pub fn camera_rays(camera: &PinholeCamera) -> (Array2<f64>, Array2<f64>) {
+    let k = camera.intrinsics();
+    let (h, w) = (k.height, k.width);
+    let centre = camera.centre();
+    let origins = Array2::from_shape_fn((h * w, 3), |(_, a)| centre[a]);
+    let mut directions = Array2::zeros((h * w, 3));
+    if let Some(values) = directions.as_slice_mut() {
+        values.par_chunks_mut(3 * w.max(1)).enumerate().for_each(|(row, line)| {
+            for (col, d) in line.chunks_exact_mut(3).enumerate() {
+                d.copy_from_slice(&camera.direction(row, col));
+            }
+        });
+    }
+    (origins, directions)
 }
 
 /// The training views and the held-out views of a fit.

@@ -45,6 +45,11 @@ pub const CHANNELS: usize = 4;
 /// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
 pub const GRID: &str = "grid";
 
+/// Channels of a raw value with the colour `sh` (none: view-independent RGB).
+fn channels_with(sh: Option<&ShColor>) -> usize {
+    sh.map_or(CHANNELS, |sh| 1 + sh.coefficient_count())
+}
+
 /// A dense grid of raw density and colour, its parameters kept in a [`Params`] store.
 #[derive(Debug)]
 pub struct DenseGrid<F: Float> {
@@ -98,7 +103,7 @@ impl<F: Float> DenseGrid<F> {
         sh: Option<ShColor>,
     ) -> Result<Self, FitError> {
         scene_box.check()?;
-        let channels = sh.as_ref().map_or(CHANNELS, |sh| 1 + sh.coefficient_count());
+        let channels = channels_with(sh.as_ref());
         let field = GridField::new(
             GridBox::new(&scene_box.min, &scene_box.max)?,
             &[nodes, nodes, nodes, channels],
@@ -121,7 +126,7 @@ impl<F: Float> DenseGrid<F> {
     /// Channels of a raw value: the density, then the colour's (3, or the spherical
     /// harmonics' coefficients).
     pub fn channels(&self) -> usize {
-        self.sh.as_ref().map_or(CHANNELS, |sh| 1 + sh.coefficient_count())
+        channels_with(self.sh.as_ref())
     }
 
     /// The degree of the spherical harmonics of the colour (0 for view-independent).

@@ -420,13 +420,7 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
         create_dir(dir)?;
     }
     if let Some(file) = &args.save_model {
-        let parent = file
-            .parent()
-            .filter(|p| !p.as_os_str().is_empty())
-            .unwrap_or(Path::new("."));
-        if !parent.is_dir() {
-            anyhow::bail!("cannot write {}: no directory {}", file.display(), parent.display());
-        }
+        checkpoint::check_destination(file)?;
     }
     let data = dataset(&problem.scene, &ring)?;
     let stop = StopFlag::on_ctrl_c()?;
