@@ -67,7 +67,7 @@ pub use composite::{
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
 pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError, ShError};
-pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted};
+pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted, NodeIndex, SparseGridField};
 pub use rays::{
     rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, PinholeCamera, RayBatch, RayIntervals,
 };

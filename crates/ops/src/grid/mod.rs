@@ -61,7 +61,9 @@ mod geometry;
 mod op;
 mod scatter;
 mod scratch;
+pub mod sparse;
 pub mod twin;
 
 pub use config::{GridField, GridGradientBuffers, GridGradients, GridWanted};
 pub use geometry::GridBox;
+pub use sparse::{NodeIndex, SparseGridField};

@@ -16,14 +16,14 @@ use super::scatter::grid_gradient;
 use crate::error::GridError;
 
 /// The values of `x` in row-major order: borrowed when contiguous, copied otherwise.
-fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
+pub(crate) fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
     match x.as_slice() {
         Some(s) => Cow::Borrowed(s),
         None => Cow::Owned(x.iter().copied().collect()),
     }
 }
 
-fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, GridError> {
+pub(crate) fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, GridError> {
     ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| GridError::Shape {
         what: "output",
         expected: format!("{shape:?}"),
@@ -32,7 +32,7 @@ fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, GridError
 }
 
 /// A caller's buffer as a flat slice: of shape `shape`, contiguous in standard order.
-fn buffer<'a, F: Float>(
+pub(crate) fn buffer<'a, F: Float>(
     what: &'static str,
     b: &'a mut ArrayViewMutD<'_, F>,
     shape: &[usize],
@@ -49,6 +49,38 @@ fn buffer<'a, F: Float>(
         expected: "a contiguous array in standard (row-major) order".into(),
         got: "a strided view".into(),
     })
+}
+
+/// Positions `[n, d]`, flat, and `n`.
+///
+/// Errors: another shape ([`GridError::Shape`]), a NaN coordinate ([`GridError::NanPosition`],
+/// the first one).
+pub(crate) fn check_positions<'a, F: Float>(
+    positions: &'a ArrayViewD<'_, F>,
+    d: usize,
+) -> Result<(Cow<'a, [F]>, usize), GridError> {
+    if positions.ndim() != 2 || positions.shape()[1] != d {
+        return Err(GridError::Shape {
+            what: "positions",
+            expected: format!("[n, {d}]"),
+            got: format!("{:?}", positions.shape()),
+        });
+    }
+    let positions = flat(positions);
+    // By chunks: rayon's per-element search costs more than the lookups.
+    let chunk = CHUNK * d;
+    if let Some(c) = positions
+        .par_chunks(chunk)
+        .position_first(|c| c.iter().any(|x| x.is_nan()))
+    {
+        let i = c * chunk + positions[c * chunk..].iter().position(|x| x.is_nan()).unwrap_or(0);
+        return Err(GridError::NanPosition {
+            sample: i / d,
+            axis: i % d,
+        });
+    }
+    let n = positions.len() / d;
+    Ok((positions, n))
 }
 
 /// The checked inputs, flat.
@@ -73,30 +105,10 @@ impl GridField {
                 got: format!("{:?}", grid.shape()),
             });
         }
-        let d = self.dims();
-        if positions.ndim() != 2 || positions.shape()[1] != d {
-            return Err(GridError::Shape {
-                what: "positions",
-                expected: format!("[n, {d}]"),
-                got: format!("{:?}", positions.shape()),
-            });
-        }
-        let positions = flat(positions);
-        // By chunks: rayon's per-element search costs more than the lookups.
-        let chunk = CHUNK * d;
-        if let Some(c) = positions
-            .par_chunks(chunk)
-            .position_first(|c| c.iter().any(|x| x.is_nan()))
-        {
-            let i = c * chunk + positions[c * chunk..].iter().position(|x| x.is_nan()).unwrap_or(0);
-            return Err(GridError::NanPosition {
-                sample: i / d,
-                axis: i % d,
-            });
-        }
+        let (positions, n) = check_positions(positions, self.dims())?;
         Ok(Checked {
             grid: flat(grid),
-            n: positions.len() / d,
+            n,
             positions,
         })
     }
@@ -277,7 +289,7 @@ impl GridField {
 }
 
 /// The grid's own error, kept whole through the tape (`TapeError::downcast_ref`).
-fn op_error(e: GridError) -> OpError {
+pub(crate) fn op_error(e: GridError) -> OpError {
     OpError::typed(e)
 }
 

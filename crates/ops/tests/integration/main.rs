@@ -17,3 +17,4 @@ mod into_buffers;
 mod lesson_tables;
 mod prior;
 mod sh;
+mod sparse_grid;
