@@ -12,8 +12,10 @@ use fogray_fit::dense::DenseGrid;
 use fogray_fit::images::write_comparison_png;
 use fogray_fit::interrupt::StopFlag;
 use fogray_fit::plots;
-use fogray_fit::settings::{FitSettings, Precision, SceneBox};
+use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
+use fogray_fit::sparse::SparseGrid;
 use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
+use fogray_fit::RadianceField;
 use fogray_tape::Float;
 use serde::Serialize;
 
@@ -103,6 +105,8 @@ pub struct FitSummary<'a> {
     pub size: [usize; 2],
     /// Seconds from the command's start to the first training step (reading and decoding).
     pub load_seconds: f64,
+    /// Trainable values of the fitted model (a sparse grid's follow the nodes it kept).
+    pub parameters: usize,
 }
 
 /// How a fit ended: its output for stdout, or an interruption (saved).
@@ -149,8 +153,8 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
     }
     let stop = StopFlag::on_ctrl_c()?;
     match settings.precision {
-        Precision::F32 => fit_and_report::<f32>(args, &settings, &data, &stop, clock),
-        Precision::F64 => fit_and_report::<f64>(args, &settings, &data, &stop, clock),
+        Precision::F32 => fit_model::<f32>(args, &settings, &data, &stop, clock),
+        Precision::F64 => fit_model::<f64>(args, &settings, &data, &stop, clock),
     }
 }
 
@@ -177,7 +181,20 @@ fn entries(args: &FitArgs) -> Result<BTreeMap<String, String>, CliError> {
     ]))
 }
 
-fn fit_and_report<F: Float>(
+fn fit_model<F: Float>(
+    args: &FitArgs,
+    settings: &FitSettings,
+    data: &Dataset,
+    stop: &StopFlag,
+    clock: Instant,
+) -> Result<FitOutcome, CliError> {
+    match settings.model {
+        ModelKind::Dense => fit_and_report::<F, DenseGrid<F>>(args, settings, data, stop, clock),
+        ModelKind::Sparse => fit_and_report::<F, SparseGrid<F>>(args, settings, data, stop, clock),
+    }
+}
+
+fn fit_and_report<F: Float, M: RadianceField<F>>(
     args: &FitArgs,
     settings: &FitSettings,
     data: &Dataset,
@@ -201,7 +218,7 @@ fn fit_and_report<F: Float>(
             data.test.len()
         );
     }
-    let result = fit_from::<F, DenseGrid<F>>(data, settings, None, Some(stop.flag()), &mut progress)?;
+    let result = fit_from::<F, M>(data, settings, None, Some(stop.flag()), &mut progress)?;
     bar.finish_and_clear();
     let save_path = match (&args.save_model, result.interrupted) {
         (Some(p), _) => Some(p.clone()),
@@ -225,6 +242,13 @@ fn fit_and_report<F: Float>(
         views: [data.train.len(), data.test.len()],
         size: [h, w],
         load_seconds,
+        parameters: result
+            .model
+            .params()
+            .ids()
+            .filter_map(|id| result.model.params().get(id).ok())
+            .map(|v| v.len())
+            .sum(),
     };
     if let Some(dir) = &args.out {
         write_out(dir, data, &result, &summary)?;
@@ -250,10 +274,10 @@ fn fit_and_report<F: Float>(
 }
 
 /// `DIR/test/<name>.png` (photograph | render | error), `DIR/psnr.png`, `DIR/fit.json`.
-fn write_out<F: Float>(
+fn write_out<F: Float, M>(
     dir: &Path,
     data: &Dataset,
-    result: &FitResult<F, DenseGrid<F>>,
+    result: &FitResult<F, M>,
     summary: &FitSummary,
 ) -> Result<(), CliError> {
     let views = dir.join("test");

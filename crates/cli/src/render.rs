@@ -11,6 +11,7 @@ use fogray_fit::images::write_png;
 use fogray_fit::model::RadianceField;
 use fogray_fit::render::{render_picture, RenderOptions};
 use fogray_fit::settings::{Method, Precision};
+use fogray_fit::sparse::SparseGrid;
 use fogray_tape::Float;
 use ndarray::Array3;
 
@@ -41,13 +42,17 @@ pub struct RenderArgs {
 /// it), two frames of one name, a file that cannot be written.
 pub fn run(args: &RenderArgs) -> Result<String, CliError> {
     let info = read_info(&args.model)?;
-    if info.kind != DenseGrid::<f32>::KIND {
-        return Err(CliError::Option(format!(
-            "{}: a {:?} model, which fogray render does not know",
-            args.model.display(),
-            info.kind
-        )));
-    }
+    let sparse = match info.kind.as_str() {
+        k if k == DenseGrid::<f32>::KIND => false,
+        k if k == SparseGrid::<f32>::KIND => true,
+        _ => {
+            return Err(CliError::Option(format!(
+                "{}: a {:?} model, which fogray render does not know",
+                args.model.display(),
+                info.kind
+            )))
+        }
+    };
     let cameras = load_cameras(&args.cameras, args.downscale)?;
     let mut names = std::collections::BTreeSet::new();
     if let Some(twice) = cameras.iter().find(|c| !names.insert(c.name.as_str())) {
@@ -63,14 +68,20 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
         None => [1.0; 3],
     };
     std::fs::create_dir_all(&args.out).map_err(CliError::file("create", &args.out))?;
-    match info.settings.precision {
-        Precision::F32 => render_all::<f32>(args, &cameras, background),
-        Precision::F64 => render_all::<f64>(args, &cameras, background),
+    match (info.settings.precision, sparse) {
+        (Precision::F32, false) => render_all::<f32, DenseGrid<f32>>(args, &cameras, background),
+        (Precision::F64, false) => render_all::<f64, DenseGrid<f64>>(args, &cameras, background),
+        (Precision::F32, true) => render_all::<f32, SparseGrid<f32>>(args, &cameras, background),
+        (Precision::F64, true) => render_all::<f64, SparseGrid<f64>>(args, &cameras, background),
     }
 }
 
-fn render_all<F: Float>(args: &RenderArgs, cameras: &[NamedCamera], background: [f64; 3]) -> Result<String, CliError> {
-    let saved = checkpoint::load::<F, DenseGrid<F>>(&args.model)?;
+fn render_all<F: Float, M: RadianceField<F>>(
+    args: &RenderArgs,
+    cameras: &[NamedCamera],
+    background: [f64; 3],
+) -> Result<String, CliError> {
+    let saved = checkpoint::load::<F, M>(&args.model)?;
     let occupancy = saved.occupancy_grid()?;
     let options = RenderOptions {
         background,

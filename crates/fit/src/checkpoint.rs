@@ -302,6 +302,15 @@ pub fn save<F: Float, M: RadianceField<F>>(
             ));
         }
     }
+    for (name, mask) in model.structure() {
+        let n = model.nodes();
+        tensors.push((
+            name.into(),
+            Dtype::BOOL,
+            vec![n, n, n],
+            mask.iter().map(|&k| u8::from(k)).collect(),
+        ));
+    }
     if let Some(occupancy) = &training.occupancy {
         let shape = occupancy.estimate.shape().to_vec();
         let estimate = occupancy.estimate.iter().flat_map(|e| e.to_le_bytes()).collect();
@@ -444,7 +453,13 @@ pub fn load<F: Float, M: RadianceField<F>>(path: &Path) -> Result<Checkpoint<F, 
         return Err(meta.error(format!("model {:?}, not {:?}", info.kind, M::KIND)));
     }
     let tensors = SafeTensors::deserialize(&bytes).map_err(|e| meta.error(e.to_string()))?;
-    let mut model = M::fresh(&settings, info.nodes).map_err(|e| meta.error(e.to_string()))?;
+    let n = info.nodes;
+    let mask = |name: &str| {
+        let view = tensors.tensor(name).ok()?;
+        (view.dtype() == Dtype::BOOL && view.shape() == [n, n, n])
+            .then(|| view.data().iter().map(|&b| b != 0).collect())
+    };
+    let mut model = M::with_structure(&settings, n, &mask).map_err(|e| meta.error(e.to_string()))?;
     let tensor = |name: &str, shape: &[usize]| -> Result<ArrayD<F>, CheckpointError> {
         let view = tensors
             .tensor(name)

@@ -29,7 +29,7 @@
 use fogray_ops::activation::{twin, DensityColor};
 use fogray_ops::prior::TotalVariation;
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::PackedSamples;
+use fogray_ops::sample::{OccupancyGrid, PackedSamples};
 use fogray_ops::{twins, Composite, CompositeInputs, CompositeVars, GridBox, GridField, ShColor};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -218,7 +218,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
 
     /// Each new node takes the trilinear interpolation of this grid's raw values at its
     /// position.
-    fn resampled(&self, nodes: usize) -> Result<Self, FitError> {
+    fn resampled(&self, nodes: usize, _occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
         let mut grown =
             DenseGrid::<F>::with_channels(scene_box, nodes, self.activation.shift(), self.prior.weight(), self.sh)?;

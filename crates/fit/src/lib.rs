@@ -78,6 +78,8 @@ pub mod render;
 pub mod sampling;
 pub mod schedule;
 pub mod settings;
+pub mod shading;
+pub mod sparse;
 pub mod state;
 #[cfg(test)]
 mod testing;

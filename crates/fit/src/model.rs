@@ -6,7 +6,7 @@
 //! [`DenseGrid`]: crate::dense::DenseGrid
 
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::PackedSamples;
+use fogray_ops::sample::{OccupancyGrid, PackedSamples};
 use fogray_ops::CompositeVars;
 use fogray_tape::params::Params;
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -42,10 +42,32 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     /// Errors: a resolution or setting the model cannot take.
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError>;
 
-    /// The same field at `nodes` per axis (coarse-to-fine growth).
+    /// The same field at `nodes` per axis (coarse-to-fine growth); a model that stores only
+    /// the space a scene needs reads what is empty from `occupancy` (the fit's occupancy grid,
+    /// refreshed from this model), others ignore it.
     ///
     /// Errors: as [`RadianceField::fresh`].
-    fn resampled(&self, nodes: usize) -> Result<Self, FitError>;
+    fn resampled(&self, nodes: usize, occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError>;
+
+    /// Masks beyond the parameters that a checkpoint keeps to rebuild the model (a sparse
+    /// grid's kept nodes), by name, one entry per lattice node; none by default.
+    fn structure(&self) -> Vec<(&'static str, Vec<bool>)> {
+        Vec::new()
+    }
+
+    /// The model of `settings` at `nodes` per axis, every parameter 0, rebuilt with the masks
+    /// [`RadianceField::structure`] gave (looked up by name); [`RadianceField::fresh`] by
+    /// default.
+    ///
+    /// Errors: as [`RadianceField::fresh`], and a mask that is missing or of the wrong size.
+    fn with_structure(
+        settings: &FitSettings,
+        nodes: usize,
+        structure: &dyn Fn(&str) -> Option<Vec<bool>>,
+    ) -> Result<Self, FitError> {
+        let _ = structure;
+        Self::fresh(settings, nodes)
+    }
 
     /// Nodes per axis.
     fn nodes(&self) -> usize;

@@ -25,8 +25,13 @@ pub fn sample_rays<F: Float>(
     })
 }
 
+/// Cells per axis of a fit's occupancy grid at most: past it a cell spans several voxels, so
+/// that its refresh (a density per cell) costs what a 128^3 grid's does however fine the
+/// model.
+pub const OCCUPANCY_CELLS_MAX: usize = 128;
+
 /// An occupancy grid as a fit of `grid` nodes per axis over `bounds` keeps one: one cell per
-/// voxel, a cell occupied while a step of half the final voxel through it would stop at least
+/// voxel (up to [`OCCUPANCY_CELLS_MAX`] per axis), a cell occupied while a step of half the final voxel through it would stop at least
 /// 1 % of the light (the final grid's half voxel sets the threshold, so it means the same at
 /// every growth stage). Every cell is occupied until its first refresh, which its default
 /// [`Refresh`](fogray_ops::sample::Refresh) policy times.
@@ -43,7 +48,7 @@ pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitErr
     let final_step = side / (2 * (grid - 1)) as f64;
     Ok(OccupancyGrid::new(
         bounds,
-        grid - 1,
+        (grid - 1).min(OCCUPANCY_CELLS_MAX),
         OccupancyConfig::opacity(final_step, 0.01)?,
     )?)
 }

@@ -43,6 +43,28 @@ pub enum Sampling {
     Occupancy,
 }
 
+/// Which radiance field a fit trains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum ModelKind {
+    /// Every node of the grid stored ([`DenseGrid`](crate::dense::DenseGrid)): small scenes.
+    Dense,
+    /// Only the nodes near what the occupancy grid finds, pruned at each growth
+    /// ([`SparseGrid`](crate::sparse::SparseGrid)): memory follows the scene.
+    Sparse,
+}
+
+impl ModelKind {
+    /// `dense` or `sparse`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Dense => "dense",
+            ModelKind::Sparse => "sparse",
+        }
+    }
+}
+
 /// The floating-point type of a model and its render.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -237,6 +259,9 @@ pub struct FitSettings {
     )]
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scene_box: Option<SceneBox>,
+    /// The model: a dense grid, or a sparse one pruned to the occupied space at each growth.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.model))]
+    pub model: ModelKind,
 }
 
 impl FitSettings {
@@ -259,6 +284,7 @@ impl FitSettings {
         evaluations: 20,
         sh_degree: 0,
         scene_box: None,
+        model: ModelKind::Dense,
     };
 
     /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].

@@ -246,7 +246,7 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
         }
         let start = Instant::now();
         if next_stage < stages.len() && fraction(step, seconds) >= stages[next_stage].0 {
-            model = model.resampled(stages[next_stage].1)?;
+            model = model.resampled(stages[next_stage].1, occupancy.as_ref())?;
             adam = Adam::new(adam_config)?;
             next_stage += 1;
         }

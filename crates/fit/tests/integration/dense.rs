@@ -142,7 +142,7 @@ fn resampling_keeps_a_linear_field_exactly() {
     let at = |i: usize, n: usize| -1.0 + 2.0 * i as f64 / (n - 1) as f64;
     let linear = Array4::from_shape_fn((3, 3, 3, 4), |(i, j, k, c)| f(at(i, 3), at(j, 3), at(k, 3), c));
     let model = model(&linear.into_dyn(), 0.0);
-    let grown = model.resampled(5).unwrap();
+    let grown = model.resampled(5, None).unwrap();
     assert_eq!(grown.nodes(), 5);
     let values = grown.params().get(grown.grid_id()).unwrap();
     for ((i, j, k, c), v) in values.into_dimensionality::<Ix4>().unwrap().indexed_iter() {

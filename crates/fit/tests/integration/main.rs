@@ -7,4 +7,5 @@ mod checkpoint;
 mod common;
 mod dense;
 mod resume;
+mod sparse;
 mod train;

@@ -1,0 +1,119 @@
+//! What a grid model does with its raw values once it has looked them up: the density and
+//! colour activation (or view-dependent colour through spherical harmonics) and the
+//! composite over the packed samples, fused or taped. The dense and the sparse grid differ
+//! only in the lookup they pass in.
+
+use fogray_ops::activation::{twin, DensityColor};
+use fogray_ops::rays::RayBatch;
+use fogray_ops::sample::PackedSamples;
+use fogray_ops::{Background, Composite, CompositeInputs, ShColor};
+use fogray_tape::{Float, Tape, TapeError, Var};
+use ndarray::Array2;
+
+use crate::error::FitError;
+use crate::settings::Method;
+
+/// Channels of a view-independent raw value: density, then red, green, blue.
+pub const VIEW_INDEPENDENT_CHANNELS: usize = 4;
+
+/// How raw values become density and colour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shading {
+    /// The density's shift and the view-independent colour's sigmoid.
+    pub activation: DensityColor,
+    /// View-dependent colour: channels `1..` of a raw value are its coefficients.
+    pub sh: Option<ShColor>,
+}
+
+/// The background a composite is recorded with: a tape value and whether it is one colour
+/// for every ray (`[3]`) or one per ray (`[R, 3]`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct BackgroundVar {
+    /// The colour(s) on the tape.
+    pub value: Var,
+    /// Shared or per ray.
+    pub kind: Background,
+}
+
+impl Shading {
+    /// The shading of density shift `shift` with spherical harmonics of `degree` (0:
+    /// view-independent colour).
+    ///
+    /// Errors: a shift that is not finite, a degree above 3 ([`FitError::Config`] naming the
+    /// flag).
+    pub fn new(shift: f64, degree: usize) -> Result<Self, FitError> {
+        let sh = match degree {
+            0 => None,
+            d => Some(ShColor::new(d).map_err(|e| FitError::Config(format!("--sh-degree: {e}")))?),
+        };
+        Ok(Shading {
+            activation: DensityColor::new(shift)?,
+            sh,
+        })
+    }
+
+    /// Channels of a raw value: the density, then the colour's (3, or the spherical
+    /// harmonics' coefficients).
+    pub fn channels(&self) -> usize {
+        self.sh
+            .map_or(VIEW_INDEPENDENT_CHANNELS, |sh| 1 + sh.coefficient_count())
+    }
+
+    /// The degree of the spherical harmonics (0 for view-independent colour).
+    pub fn sh_degree(&self) -> usize {
+        self.sh.as_ref().map_or(0, ShColor::degree)
+    }
+
+    /// Records `lookup` (sample positions `[n, 3]` to raw values `[n, C]`) of `samples` of
+    /// `rays`, the activation and the colour, and returns the composite over the samples' rays
+    /// (with the depth if `depth`) with its inputs.
+    #[allow(clippy::too_many_arguments)] // one call site each in the grid models' render and loss
+    pub fn composite_inputs<F: Float>(
+        &self,
+        tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
+        samples: PackedSamples<F>,
+        background: BackgroundVar,
+        method: Method,
+        depth: bool,
+        lookup: impl FnOnce(&mut Tape<F>, Var) -> Result<Var, TapeError>,
+    ) -> Result<(Composite, CompositeInputs), TapeError> {
+        // Each sample's view direction, its ray's (a constant: no gradient).
+        let directions = self.sh.as_ref().map(|_| {
+            let d = rays.directions();
+            Array2::from_shape_fn((samples.len(), 3), |(k, a)| d[[samples.ray[k], a]])
+        });
+        let (vars, offsets) = samples.into_tape(tape);
+        let raw = lookup(tape, vars.positions)?;
+        // With spherical harmonics the activation sees the density and the first coefficient
+        // (it needs a colour channel) and only its density is used.
+        let activation_input = match &self.sh {
+            Some(_) => tape.slice(raw, 1, 0, 2)?,
+            None => raw,
+        };
+        let activated = match method {
+            Method::Fused => self.activation.apply(tape, activation_input)?,
+            Method::Taped => twin::density_color(tape, &self.activation, activation_input)?,
+        };
+        let color = match (&self.sh, directions) {
+            (Some(sh), Some(directions)) => {
+                let coefficients = tape.slice(raw, 1, 1, self.channels())?;
+                let directions = tape.constant(directions);
+                match method {
+                    Method::Fused => sh.apply(tape, coefficients, directions)?,
+                    Method::Taped => fogray_ops::sh::twin::sh_color(tape, sh, coefficients, directions)?,
+                }
+            }
+            _ => activated.color,
+        };
+        let inputs = CompositeInputs {
+            sigma: activated.sigma,
+            delta: vars.delta,
+            color,
+            background: Some(background.value),
+            t: depth.then_some(vars.t),
+        };
+        let op = Composite::packed(offsets).background(background.kind);
+        Ok((if depth { op.with_depth() } else { op }, inputs))
+    }
+}

@@ -1,0 +1,302 @@
+//! The sparse grid: a lattice of `N^3` nodes over the scene's box of which only those near
+//! matter are stored ([`SparseGridField`]: packed rows of raw density and colour, an index
+//! from each node to its row), shaded and composited as the dense grid is. It grows coarse to
+//! fine like the dense grid, and each growth prunes: the new lattice keeps the nodes within
+//! [`DILATION`] occupancy cells of an occupied one (the dilation lets surfaces still move),
+//! so the parameters, their gradient, Adam's moments and a step's scatter grow with the nodes
+//! kept, not with `N^3`; only the index (4 bytes a node) spans the lattice.
+//!
+//! A node that is not stored reads raw 0 (the fresh grid's thin fog, below the occupancy
+//! threshold): the occupancy grid marks pruned space empty at its next refresh and the
+//! samplers skip it. The first stage keeps every node. It has no smoothness prior.
+//!
+//! ```
+//! use fogray_fit::sparse::SparseGrid;
+//! use fogray_fit::model::RadianceField;
+//! use fogray_fit::settings::FitSettings;
+//!
+//! let model = SparseGrid::<f32>::fresh(&FitSettings::default(), 8)?;
+//! assert_eq!(model.kept(), 8 * 8 * 8); // the first stage keeps every node
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use fogray_ops::grid::{NodeIndex, SparseGridField};
+use fogray_ops::rays::{Aabb, RayBatch};
+use fogray_ops::sample::{OccupancyGrid, PackedSamples};
+use fogray_ops::{twins, Background, CompositeVars, GridBox};
+use fogray_tape::params::{ParamId, Params};
+use fogray_tape::{Float, Tape, TapeError, Var};
+use ndarray::{Array1, Array2, ArrayView2, Ix2};
+
+use crate::error::FitError;
+use crate::model::{RadianceField, RenderWanted, TrainingLoss};
+use crate::settings::{FitSettings, Method, SceneBox};
+use crate::shading::{BackgroundVar, Shading};
+
+/// The name of the packed raw values `[kept, C]` in the parameter store and a checkpoint.
+pub const DATA: &str = "sparse_grid";
+
+/// The name of the kept-node mask `[N, N, N]` in a checkpoint.
+pub const KEPT: &str = "sparse_grid.kept";
+
+/// Occupancy cells around an occupied one whose nodes a growth keeps.
+pub const DILATION: usize = 2;
+
+/// A sparse grid of raw density and colour, its packed values kept in a [`Params`] store.
+#[derive(Debug)]
+pub struct SparseGrid<F: Float> {
+    params: Params<F>,
+    data: ParamId,
+    field: SparseGridField,
+    shading: Shading,
+    bounds: Aabb,
+    nodes: usize,
+}
+
+/// Where node `i` of `nodes` sits along axis `a` of `scene_box`.
+fn node_position(scene_box: &SceneBox, nodes: usize, a: usize, i: usize) -> f64 {
+    let (lo, hi) = (scene_box.min[a], scene_box.max[a]);
+    lo + i as f64 * (hi - lo) / (nodes - 1) as f64
+}
+
+impl<F: Float> SparseGrid<F> {
+    /// The grid over `scene_box` of the lattice nodes `index` keeps (`nodes^3`), every raw
+    /// value 0, with `shading`.
+    ///
+    /// Errors: a bad box, a lattice that is not `nodes^3`.
+    pub fn new(scene_box: SceneBox, nodes: usize, index: NodeIndex, shading: Shading) -> Result<Self, FitError> {
+        scene_box.check()?;
+        if index.nodes() != [nodes; 3] {
+            return Err(FitError::Config(format!(
+                "sparse grid: an index of {:?} nodes for a lattice of {nodes}^3",
+                index.nodes()
+            )));
+        }
+        let channels = shading.channels();
+        let field = SparseGridField::new(GridBox::new(&scene_box.min, &scene_box.max)?, index, channels)?;
+        let mut params = Params::new();
+        let data = params.add(DATA, Array2::<F>::zeros((field.index().kept(), channels)))?;
+        Ok(SparseGrid {
+            params,
+            data,
+            field,
+            shading,
+            bounds: Aabb::new(scene_box.min, scene_box.max)?,
+            nodes,
+        })
+    }
+
+    /// Nodes stored.
+    pub fn kept(&self) -> usize {
+        self.field.index().kept()
+    }
+
+    /// Which lattice nodes are stored.
+    pub fn index(&self) -> &NodeIndex {
+        self.field.index()
+    }
+
+    /// The box the lattice covers.
+    pub fn scene_box(&self) -> SceneBox {
+        SceneBox {
+            min: self.bounds.min(),
+            max: self.bounds.max(),
+        }
+    }
+
+    /// The degree of the spherical harmonics of the colour (0 for view-independent).
+    pub fn sh_degree(&self) -> usize {
+        self.shading.sh_degree()
+    }
+
+    /// The same field on a lattice of `nodes^3` keeping the nodes `keep` marks: each kept
+    /// node takes this grid's raw value at its position.
+    ///
+    /// Errors: a mask that is not one entry per node.
+    pub fn resampled_onto(&self, nodes: usize, keep: &[bool]) -> Result<Self, FitError> {
+        let scene_box = self.scene_box();
+        let mut grown = SparseGrid::<F>::new(scene_box, nodes, NodeIndex::from_mask([nodes; 3], keep)?, self.shading)?;
+        let kept = grown.index().kept_nodes();
+        let positions = Array2::from_shape_fn((kept.len(), 3), |(r, a)| {
+            let l = kept[r];
+            let i = [l / (nodes * nodes), l / nodes % nodes, l % nodes][a];
+            F::lit(node_position(&scene_box, nodes, a, i))
+        });
+        let data = self.params.get(self.data)?;
+        let raw = self.field.evaluate(&data, &positions.view().into_dyn())?;
+        grown.params.get_mut(grown.data)?.assign(&raw);
+        Ok(grown)
+    }
+
+    fn lookup(&self, tape: &mut Tape<F>, data: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
+        match method {
+            Method::Fused => self.field.apply(tape, data, positions),
+            Method::Taped => fogray_ops::grid::sparse::twin::lookup(tape, &self.field, data, positions),
+        }
+    }
+}
+
+/// The nodes of a `nodes^3` lattice over `scene_box` within `dilation` cells (per axis) of an
+/// occupied cell of `occupancy`: one entry per node, in linear order.
+pub fn keep_near_occupied(scene_box: &SceneBox, nodes: usize, occupancy: &OccupancyGrid, dilation: usize) -> Vec<bool> {
+    let r = occupancy.resolution();
+    let mut near: Vec<bool> = (0..r * r * r)
+        .map(|l| occupancy.is_occupied([l / (r * r), l / r % r, l % r]))
+        .collect();
+    // A box dilation is three passes of a running window, one along each axis.
+    for stride in [r * r, r, 1] {
+        let before = near.clone();
+        for (l, n) in near.iter_mut().enumerate() {
+            let i = l / stride % r;
+            let (lo, hi) = (i.saturating_sub(dilation), (i + dilation).min(r - 1));
+            *n = (lo..=hi).any(|j| before[l - i * stride + j * stride]);
+        }
+    }
+    (0..nodes * nodes * nodes)
+        .map(|l| {
+            let i = [l / (nodes * nodes), l / nodes % nodes, l % nodes];
+            let p = std::array::from_fn(|a| node_position(scene_box, nodes, a, i[a]));
+            occupancy.cell_of(p).is_some_and(|[x, y, z]| near[(x * r + y) * r + z])
+        })
+        .collect()
+}
+
+impl<F: Float> RadianceField<F> for SparseGrid<F> {
+    const KIND: &'static str = "sparse-grid";
+
+    /// Every node of the lattice stored.
+    fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
+        let shading = Shading::new(settings.shift, settings.sh_degree)?;
+        SparseGrid::new(settings.model_box(), nodes, NodeIndex::full([nodes; 3])?, shading)
+    }
+
+    /// Keeps the nodes within [`DILATION`] occupancy cells of an occupied one (every node
+    /// without an occupancy grid).
+    fn resampled(&self, nodes: usize, occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
+        let keep = match occupancy {
+            Some(g) => keep_near_occupied(&self.scene_box(), nodes, g, DILATION),
+            None => vec![true; nodes * nodes * nodes],
+        };
+        self.resampled_onto(nodes, &keep)
+    }
+
+    fn structure(&self) -> Vec<(&'static str, Vec<bool>)> {
+        let mut keep = vec![false; self.nodes.pow(3)];
+        for l in self.index().kept_nodes() {
+            keep[l] = true;
+        }
+        vec![(KEPT, keep)]
+    }
+
+    fn with_structure(
+        settings: &FitSettings,
+        nodes: usize,
+        structure: &dyn Fn(&str) -> Option<Vec<bool>>,
+    ) -> Result<Self, FitError> {
+        let keep = structure(KEPT).ok_or_else(|| FitError::Config(format!("no {KEPT:?} mask")))?;
+        let shading = Shading::new(settings.shift, settings.sh_degree)?;
+        SparseGrid::new(
+            settings.model_box(),
+            nodes,
+            NodeIndex::from_mask([nodes; 3], &keep)?,
+            shading,
+        )
+    }
+
+    fn nodes(&self) -> usize {
+        self.nodes
+    }
+
+    fn bounds(&self) -> Aabb {
+        self.bounds
+    }
+
+    /// Half the lattice spacing along the box's shortest side, as the dense grid's.
+    fn sample_step(&self) -> f64 {
+        let b = self.scene_box();
+        let side = (0..3).map(|a| b.max[a] - b.min[a]).fold(f64::INFINITY, f64::min);
+        side / (2 * (self.nodes - 1)) as f64
+    }
+
+    fn params(&self) -> &Params<F> {
+        &self.params
+    }
+
+    fn params_mut(&mut self) -> &mut Params<F> {
+        &mut self.params
+    }
+
+    fn render(
+        &self,
+        tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        method: Method,
+        wanted: RenderWanted,
+    ) -> Result<CompositeVars, TapeError> {
+        let data = tape.param_from(&self.params, self.data)?;
+        let background = BackgroundVar {
+            value: tape.constant(Array1::from_iter(background.map(F::lit))),
+            kind: Background::Shared,
+        };
+        let (op, inputs) = self.shading.composite_inputs(
+            tape,
+            rays,
+            samples,
+            background,
+            method,
+            wanted.depth,
+            |tape, positions| self.lookup(tape, data, positions, method),
+        )?;
+        match method {
+            Method::Fused => op.apply(tape, &inputs),
+            Method::Taped => twins::stable(tape, &op, &inputs),
+        }
+    }
+
+    fn training_loss(
+        &self,
+        tape: &mut Tape<F>,
+        rays: &RayBatch<F>,
+        samples: PackedSamples<F>,
+        background: [f64; 3],
+        target: Var,
+        method: Method,
+    ) -> Result<TrainingLoss, TapeError> {
+        let data = tape.param_from(&self.params, self.data)?;
+        let background = BackgroundVar {
+            value: tape.constant(Array1::from_iter(background.map(F::lit))),
+            kind: Background::Shared,
+        };
+        let (op, inputs) =
+            self.shading
+                .composite_inputs(tape, rays, samples, background, method, false, |tape, positions| {
+                    self.lookup(tape, data, positions, method)
+                })?;
+        let photometric = match method {
+            Method::Fused => op.apply_mse(tape, &inputs, target)?,
+            Method::Taped => {
+                let color = twins::stable(tape, &op, &inputs)?.color;
+                let residual = tape.sub(color, target)?;
+                let squared = tape.square(residual)?;
+                tape.mean(squared)?
+            }
+        };
+        Ok(TrainingLoss {
+            photometric,
+            objective: photometric,
+        })
+    }
+
+    /// A position outside the box or among absent nodes reads raw 0 (density
+    /// `softplus(shift)`).
+    fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError> {
+        let data = self.params.get(self.data)?;
+        let raw = self.field.evaluate(&data, &positions.into_dyn())?;
+        let raw = raw
+            .into_dimensionality::<Ix2>()
+            .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
+        Ok(self.shading.activation.density(raw.view())?)
+    }
+}
