@@ -12,6 +12,7 @@ use fogray_fit::dense::DenseGrid;
 use fogray_fit::images::write_comparison_png;
 use fogray_fit::interrupt::StopFlag;
 use fogray_fit::plots;
+use fogray_fit::profile::ProfileTable;
 use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
 use fogray_fit::sparse::SparseGrid;
 use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
@@ -107,6 +108,8 @@ pub struct FitSummary<'a> {
     pub load_seconds: f64,
     /// Trainable values of the fitted model (a sparse grid's follow the nodes it kept).
     pub parameters: usize,
+    /// Where a training step's time went, milliseconds a step averaged over the fit.
+    pub profile: ProfileTable,
 }
 
 /// How a fit ended: its output for stdout, or an interruption (saved).
@@ -242,6 +245,7 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         views: [data.train.len(), data.test.len()],
         size: [h, w],
         load_seconds,
+        profile: result.profile.table(),
         parameters: result
             .model
             .params()

@@ -8,7 +8,8 @@
 //!
 //! A node that is not stored reads raw 0 (the fresh grid's thin fog, below the occupancy
 //! threshold): the occupancy grid marks pruned space empty at its next refresh and the
-//! samplers skip it. The first stage keeps every node. It has no smoothness prior.
+//! samplers skip it. The first stage keeps every node. Its total-variation prior
+//! ([`SparseTotalVariation`]) takes the pairs of neighbouring nodes that are both stored.
 //!
 //! ```
 //! use fogray_fit::sparse::SparseGrid;
@@ -21,8 +22,9 @@
 //! ```
 
 use fogray_ops::grid::{NodeIndex, SparseGridField};
+use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{OccupancyGrid, PackedSamples};
+use fogray_ops::sample::{CellPoints, OccupancyGrid, PackedSamples};
 use fogray_ops::{twins, Background, CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -49,6 +51,7 @@ pub struct SparseGrid<F: Float> {
     data: ParamId,
     field: SparseGridField,
     shading: Shading,
+    prior: SparseTotalVariation,
     bounds: Aabb,
     nodes: usize,
 }
@@ -61,10 +64,17 @@ fn node_position(scene_box: &SceneBox, nodes: usize, a: usize, i: usize) -> f64 
 
 impl<F: Float> SparseGrid<F> {
     /// The grid over `scene_box` of the lattice nodes `index` keeps (`nodes^3`), every raw
-    /// value 0, with `shading`.
+    /// value 0, with `shading`; `smoothness` weighs its total-variation prior (0 for none).
     ///
-    /// Errors: a bad box, a lattice that is not `nodes^3`.
-    pub fn new(scene_box: SceneBox, nodes: usize, index: NodeIndex, shading: Shading) -> Result<Self, FitError> {
+    /// Errors: a bad box, a lattice that is not `nodes^3`, a smoothness that is negative or
+    /// not finite.
+    pub fn new(
+        scene_box: SceneBox,
+        nodes: usize,
+        index: NodeIndex,
+        shading: Shading,
+        smoothness: f64,
+    ) -> Result<Self, FitError> {
         scene_box.check()?;
         if index.nodes() != [nodes; 3] {
             return Err(FitError::Config(format!(
@@ -76,9 +86,11 @@ impl<F: Float> SparseGrid<F> {
         let field = SparseGridField::new(GridBox::new(&scene_box.min, &scene_box.max)?, index, channels)?;
         let mut params = Params::new();
         let data = params.add(DATA, Array2::<F>::zeros((field.index().kept(), channels)))?;
+        let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
         Ok(SparseGrid {
             params,
             data,
+            prior: SparseTotalVariation::new(prior, &field),
             field,
             shading,
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
@@ -115,7 +127,13 @@ impl<F: Float> SparseGrid<F> {
     /// Errors: a mask that is not one entry per node.
     pub fn resampled_onto(&self, nodes: usize, keep: &[bool]) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
-        let mut grown = SparseGrid::<F>::new(scene_box, nodes, NodeIndex::from_mask([nodes; 3], keep)?, self.shading)?;
+        let mut grown = SparseGrid::<F>::new(
+            scene_box,
+            nodes,
+            NodeIndex::from_mask([nodes; 3], keep)?,
+            self.shading,
+            self.prior.weight(),
+        )?;
         let kept = grown.index().kept_nodes();
         let positions = Array2::from_shape_fn((kept.len(), 3), |(r, a)| {
             let l = kept[r];
@@ -167,14 +185,26 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     /// Every node of the lattice stored.
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
         let shading = Shading::new(settings.shift, settings.sh_degree)?;
-        SparseGrid::new(settings.model_box(), nodes, NodeIndex::full([nodes; 3])?, shading)
+        SparseGrid::new(
+            settings.model_box(),
+            nodes,
+            NodeIndex::full([nodes; 3])?,
+            shading,
+            settings.smoothness,
+        )
     }
 
     /// Keeps the nodes within [`DILATION`] occupancy cells of an occupied one (every node
-    /// without an occupancy grid).
+    /// without an occupancy grid), after refreshing a copy of the grid from this model: a
+    /// growth may come before the fit's first refresh, or long after its last.
     fn resampled(&self, nodes: usize, occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
         let keep = match occupancy {
-            Some(g) => keep_near_occupied(&self.scene_box(), nodes, g, DILATION),
+            Some(g) => {
+                let mut fresh = g.clone();
+                let points = CellPoints::CentreAndRandom { seed: nodes as u64 };
+                fresh.update(|p| self.densities(p), points)?;
+                keep_near_occupied(&self.scene_box(), nodes, &fresh, DILATION)
+            }
             None => vec![true; nodes * nodes * nodes],
         };
         self.resampled_onto(nodes, &keep)
@@ -200,6 +230,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             nodes,
             NodeIndex::from_mask([nodes; 3], &keep)?,
             shading,
+            settings.smoothness,
         )
     }
 
@@ -283,10 +314,13 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
                 tape.mean(squared)?
             }
         };
-        Ok(TrainingLoss {
-            photometric,
-            objective: photometric,
-        })
+        let objective = if self.prior.weight() > 0.0 {
+            let smooth = self.prior.apply(tape, data)?;
+            tape.add(photometric, smooth)?
+        } else {
+            photometric
+        };
+        Ok(TrainingLoss { photometric, objective })
     }
 
     /// A position outside the box or among absent nodes reads raw 0 (density

@@ -44,13 +44,20 @@ fn some_absent() -> Vec<bool> {
     (0..27).map(|l| l % 2 == 0 || l == 13).collect()
 }
 
-/// A sparse grid over the unit box keeping `keep` of the 3^3 lattice, holding `raw`'s rows.
-fn sparse_model(keep: &[bool], raw: &Array2<f64>) -> SparseGrid<f64> {
+/// A sparse grid over the unit box keeping `keep` of the 3^3 lattice, holding `raw`'s rows,
+/// with the prior's weight `smoothness`.
+fn sparse_model_tv(keep: &[bool], raw: &Array2<f64>, smoothness: f64) -> SparseGrid<f64> {
     let shading = Shading::new(-1.0, 0).unwrap();
-    let mut model = SparseGrid::new(SceneBox::UNIT, 3, NodeIndex::from_mask([3; 3], keep).unwrap(), shading).unwrap();
+    let index = NodeIndex::from_mask([3; 3], keep).unwrap();
+    let mut model = SparseGrid::new(SceneBox::UNIT, 3, index, shading, smoothness).unwrap();
     let id = model.params().ids().next().unwrap();
     model.params_mut().get_mut(id).unwrap().assign(raw);
     model
+}
+
+/// [`sparse_model_tv`] without a prior.
+fn sparse_model(keep: &[bool], raw: &Array2<f64>) -> SparseGrid<f64> {
+    sparse_model_tv(keep, raw, 0.0)
 }
 
 /// The rows of `raw_lattice` that `keep` keeps.
@@ -101,7 +108,7 @@ fn with_nodes_absent_the_loss_passes_gradcheck_and_fused_is_taped() {
     let objective = |tape: &mut Tape<f64>, data: Var, method: Method| -> Result<Var, TapeError> {
         // The model's own copy of the values carries its gradient to `data` (exactly 0 added).
         let value = tape.value(data)?.to_owned().into_dimensionality::<Ix2>().unwrap();
-        let model = sparse_model(&keep, &value);
+        let model = sparse_model_tv(&keep, &value, 0.05);
         let (rays, samples, target) = setup();
         let target = tape.constant(target);
         let loss = model
@@ -128,7 +135,7 @@ fn with_nodes_absent_the_loss_passes_gradcheck_and_fused_is_taped() {
         assert!(report.passes(), "{method:?}: {report}");
         assert!(report.entries.iter().any(|e| e.analytic.abs() > 1e-3));
     }
-    let model = sparse_model(&keep, &rows);
+    let model = sparse_model_tv(&keep, &rows, 0.05);
     let (l0, g0) = loss_and_gradient(&model, Method::Fused);
     let (l1, g1) = loss_and_gradient(&model, Method::Taped);
     assert!((l0 - l1).abs() < 1e-14, "{l0} {l1}");
@@ -227,7 +234,6 @@ fn a_sparse_fit_prunes_the_empty_space_and_fits_as_well_as_the_dense_grid() {
         grid: 32,
         batch: 512,
         evaluations: 1,
-        smoothness: 0.0,
         ..FitSettings::default()
     }
     .with_budget(Budget::Steps(300));

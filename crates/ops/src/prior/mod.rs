@@ -5,6 +5,8 @@
 //! that the rays constrain only in places (few views, many unknowns) towards a smooth field
 //! instead of leaving speckle where no ray disagreed with it.
 
+mod sparse_total_variation;
 mod total_variation;
 
+pub use sparse_total_variation::SparseTotalVariation;
 pub use total_variation::TotalVariation;

@@ -18,3 +18,4 @@ mod lesson_tables;
 mod prior;
 mod sh;
 mod sparse_grid;
+mod sparse_prior;
