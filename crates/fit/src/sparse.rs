@@ -24,7 +24,7 @@
 use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{CellPoints, OccupancyGrid, PackedSamples};
+use fogray_ops::sample::{OccupancyGrid, PackedSamples};
 use fogray_ops::{twins, Background, CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -194,17 +194,13 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         )
     }
 
-    /// Keeps the nodes within [`DILATION`] occupancy cells of an occupied one (every node
-    /// without an occupancy grid), after refreshing a copy of the grid from this model: a
-    /// growth may come before the fit's first refresh, or long after its last.
+    /// Keeps the nodes within [`DILATION`] occupancy cells of a cell the fit's occupancy grid
+    /// marks occupied: every node without an occupancy grid, or before its first refresh
+    /// (when every cell is occupied, as nothing is known yet: a model that has barely started
+    /// has no density above the threshold, and pruning by it would keep nothing).
     fn resampled(&self, nodes: usize, occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
         let keep = match occupancy {
-            Some(g) => {
-                let mut fresh = g.clone();
-                let points = CellPoints::CentreAndRandom { seed: nodes as u64 };
-                fresh.update(|p| self.densities(p), points)?;
-                keep_near_occupied(&self.scene_box(), nodes, &fresh, DILATION)
-            }
+            Some(g) => keep_near_occupied(&self.scene_box(), nodes, g, DILATION),
             None => vec![true; nodes * nodes * nodes],
         };
         self.resampled_onto(nodes, &keep)

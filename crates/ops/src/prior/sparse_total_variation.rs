@@ -45,8 +45,9 @@ pub struct SparseTotalVariation {
     weight: f64,
     index: Arc<NodeIndex>,
     channels: usize,
-    /// Each row's node (linear index).
-    nodes: Arc<Vec<usize>>,
+    /// Each row's stored neighbours' rows in the order x+, x-, y+, y-, z+, z- ([`NONE`] for
+    /// none), found once: a step's prior then reads no index.
+    neighbours: Arc<Vec<[u32; 6]>>,
     /// Pairs of stored neighbours times the channels.
     terms: usize,
 }
@@ -54,51 +55,50 @@ pub struct SparseTotalVariation {
 /// Rows per parallel task (the results do not depend on it).
 const ROWS: usize = 4096;
 
+/// No neighbour.
+const NONE: u32 = u32::MAX;
+
+/// The rows of node `node`'s stored neighbours (absent: `None`), in the order x+, x-, y+, y-,
+/// z+, z-.
+fn neighbours_of(index: &NodeIndex, node: usize) -> [Option<usize>; 6] {
+    let [n0, n1, n2] = index.nodes();
+    let at = [node / (n1 * n2), node / n2 % n1, node % n2];
+    let (strides, len) = ([n1 * n2, n2, 1], [n0, n1, n2]);
+    std::array::from_fn(|s| {
+        let a = s / 2;
+        if s % 2 == 0 {
+            (at[a] + 1 < len[a]).then(|| index.row_at(node + strides[a])).flatten()
+        } else {
+            (at[a] > 0).then(|| index.row_at(node - strides[a])).flatten()
+        }
+    })
+}
+
 impl SparseTotalVariation {
     /// The prior `prior` (its weight) on `field`'s packed values.
     pub fn new(prior: TotalVariation, field: &SparseGridField) -> Self {
-        let mut tv = SparseTotalVariation {
+        let index = field.shared_index();
+        let neighbours = index
+            .kept_nodes()
+            .par_iter()
+            .map(|&l| neighbours_of(&index, l).map(|n| n.map_or(NONE, |r| r as u32)))
+            .collect::<Vec<_>>();
+        let pairs: usize = neighbours
+            .iter()
+            .map(|n| n.iter().step_by(2).filter(|&&r| r != NONE).count())
+            .sum();
+        SparseTotalVariation {
             weight: prior.weight(),
-            index: field.shared_index(),
+            index,
             channels: field.channels(),
-            nodes: Arc::new(field.index().kept_nodes()),
-            terms: 0,
-        };
-        tv.terms = tv.count_terms();
-        tv
+            neighbours: Arc::new(neighbours),
+            terms: pairs * field.channels(),
+        }
     }
 
     /// The weight.
     pub fn weight(&self) -> f64 {
         self.weight
-    }
-
-    /// Each row's neighbours' rows (absent: `None`), in the order x+, x-, y+, y-, z+, z-.
-    fn neighbours(&self, node: usize) -> [Option<usize>; 6] {
-        let [n0, n1, n2] = self.index.nodes();
-        let (i, j, k) = (node / (n1 * n2), node / n2 % n1, node % n2);
-        let strides = [n1 * n2, n2, 1];
-        let (at, len) = ([i, j, k], [n0, n1, n2]);
-        std::array::from_fn(|s| {
-            let a = s / 2;
-            if s % 2 == 0 {
-                (at[a] + 1 < len[a])
-                    .then(|| self.index.row_at(node + strides[a]))
-                    .flatten()
-            } else {
-                (at[a] > 0).then(|| self.index.row_at(node - strides[a])).flatten()
-            }
-        })
-    }
-
-    /// Pairs of stored neighbours, times the channels.
-    fn count_terms(&self) -> usize {
-        let pairs: usize = self
-            .nodes
-            .par_iter()
-            .map(|&l| self.neighbours(l).iter().step_by(2).filter(|n| n.is_some()).count())
-            .sum();
-        pairs * self.channels
     }
 
     fn check<'a, F: Float>(&self, data: &'a ArrayViewD<'_, F>) -> Result<std::borrow::Cow<'a, [F]>, PriorError> {
@@ -121,19 +121,21 @@ impl SparseTotalVariation {
     /// Errors: values of another shape ([`PriorError::Shape`]).
     pub fn value<F: Float>(&self, data: &ArrayViewD<'_, F>) -> Result<f64, PriorError> {
         let v = self.check(data)?;
-        let (nodes, terms) = (&self.nodes, self.terms);
+        let terms = self.terms;
         if terms == 0 {
             return Ok(0.0);
         }
         let ch = self.channels;
-        let chunks: Vec<f64> = nodes
+        let chunks: Vec<f64> = self
+            .neighbours
             .par_chunks(ROWS)
             .enumerate()
-            .map(|(c, nodes)| {
+            .map(|(c, rows)| {
                 let mut sum = 0.0;
-                for (i, &l) in nodes.iter().enumerate() {
+                for (i, neighbours) in rows.iter().enumerate() {
                     let r = c * ROWS + i;
-                    for n in self.neighbours(l).iter().step_by(2).flatten() {
+                    for &n in neighbours.iter().step_by(2).filter(|&&n| n != NONE) {
+                        let n = n as usize;
                         for k in 0..ch {
                             let d = v[n * ch + k].as_f64() - v[r * ch + k].as_f64();
                             sum += d * d;
@@ -151,21 +153,23 @@ impl SparseTotalVariation {
     /// Errors: values of another shape ([`PriorError::Shape`]).
     pub fn gradient<F: Float>(&self, data: &ArrayViewD<'_, F>, scale: f64) -> Result<ArrayD<F>, PriorError> {
         let v = self.check(data)?;
-        let (nodes, terms) = (&self.nodes, self.terms);
+        let terms = self.terms;
         let ch = self.channels;
         let mut out = vec![F::zero(); v.len()];
         if terms > 0 {
             let factor = scale * 2.0 * self.weight / terms as f64;
             out.par_chunks_mut(ROWS * ch).enumerate().for_each(|(c, out)| {
+                let mut acc = vec![0.0f64; ch];
                 for (i, o) in out.chunks_exact_mut(ch).enumerate() {
                     let r = c * ROWS + i;
-                    let mut acc = vec![0.0f64; ch];
-                    for n in self.neighbours(nodes[r]).iter().flatten() {
-                        for k in 0..ch {
-                            acc[k] += v[r * ch + k].as_f64() - v[n * ch + k].as_f64();
+                    acc.fill(0.0);
+                    for &n in self.neighbours[r].iter().filter(|&&n| n != NONE) {
+                        let n = n as usize;
+                        for (k, a) in acc.iter_mut().enumerate() {
+                            *a += v[r * ch + k].as_f64() - v[n * ch + k].as_f64();
                         }
                     }
-                    for (o, a) in o.iter_mut().zip(acc) {
+                    for (o, &a) in o.iter_mut().zip(&acc) {
                         *o = F::lit(factor * a);
                     }
                 }
