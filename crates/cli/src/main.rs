@@ -55,8 +55,14 @@ enum Command {
     /// nerfstudio): train on its training views, measure the held-out views (the test split,
     /// else every 8th view) at intervals off the clock, and print the log.
     // Photographs of real objects shine: the recommended colour for them is view dependent
-    // (the library's default, 0, suits the grid example's matte scene).
-    #[command(long_about = FIT_HELP, mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)))]
+    // (the library's default, 0, suits the grid example's matte scene), and real scenes fill
+    // a small part of their box: the recommended model is the sparse grid.
+    #[command(
+        long_about = FIT_HELP,
+        mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)),
+        mut_arg("model", |a| a.default_value(fit::RECOMMENDED_MODEL)),
+        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID))
+    )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms
     /// file: DIR/<name>.png, 8-bit RGB, over the model's background.
