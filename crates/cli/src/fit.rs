@@ -11,7 +11,9 @@ use fogray_fit::dataset::{Dataset, View};
 use fogray_fit::dense::DenseGrid;
 use fogray_fit::images::write_comparison_png;
 use fogray_fit::interrupt::StopFlag;
+use fogray_fit::metrics::haze_fraction;
 use fogray_fit::plots;
+use fogray_fit::render::{render_picture, RenderOptions};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
 use fogray_fit::sparse::SparseGrid;
@@ -29,6 +31,11 @@ pub const RECOMMENDED_SH_DEGREE: &str = "1";
 /// The model `fogray fit` trains unless `--model` is given: a real scene fills a small part of
 /// its box, and the sparse grid keeps only that part.
 pub const RECOMMENDED_MODEL: &str = "sparse";
+
+/// The total-variation weight `fogray fit` uses unless `--tv` is given: none. Tens of views
+/// constrain a scene enough, and the prior costs a step as much as the lookup's backward
+/// without buying held-out PSNR (the lego comparison in reports/lego/report.md).
+pub const RECOMMENDED_TV: &str = "0";
 
 /// The lattice `fogray fit` grows to unless `--grid` is given: 128 nodes per axis (32, 64,
 /// then 128), the finest that a minute's fit on two cores still trains well.
@@ -118,6 +125,11 @@ pub struct FitSummary<'a> {
     pub parameters: usize,
     /// Where a training step's time went, milliseconds a step averaged over the fit.
     pub profile: ProfileTable,
+    /// The fraction of held-out pixels whose rendered opacity lies in (0.05, 0.95) at the end:
+    /// the haze around an object that should be opaque or empty.
+    pub held_out_haze: f64,
+    /// The process's peak resident memory in bytes (null where the system does not say).
+    pub peak_resident_bytes: Option<u64>,
 }
 
 /// How a fit ended: its output for stdout, or an interruption (saved).
@@ -137,6 +149,23 @@ pub fn views(frames: Vec<fogray_data::Frame>) -> Result<Vec<View>, CliError> {
         .collect()
 }
 
+/// A dataset on disk as a fit's data (its training and held-out views over the background
+/// `data_args` names) and the box the dataset gives its scene.
+///
+/// Errors: a bad dataset, naming the file.
+pub fn load_fit_data(path: &Path, data_args: &DataArgs) -> Result<(Dataset, SceneBox), CliError> {
+    let scene: SceneData = load(path, &data_args.options())?;
+    if scene.skipped > 0 {
+        eprintln!(
+            "fogray fit: --skip-missing dropped {} frames whose image is missing",
+            scene.skipped
+        );
+    }
+    let (min, max) = scene.scene_box;
+    let data = Dataset::new(views(scene.train)?, views(scene.test)?, data_args.background)?;
+    Ok((data, SceneBox { min, max }))
+}
+
 /// Runs `fogray fit`.
 ///
 /// Errors: a bad dataset (naming the file), bad settings, a file that cannot be written.
@@ -146,19 +175,11 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
         checkpoint::check_destination(file)?;
     }
     args.settings.check()?;
-    let scene: SceneData = load(&args.data, &args.data_args.options())?;
-    if scene.skipped > 0 {
-        eprintln!(
-            "fogray fit: --skip-missing dropped {} frames whose image is missing",
-            scene.skipped
-        );
-    }
-    let (lo, hi) = scene.scene_box;
+    let (data, scene_box) = load_fit_data(&args.data, &args.data_args)?;
     let settings = FitSettings {
-        scene_box: Some(args.settings.scene_box.unwrap_or(SceneBox { min: lo, max: hi })),
+        scene_box: Some(args.settings.scene_box.unwrap_or(scene_box)),
         ..args.settings
     };
-    let data = Dataset::new(views(scene.train)?, views(scene.test)?, args.data_args.background)?;
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
     }
@@ -246,6 +267,8 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         return Ok(FitOutcome::Interrupted(path));
     }
     let summary = FitSummary {
+        held_out_haze: held_out_haze(&result, data, settings)?,
+        peak_resident_bytes: crate::memory::peak_resident_bytes(),
         final_test_psnr: result.final_test_psnr,
         seconds: result.seconds,
         steps: result.training.step,
@@ -283,6 +306,27 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         result.training.step
     );
     Ok(FitOutcome::Done(text))
+}
+
+/// [`haze_fraction`] in (0.05, 0.95) of the fitted model's held-out views.
+fn held_out_haze<F: Float, M: RadianceField<F>>(
+    result: &FitResult<F, M>,
+    data: &Dataset,
+    settings: &FitSettings,
+) -> Result<f64, CliError> {
+    let options = RenderOptions {
+        background: data.background,
+        method: settings.method,
+        depth: false,
+    };
+    let mut opacities = Vec::new();
+    for t in &data.test {
+        let (origins, directions) = t.rays();
+        let view = render_picture(&result.model, result.occupancy.as_ref(), &origins, &directions, t.size(), &options)?;
+        opacities.push(view.opacity);
+    }
+    let views: Vec<_> = opacities.iter().map(|o| o.view()).collect();
+    Ok(haze_fraction(&views, 0.05, 0.95))
 }
 
 /// `DIR/test/<name>.png` (photograph | render | error), `DIR/psnr.png`, `DIR/fit.json`.

@@ -14,6 +14,7 @@ pub mod grid_bench;
 pub mod heap;
 pub mod input;
 pub mod markdown;
+pub mod memory;
 pub mod reference;
 pub mod render;
 pub mod tape_cost;

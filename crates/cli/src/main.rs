@@ -61,7 +61,8 @@ enum Command {
         long_about = FIT_HELP,
         mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)),
         mut_arg("model", |a| a.default_value(fit::RECOMMENDED_MODEL)),
-        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID))
+        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID)),
+        mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV))
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms

@@ -42,3 +42,23 @@ pub fn psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> 
     }
     Ok(-10.0 * (sum / count as f64).log10())
 }
+
+/// The fraction of pixels whose opacity lies strictly between `lo` and `hi`, over all
+/// `opacities`: with `(0.05, 0.95)`, the haze of a model that should be opaque or empty
+/// everywhere (an object in front of a background). NaN when there is no pixel.
+///
+/// ```
+/// use fogray_fit::metrics::haze_fraction;
+/// use ndarray::arr2;
+///
+/// let opacity = arr2(&[[0.0, 0.5], [0.97, 0.05]]);
+/// assert_eq!(haze_fraction(&[opacity.view()], 0.05, 0.95), 0.25); // only 0.5
+/// ```
+pub fn haze_fraction(opacities: &[ndarray::ArrayView2<'_, f64>], lo: f64, hi: f64) -> f64 {
+    let pixels: usize = opacities.iter().map(|o| o.len()).sum();
+    let hazy: usize = opacities
+        .iter()
+        .map(|o| o.iter().filter(|&&a| lo < a && a < hi).count())
+        .sum();
+    hazy as f64 / pixels as f64
+}
