@@ -30,13 +30,13 @@ use fogray_ops::activation::{twin, DensityColor};
 use fogray_ops::prior::TotalVariation;
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::PackedSamples;
-use fogray_ops::{twins, Composite, CompositeInputs, CompositeVars, GridBox, GridField, ShColor};
+use fogray_ops::{twins, Background, Composite, CompositeInputs, CompositeVars, GridBox, GridField, ShColor};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
 
 use crate::error::FitError;
-use crate::model::{RadianceField, RenderWanted, TrainingLoss};
+use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
 
 /// Channels of a view-independent grid's raw value: density, then red, green, blue.
@@ -148,7 +148,7 @@ impl<F: Float> DenseGrid<F> {
     }
 
     /// Records the lookup of `samples` in `grid` and the activation, and returns the composite
-    /// over the samples' rays with its inputs (the background `background`, shared).
+    /// over the samples' rays with its inputs (over `background`, shared or one per ray).
     #[allow(clippy::too_many_arguments)] // one call site each in render and training_loss
     fn composite_inputs(
         &self,
@@ -156,7 +156,7 @@ impl<F: Float> DenseGrid<F> {
         grid: Var,
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
-        background: [f64; 3],
+        background: TrainingBackground<F>,
         method: Method,
         depth: bool,
     ) -> Result<(Composite, CompositeInputs), TapeError> {
@@ -191,14 +191,18 @@ impl<F: Float> DenseGrid<F> {
             }
             _ => activated.color,
         };
+        let (background, kind) = match background {
+            TrainingBackground::Shared(b) => (tape.constant(Array1::from_iter(b.map(F::lit))), Background::Shared),
+            TrainingBackground::PerRay(b) => (tape.constant(b), Background::PerRay),
+        };
         let inputs = CompositeInputs {
             sigma: activated.sigma,
             delta: vars.delta,
             color,
-            background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
+            background: Some(background),
             t: depth.then_some(vars.t),
         };
-        let op = Composite::packed(offsets);
+        let op = Composite::packed(offsets).background(kind);
         Ok((if depth { op.with_depth() } else { op }, inputs))
     }
 }
@@ -276,6 +280,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
+        let background = TrainingBackground::Shared(background);
         let (op, inputs) = self.composite_inputs(tape, grid, rays, samples, background, method, wanted.depth)?;
         match method {
             Method::Fused => op.apply(tape, &inputs),
@@ -291,7 +296,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         tape: &mut Tape<F>,
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
-        background: [f64; 3],
+        background: TrainingBackground<F>,
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
