@@ -140,12 +140,19 @@ pub enum FitOutcome {
     Interrupted(PathBuf),
 }
 
-/// The dataset's views as the pipeline's: each picture widened to `f64` and its `f32`
-/// dropped as it goes, so that the peak is one copy plus one picture.
+/// The dataset's views as the pipeline's: each picture (and its alpha, where the file had
+/// one, for `--random-background`) widened to `f64` and its `f32` dropped as it goes, so that
+/// the peak is one copy plus one picture.
 pub fn views(frames: Vec<fogray_data::Frame>) -> Result<Vec<View>, CliError> {
     frames
         .into_iter()
-        .map(|f| Ok(View::new(f.name, &f.camera, f.picture.color.mapv(f64::from))?))
+        .map(|f| {
+            let view = View::new(f.name, &f.camera, f.picture.color.mapv(f64::from))?;
+            Ok(match f.picture.alpha {
+                Some(alpha) => view.with_alpha(alpha.mapv(f64::from))?,
+                None => view,
+            })
+        })
         .collect()
 }
 

@@ -7,7 +7,7 @@
 //!
 use fogray_ops::rays::RayBatch;
 use fogray_tape::Float;
-use ndarray::Array2;
+use ndarray::{Array1, Array2, ArrayView2};
 use rayon::prelude::*;
 
 use crate::dataset::Dataset;
@@ -29,8 +29,36 @@ pub struct TrainingTable<'a> {
 pub struct TrainingBatch<F: Float> {
     /// Their rays.
     pub rays: RayBatch<F>,
-    /// Their exact colours `[n, 3]`.
+    /// Their exact colours `[n, 3]`, composited over the dataset's background where their
+    /// picture had alpha.
     pub colors: Array2<F>,
+    /// Their opacities `[n]`, when a training view has an alpha channel (a pixel of a view
+    /// without one is opaque: 1); `None` when no training view has one.
+    pub alpha: Option<Array1<F>>,
+}
+
+impl<F: Float> TrainingBatch<F> {
+    /// The pixels' colours over `backgrounds` (`[n, 3]`, one per pixel) instead of `from`,
+    /// the background they were composited over: `color + (b - from) (1 - alpha)` in `f64`,
+    /// rounded to `F`; the colours themselves without alpha.
+    ///
+    /// Errors: [`FitError::Config`] if `backgrounds` is not `[n, 3]`.
+    pub fn colors_over(&self, from: [f64; 3], backgrounds: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
+        if backgrounds.dim() != self.colors.dim() {
+            return Err(FitError::Config(format!(
+                "backgrounds {:?} for a batch of {} pixels",
+                backgrounds.shape(),
+                self.colors.nrows()
+            )));
+        }
+        let Some(alpha) = &self.alpha else {
+            return Ok(self.colors.clone());
+        };
+        Ok(Array2::from_shape_fn(self.colors.dim(), |(k, c)| {
+            let seen = 1.0 - alpha[k].as_f64();
+            F::lit(self.colors[[k, c]].as_f64() + (backgrounds[[k, c]].as_f64() - from[c]) * seen)
+        }))
+    }
 }
 
 impl<'a> TrainingTable<'a> {
@@ -48,8 +76,9 @@ impl<'a> TrainingTable<'a> {
         self.starts[self.starts.len() - 1]
     }
 
-    /// The rays and colours of pixels `rows`, in that order (a pixel may repeat), each value
-    /// rounded to `F` (to nearest) from the view's `f64`.
+    /// The rays, colours and (when a training view has alpha) opacities of pixels `rows`, in
+    /// that order (a pixel may repeat), each value rounded to `F` (to nearest) from the view's
+    /// `f64`.
     ///
     /// Errors: [`FitError::Config`] for a row past the last pixel (nothing is gathered), or
     /// an error of [`RayBatch::new`] (no rows at all).
@@ -62,11 +91,17 @@ impl<'a> TrainingTable<'a> {
         }
         let n = rows.len();
         let (mut o, mut d, mut c) = (vec![F::zero(); 3 * n], vec![F::zero(); 3 * n], vec![F::zero(); 3 * n]);
+        let with_alpha = self.data.training_alpha();
+        let mut alpha = vec![F::one(); if with_alpha { n } else { 0 }];
+        // Each task's opacities; without alpha, every task gets an empty slice.
+        let mut alpha_chunks: Vec<&mut [F]> = alpha.chunks_mut(ROWS_PER_TASK).collect();
+        alpha_chunks.resize_with(n.div_ceil(ROWS_PER_TASK), Default::default);
         o.par_chunks_mut(3 * ROWS_PER_TASK)
             .zip(d.par_chunks_mut(3 * ROWS_PER_TASK))
             .zip(c.par_chunks_mut(3 * ROWS_PER_TASK))
+            .zip(alpha_chunks.into_par_iter())
             .zip(rows.par_chunks(ROWS_PER_TASK))
-            .for_each(|(((o, d), c), rows)| {
+            .for_each(|((((o, d), c), opacity), rows)| {
                 for (k, &r) in rows.iter().enumerate() {
                     // The view holding pixel r: the last start at or before it.
                     let v = self.starts.partition_point(|&s| s <= r) - 1;
@@ -81,12 +116,16 @@ impl<'a> TrainingTable<'a> {
                         d[3 * k + a] = F::lit(direction[a]);
                         c[3 * k + a] = F::lit(view.image[[row, col, a]]);
                     }
+                    if let (Some(slot), Some(alpha)) = (opacity.get_mut(k), &view.alpha) {
+                        *slot = F::lit(alpha[[row, col]]);
+                    }
                 }
             });
         let shape = |v| Array2::from_shape_vec((n, 3), v).map_err(|e| FitError::Config(e.to_string()));
         Ok(TrainingBatch {
             rays: RayBatch::new(shape(o)?, shape(d)?)?,
             colors: shape(c)?,
+            alpha: with_alpha.then(|| Array1::from(alpha)),
         })
     }
 }
@@ -120,6 +159,64 @@ mod tests {
         }
         let exact = table.gather::<f64>(&rows).unwrap();
         assert_eq!(exact.colors[[2, 0]], data.train[1].image[[1, 2, 0]]);
+    }
+
+    /// The picture over another background against a pixel computed by hand: colour
+    /// (0.8, 0.3, 0.1) at opacity 0.25 over white is (0.95, 0.825, 0.775); over
+    /// (0.2, 0.4, 0.6) it is 0.25 (0.8, 0.3, 0.1) + 0.75 (0.2, 0.4, 0.6) = (0.35, 0.375, 0.475).
+    #[test]
+    fn a_pixel_with_alpha_over_another_background_is_the_colour_composited_over_it() {
+        let mut data = small_dataset();
+        let over_white = [0.95, 0.825, 0.775];
+        for (c, v) in over_white.into_iter().enumerate() {
+            data.train[1].image[[2, 5, c]] = v;
+            data.train[1].image[[0, 0, c]] = 1.0; // transparent over white
+        }
+        let mut alpha = Array2::from_elem((8, 8), 1.0);
+        alpha[[2, 5]] = 0.25;
+        alpha[[0, 0]] = 0.0;
+        let view = data.train[1].clone().with_alpha(alpha).unwrap();
+        let want = [0.35, 0.375, 0.475];
+        let got = view.target_over(2, 5, [1.0; 3], [0.2, 0.4, 0.6]);
+        for c in 0..3 {
+            assert!((got[c] - want[c]).abs() < 1e-15, "{got:?}");
+        }
+        data.train[1] = view;
+        // In a batch: view 1's pixel (2, 5), its transparent (0, 0), and a pixel of view 0,
+        // which has no alpha and is opaque.
+        let table = TrainingTable::new(&data);
+        let rows = [64 + 2 * 8 + 5, 64, 3];
+        let batch = table.gather::<f64>(&rows).unwrap();
+        assert_eq!(batch.alpha, Some(ndarray::arr1(&[0.25, 0.0, 1.0])));
+        let backgrounds = ndarray::arr2(&[[0.2, 0.4, 0.6], [0.0, 0.5, 1.0], [0.0, 0.0, 0.0]]);
+        let targets = batch.colors_over([1.0; 3], backgrounds.view()).unwrap();
+        for c in 0..3 {
+            assert!((targets[[0, c]] - want[c]).abs() < 1e-15, "{targets}");
+            // Transparent: the background itself; opaque: the picture whatever the background.
+            assert!((targets[[1, c]] - backgrounds[[1, c]]).abs() < 1e-15, "{targets}");
+            assert_eq!(targets[[2, c]], data.train[0].image[[0, 3, c]]);
+        }
+        assert!(batch
+            .colors_over([1.0; 3], backgrounds.slice(ndarray::s![..2, ..]))
+            .is_err());
+        // Without alpha anywhere the batch carries none.
+        assert_eq!(
+            TrainingTable::new(&small_dataset()).gather::<f32>(&rows).unwrap().alpha,
+            None
+        );
+    }
+
+    #[test]
+    fn a_view_refuses_an_alpha_of_the_wrong_shape_or_range() {
+        let view = small_dataset().train[0].clone();
+        for (alpha, says) in [
+            (Array2::from_elem((8, 7), 0.5), "alpha [8, 7]"),
+            (Array2::from_elem((8, 8), -0.1), "alpha -0.1 at row 0, column 0"),
+            (Array2::from_elem((8, 8), f64::NAN), "alpha NaN"),
+        ] {
+            let e = view.clone().with_alpha(alpha).unwrap_err();
+            assert!(matches!(e, FitError::Config(_)) && e.to_string().contains(says), "{e}");
+        }
     }
 
     #[test]

@@ -37,8 +37,14 @@ pub struct View {
     pub name: String,
     /// The camera (its image size is the picture's).
     pub camera: PinholeCamera,
-    /// The picture `[H][W][3]`, RGB in `[0, 1]`.
+    /// The picture `[H][W][3]`, RGB in `[0, 1]`, composited over the dataset's background
+    /// ([`Dataset::background`]) where the picture had an alpha channel.
     pub image: Array3<f64>,
+    /// The picture's opacity `[H][W]` in `[0, 1]`, where it had an alpha channel (`None` for
+    /// an opaque picture: a JPEG photograph, a synthetic scene's render). The picture over
+    /// another background `b` is `image + (b - background) (1 - alpha)`
+    /// ([`View::target_over`]).
+    pub alpha: Option<Array2<f64>>,
 }
 
 impl View {
@@ -60,7 +66,61 @@ impl View {
             name,
             camera: camera.clone(),
             image,
+            alpha: None,
         })
+    }
+
+    /// The view with the picture's opacity `alpha` (`[H][W]`, each value in `[0, 1]`): its
+    /// `image` is the colour composited over the dataset's background with that opacity, so
+    /// that a fit can composite it over another background
+    /// ([`FitSettings::random_background`](crate::settings::FitSettings::random_background)).
+    ///
+    /// ```
+    /// use fogray_fit::dataset::View;
+    /// use fogray_ops::{Intrinsics, PinholeCamera};
+    /// use ndarray::{Array2, Array3};
+    ///
+    /// let k = Intrinsics::from_vertical_fov(2, 1, 0.7)?;
+    /// let camera = PinholeCamera::look_at(k, [3.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0])?;
+    /// // A grey 0.5 at half opacity over white: 0.75.
+    /// let view = View::new("a", &camera, Array3::from_elem((1, 2, 3), 0.75))?;
+    /// assert!(view.clone().with_alpha(Array2::from_elem((1, 2), 1.5)).is_err()); // not in [0, 1]
+    /// assert!(view.clone().with_alpha(Array2::from_elem((2, 1), 0.5)).is_err()); // not [H][W]
+    /// let view = view.with_alpha(Array2::from_elem((1, 2), 0.5))?;
+    /// // Over black: 0.75 + (0 - 1) (1 - 0.5), the grey at half opacity.
+    /// assert_eq!(view.target_over(0, 1, [1.0; 3], [0.0; 3]), [0.25; 3]);
+    /// # Ok::<(), Box<dyn std::error::Error>>(())
+    /// ```
+    ///
+    /// Errors: [`FitError::Config`] if `alpha` is not the picture's `[H][W]` or a value is not
+    /// in `[0, 1]` (NaN included).
+    pub fn with_alpha(self, alpha: Array2<f64>) -> Result<View, FitError> {
+        let [h, w] = self.size();
+        if alpha.shape() != [h, w] {
+            return Err(FitError::Config(format!(
+                "view {}: alpha {:?}, but the picture is [{h}, {w}]",
+                self.name,
+                alpha.shape()
+            )));
+        }
+        if let Some(((row, col), a)) = alpha.indexed_iter().find(|(_, a)| !(0.0..=1.0).contains(*a)) {
+            return Err(FitError::Config(format!(
+                "view {}: alpha {a} at row {row}, column {col} (must be in [0, 1])",
+                self.name
+            )));
+        }
+        Ok(View {
+            alpha: Some(alpha),
+            ..self
+        })
+    }
+
+    /// The colour of pixel (`row`, `col`) over `to` instead of `from`, the background the
+    /// picture was composited over: `image + (to - from) (1 - alpha)`, the picture itself for
+    /// a view without alpha (opaque).
+    pub fn target_over(&self, row: usize, col: usize, from: [f64; 3], to: [f64; 3]) -> [f64; 3] {
+        let seen = self.alpha.as_ref().map_or(0.0, |a| 1.0 - a[[row, col]]);
+        std::array::from_fn(|c| self.image[[row, col, c]] + (to[c] - from[c]) * seen)
     }
 
     /// `[height, width]` of the picture.
@@ -108,7 +168,10 @@ pub struct Dataset {
     pub train: Vec<View>,
     /// The held-out views, in order.
     pub test: Vec<View>,
-    /// The background composited behind the model.
+    /// The background the pictures with alpha were composited over, and the one the model
+    /// renders over for the held-out views (and for training, unless
+    /// [`FitSettings::random_background`](crate::settings::FitSettings::random_background)
+    /// draws others for the views with alpha).
     pub background: [f64; 3],
 }
 
@@ -116,8 +179,8 @@ impl Dataset {
     /// The training views `train` and the held-out views `test`.
     ///
     /// Errors: [`FitError::Config`] if there is no training pixel or no test view, or a view's
-    /// picture is not its camera's size (possible only if its fields were changed after
-    /// [`View::new`]).
+    /// picture or alpha is not its camera's size (possible only if its fields were changed
+    /// after [`View::new`] or [`View::with_alpha`]).
     pub fn new(train: Vec<View>, test: Vec<View>, background: [f64; 3]) -> Result<Dataset, FitError> {
         if test.is_empty() {
             return Err(FitError::Config("the fit needs at least one test view".into()));
@@ -132,6 +195,17 @@ impl Dataset {
                     k.height,
                     k.width
                 )));
+            }
+            if let Some(alpha) = &v.alpha {
+                if alpha.shape() != [k.height, k.width] {
+                    return Err(FitError::Config(format!(
+                        "view {}: alpha {:?} for a camera of {} x {}",
+                        v.name,
+                        alpha.shape(),
+                        k.height,
+                        k.width
+                    )));
+                }
             }
         }
         let data = Dataset {
@@ -148,5 +222,10 @@ impl Dataset {
     /// Pixels of all training views.
     pub fn training_pixels(&self) -> usize {
         self.train.iter().map(View::pixels).sum()
+    }
+
+    /// Whether any training view has an alpha channel.
+    pub fn training_alpha(&self) -> bool {
+        self.train.iter().any(|v| v.alpha.is_some())
     }
 }

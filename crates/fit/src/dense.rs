@@ -26,29 +26,24 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use fogray_ops::activation::{twin, DensityColor};
 use fogray_ops::prior::TotalVariation;
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples};
-use fogray_ops::{twins, Composite, CompositeInputs, CompositeVars, GridBox, GridField, ShColor};
+use fogray_ops::{twins, CompositeVars, GridBox, GridField};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
 
 use crate::error::FitError;
-use crate::model::{RadianceField, RenderWanted, TrainingLoss};
+use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
+use crate::shading::{Shading, VIEW_INDEPENDENT_CHANNELS};
 
 /// Channels of a view-independent grid's raw value: density, then red, green, blue.
-pub const CHANNELS: usize = 4;
+pub const CHANNELS: usize = VIEW_INDEPENDENT_CHANNELS;
 
 /// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
 pub const GRID: &str = "grid";
-
-/// Channels of a raw value with the colour `sh` (none: view-independent RGB).
-fn channels_with(sh: Option<&ShColor>) -> usize {
-    sh.map_or(CHANNELS, |sh| 1 + sh.coefficient_count())
-}
 
 /// A dense grid of raw density and colour, its parameters kept in a [`Params`] store.
 #[derive(Debug)]
@@ -56,12 +51,10 @@ pub struct DenseGrid<F: Float> {
     params: Params<F>,
     grid: ParamId,
     field: GridField,
-    activation: DensityColor,
+    shading: Shading,
     prior: TotalVariation,
     bounds: Aabb,
     nodes: usize,
-    /// View-dependent colour: channels `1..` of a raw value are its coefficients.
-    sh: Option<ShColor>,
 }
 
 impl<F: Float> DenseGrid<F> {
@@ -72,7 +65,7 @@ impl<F: Float> DenseGrid<F> {
     /// Errors: fewer than 2 nodes, more than memory can address, a bad box, a shift that is
     /// not finite, a smoothness that is negative or not finite.
     pub fn new(scene_box: SceneBox, nodes: usize, shift: f64, smoothness: f64) -> Result<Self, FitError> {
-        Self::with_channels(scene_box, nodes, shift, smoothness, None)
+        Self::with_shading(scene_box, nodes, Shading::new(shift, 0)?, smoothness)
     }
 
     /// The grid of [`DenseGrid::new`] with a view-dependent colour: spherical harmonics of
@@ -88,22 +81,12 @@ impl<F: Float> DenseGrid<F> {
         smoothness: f64,
         degree: usize,
     ) -> Result<Self, FitError> {
-        let sh = match degree {
-            0 => None,
-            d => Some(ShColor::new(d).map_err(|e| FitError::Config(format!("--sh-degree: {e}")))?),
-        };
-        Self::with_channels(scene_box, nodes, shift, smoothness, sh)
+        Self::with_shading(scene_box, nodes, Shading::new(shift, degree)?, smoothness)
     }
 
-    fn with_channels(
-        scene_box: SceneBox,
-        nodes: usize,
-        shift: f64,
-        smoothness: f64,
-        sh: Option<ShColor>,
-    ) -> Result<Self, FitError> {
+    fn with_shading(scene_box: SceneBox, nodes: usize, shading: Shading, smoothness: f64) -> Result<Self, FitError> {
         scene_box.check()?;
-        let channels = channels_with(sh.as_ref());
+        let channels = shading.channels();
         let field = GridField::new(
             GridBox::new(&scene_box.min, &scene_box.max)?,
             &[nodes, nodes, nodes, channels],
@@ -116,22 +99,21 @@ impl<F: Float> DenseGrid<F> {
             params,
             grid,
             field,
-            activation: DensityColor::new(shift)?,
+            shading,
             prior,
             nodes,
-            sh,
         })
     }
 
     /// Channels of a raw value: the density, then the colour's (3, or the spherical
     /// harmonics' coefficients).
     pub fn channels(&self) -> usize {
-        channels_with(self.sh.as_ref())
+        self.shading.channels()
     }
 
     /// The degree of the spherical harmonics of the colour (0 for view-independent).
     pub fn sh_degree(&self) -> usize {
-        self.sh.as_ref().map_or(0, ShColor::degree)
+        self.shading.sh_degree()
     }
 
     /// The box the grid covers.
@@ -147,59 +129,11 @@ impl<F: Float> DenseGrid<F> {
         self.grid
     }
 
-    /// Records the lookup of `samples` in `grid` and the activation, and returns the composite
-    /// over the samples' rays with its inputs (the background `background`, shared).
-    #[allow(clippy::too_many_arguments)] // one call site each in render and training_loss
-    fn composite_inputs(
-        &self,
-        tape: &mut Tape<F>,
-        grid: Var,
-        rays: &RayBatch<F>,
-        samples: PackedSamples<F>,
-        background: [f64; 3],
-        method: Method,
-        depth: bool,
-    ) -> Result<(Composite, CompositeInputs), TapeError> {
-        // Each sample's view direction, its ray's (a constant: no gradient).
-        let directions = self.sh.as_ref().map(|_| {
-            let d = rays.directions();
-            Array2::from_shape_fn((samples.len(), 3), |(k, a)| d[[samples.ray[k], a]])
-        });
-        let (vars, offsets) = samples.into_tape(tape);
-        let raw = match method {
-            Method::Fused => self.field.apply(tape, grid, vars.positions)?,
-            Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, vars.positions)?,
-        };
-        // With spherical harmonics the activation sees the density and the first coefficient
-        // (it needs a colour channel) and only its density is used.
-        let activation_input = match &self.sh {
-            Some(_) => tape.slice(raw, 1, 0, 2)?,
-            None => raw,
-        };
-        let activated = match method {
-            Method::Fused => self.activation.apply(tape, activation_input)?,
-            Method::Taped => twin::density_color(tape, &self.activation, activation_input)?,
-        };
-        let color = match (&self.sh, directions) {
-            (Some(sh), Some(directions)) => {
-                let coefficients = tape.slice(raw, 1, 1, self.channels())?;
-                let directions = tape.constant(directions);
-                match method {
-                    Method::Fused => sh.apply(tape, coefficients, directions)?,
-                    Method::Taped => fogray_ops::sh::twin::sh_color(tape, sh, coefficients, directions)?,
-                }
-            }
-            _ => activated.color,
-        };
-        let inputs = CompositeInputs {
-            sigma: activated.sigma,
-            delta: vars.delta,
-            color,
-            background: Some(tape.constant(Array1::from_iter(background.map(F::lit)))),
-            t: depth.then_some(vars.t),
-        };
-        let op = Composite::packed(offsets);
-        Ok((if depth { op.with_depth() } else { op }, inputs))
+    fn lookup(&self, tape: &mut Tape<F>, grid: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
+        match method {
+            Method::Fused => self.field.apply(tape, grid, positions),
+            Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, positions),
+        }
     }
 }
 
@@ -221,7 +155,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     fn resampled(&self, nodes: usize, _occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
         let mut grown =
-            DenseGrid::<F>::with_channels(scene_box, nodes, self.activation.shift(), self.prior.weight(), self.sh)?;
+            DenseGrid::<F>::with_shading(scene_box, nodes, self.shading, self.prior.weight())?;
         let channels = self.channels();
         let at = |i: usize, axis: usize| {
             let (lo, hi) = (scene_box.min[axis], scene_box.max[axis]);
@@ -276,7 +210,16 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let (op, inputs) = self.composite_inputs(tape, grid, rays, samples, background, method, wanted.depth)?;
+        let background = TrainingBackground::Shared(background);
+        let (op, inputs) = self.shading.composite_inputs(
+            tape,
+            rays,
+            samples,
+            background,
+            method,
+            wanted.depth,
+            |tape, positions| self.lookup(tape, grid, positions, method),
+        )?;
         match method {
             Method::Fused => op.apply(tape, &inputs),
             Method::Taped => twins::stable(tape, &op, &inputs),
@@ -291,12 +234,16 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         tape: &mut Tape<F>,
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
-        background: [f64; 3],
+        background: TrainingBackground<F>,
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let (op, inputs) = self.composite_inputs(tape, grid, rays, samples, background, method, false)?;
+        let (op, inputs) =
+            self.shading
+                .composite_inputs(tape, rays, samples, background, method, false, |tape, positions| {
+                    self.lookup(tape, grid, positions, method)
+                })?;
         let photometric = match method {
             Method::Fused => op.apply_mse(tape, &inputs, target)?,
             Method::Taped => {
@@ -322,6 +269,6 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         let raw = raw
             .into_dimensionality::<Ix2>()
             .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
-        Ok(self.activation.density(raw.view())?)
+        Ok(self.shading.activation.density(raw.view())?)
     }
 }

@@ -10,7 +10,7 @@ use fogray_ops::sample::{OccupancyGrid, PackedSamples};
 use fogray_ops::CompositeVars;
 use fogray_tape::params::Params;
 use fogray_tape::{Float, Tape, TapeError, Var};
-use ndarray::{Array1, ArrayView2};
+use ndarray::{Array1, Array2, ArrayView2};
 
 use crate::error::FitError;
 use crate::settings::{FitSettings, Method};
@@ -23,6 +23,16 @@ pub struct TrainingLoss {
     pub photometric: Var,
     /// The photometric loss plus the model's priors, a 0-d value.
     pub objective: Var,
+}
+
+/// What a training loss composites its rays over.
+#[derive(Debug, Clone, PartialEq)]
+pub enum TrainingBackground<F> {
+    /// One colour behind every ray (the dataset's background).
+    Shared([f64; 3]),
+    /// A colour behind each ray, `[R, 3]` in the rays' order (a random background per ray,
+    /// with targets composited over the same colours).
+    PerRay(Array2<F>),
 }
 
 /// Which outputs a render records beyond the colour.
@@ -99,16 +109,17 @@ pub trait RadianceField<F: Float>: Sized + Sync {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError>;
 
-    /// Records a training step's loss against `target` (`[R, 3]`) with the parameters lent to
-    /// the tape, so that the backward reaches them.
+    /// Records a training step's loss against `target` (`[R, 3]`) of the render over
+    /// `background` (shared, or one per ray), with the parameters lent to the tape, so that the
+    /// backward reaches them. The fused and taped methods record the same function.
     ///
-    /// Errors: from the ops, or a target of the wrong shape.
+    /// Errors: from the ops, or a target or per-ray background of the wrong shape.
     fn training_loss(
         &self,
         tape: &mut Tape<F>,
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
-        background: [f64; 3],
+        background: TrainingBackground<F>,
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError>;

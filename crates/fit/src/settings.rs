@@ -251,6 +251,18 @@ pub struct FitSettings {
     /// direction; 1 to 3: 3 (degree + 1)^2 coefficients a node).
     #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.sh_degree))]
     pub sh_degree: usize,
+    /// For training views with an alpha channel: composite each training ray over its own
+    /// random colour, uniform in [0, 1]^3 and drawn afresh every step, against the picture
+    /// composited over the same colour, so that the model cannot paint the background into
+    /// the scene (held-out views are still rendered over the dataset's background). No effect
+    /// on views without alpha. A file written before this setting existed reads false.
+    #[cfg_attr(
+        feature = "cli",
+        arg(long, value_name = "BOOL", num_args = 0..=1, default_missing_value = "true",
+            action = clap::ArgAction::Set, default_value_t = FitSettings::DEFAULT.random_background)
+    )]
+    #[serde(default = "trained_without_random_background")]
+    pub random_background: bool,
     /// The box the model covers: H for [-H, H]^3, or x0,y0,z0,x1,y1,z1; the data's own box
     /// when not given ([-1, 1]^3 for data that names none).
     #[cfg_attr(
@@ -266,7 +278,7 @@ pub struct FitSettings {
 
 impl FitSettings {
     /// The defaults: a 64^3 grid grown coarse to fine, 8192 rays a step for 60 s, fused ops,
-    /// occupancy sampling, f32.
+    /// occupancy sampling, f32, a random background per training ray for views with alpha.
     pub const DEFAULT: FitSettings = FitSettings {
         grid: 64,
         seconds: None,
@@ -283,6 +295,7 @@ impl FitSettings {
         shift: -4.0,
         evaluations: 20,
         sh_degree: 0,
+        random_background: true,
         scene_box: None,
         model: ModelKind::Dense,
     };
@@ -366,6 +379,12 @@ impl FitSettings {
     }
 }
 
+/// `random_background` of settings written before it existed: their fits trained over the
+/// dataset's background.
+fn trained_without_random_background() -> bool {
+    false
+}
+
 impl Default for FitSettings {
     fn default() -> Self {
         FitSettings::DEFAULT
@@ -397,6 +416,25 @@ mod tests {
         assert_eq!(merged.budget(), Budget::Seconds(5.0));
         let untouched = flags.given_over(&saved, &|_| false).unwrap();
         assert_eq!(untouched, saved);
+    }
+
+    #[test]
+    fn settings_written_before_random_backgrounds_read_them_off() {
+        const { assert!(FitSettings::DEFAULT.random_background) };
+        let old: FitSettings = serde_json::from_str(r#"{"grid": 32}"#).unwrap();
+        assert!(!old.random_background);
+        assert_eq!(
+            FitSettings {
+                random_background: true,
+                ..old
+            },
+            FitSettings {
+                grid: 32,
+                ..FitSettings::DEFAULT
+            }
+        );
+        let text = serde_json::to_string(&FitSettings::DEFAULT).unwrap();
+        assert!(serde_json::from_str::<FitSettings>(&text).unwrap().random_background);
     }
 
     #[test]

@@ -8,9 +8,10 @@ use fogray_ops::rays::RayBatch;
 use fogray_ops::sample::PackedSamples;
 use fogray_ops::{Background, Composite, CompositeInputs, ShColor};
 use fogray_tape::{Float, Tape, TapeError, Var};
-use ndarray::Array2;
+use ndarray::{Array1, Array2};
 
 use crate::error::FitError;
+use crate::model::TrainingBackground;
 use crate::settings::Method;
 
 /// Channels of a view-independent raw value: density, then red, green, blue.
@@ -23,16 +24,6 @@ pub struct Shading {
     pub activation: DensityColor,
     /// View-dependent colour: channels `1..` of a raw value are its coefficients.
     pub sh: Option<ShColor>,
-}
-
-/// The background a composite is recorded with: a tape value and whether it is one colour
-/// for every ray (`[3]`) or one per ray (`[R, 3]`).
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct BackgroundVar {
-    /// The colour(s) on the tape.
-    pub value: Var,
-    /// Shared or per ray.
-    pub kind: Background,
 }
 
 impl Shading {
@@ -66,14 +57,14 @@ impl Shading {
 
     /// Records `lookup` (sample positions `[n, 3]` to raw values `[n, C]`) of `samples` of
     /// `rays`, the activation and the colour, and returns the composite over the samples' rays
-    /// (with the depth if `depth`) with its inputs.
+    /// (over `background`, shared or one per ray; with the depth if `depth`) with its inputs.
     #[allow(clippy::too_many_arguments)] // one call site each in the grid models' render and loss
     pub fn composite_inputs<F: Float>(
         &self,
         tape: &mut Tape<F>,
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
-        background: BackgroundVar,
+        background: TrainingBackground<F>,
         method: Method,
         depth: bool,
         lookup: impl FnOnce(&mut Tape<F>, Var) -> Result<Var, TapeError>,
@@ -106,14 +97,18 @@ impl Shading {
             }
             _ => activated.color,
         };
+        let (background, kind) = match background {
+            TrainingBackground::Shared(b) => (tape.constant(Array1::from_iter(b.map(F::lit))), Background::Shared),
+            TrainingBackground::PerRay(b) => (tape.constant(b), Background::PerRay),
+        };
         let inputs = CompositeInputs {
             sigma: activated.sigma,
             delta: vars.delta,
             color,
-            background: Some(background.value),
+            background: Some(background),
             t: depth.then_some(vars.t),
         };
-        let op = Composite::packed(offsets).background(background.kind);
+        let op = Composite::packed(offsets).background(kind);
         Ok((if depth { op.with_depth() } else { op }, inputs))
     }
 }

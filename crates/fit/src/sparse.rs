@@ -25,15 +25,15 @@ use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples};
-use fogray_ops::{twins, Background, CompositeVars, GridBox};
+use fogray_ops::{twins, CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView2, Ix2};
 
 use crate::error::FitError;
-use crate::model::{RadianceField, RenderWanted, TrainingLoss};
+use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
-use crate::shading::{BackgroundVar, Shading};
+use crate::shading::Shading;
 
 /// The name of the packed raw values `[kept, C]` in the parameter store and a checkpoint.
 pub const DATA: &str = "sparse_grid";
@@ -263,10 +263,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let data = tape.param_from(&self.params, self.data)?;
-        let background = BackgroundVar {
-            value: tape.constant(Array1::from_iter(background.map(F::lit))),
-            kind: Background::Shared,
-        };
+        let background = TrainingBackground::Shared(background);
         let (op, inputs) = self.shading.composite_inputs(
             tape,
             rays,
@@ -287,15 +284,11 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         tape: &mut Tape<F>,
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
-        background: [f64; 3],
+        background: TrainingBackground<F>,
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let data = tape.param_from(&self.params, self.data)?;
-        let background = BackgroundVar {
-            value: tape.constant(Array1::from_iter(background.map(F::lit))),
-            kind: Background::Shared,
-        };
         let (op, inputs) =
             self.shading
                 .composite_inputs(tape, rays, samples, background, method, false, |tape, positions| {

@@ -1,5 +1,7 @@
 //! The training loop: Adam on a model's parameters, minimising the mean squared error of random
-//! batches of training rays (plus the model's priors), with the schedules of
+//! batches of training rays (plus the model's priors), each ray over the dataset's background
+//! or, for pictures with alpha and [`FitSettings::random_background`], over a random colour of
+//! its own against its picture composited over that colour, with the schedules of
 //! [`schedule`](crate::schedule) (learning rate, coarse-to-fine growth), the occupancy grid's
 //! own refresh policy, and the test PSNR on the held-out views measured at intervals (outside
 //! the training clock).
@@ -10,7 +12,7 @@ use std::time::Instant;
 use fogray_ops::sample::{CellPoints, OccupancyGrid};
 use fogray_tape::optim::{Adam, AdamConfig};
 use fogray_tape::{Float, Tape};
-use ndarray::Array3;
+use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha12Rng;
 use serde::Serialize;
@@ -19,7 +21,7 @@ use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
 use crate::error::FitError;
 use crate::metrics::psnr;
-use crate::model::RadianceField;
+use crate::model::{RadianceField, TrainingBackground};
 use crate::profile::{Phases, StepProfile};
 use crate::render::{render_picture, RenderOptions};
 use crate::sampling::{occupancy_grid, sample_rays};
@@ -119,7 +121,7 @@ pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitErro
 /// use fogray_fit::dataset::{Dataset, View};
 /// use fogray_fit::train::fit;
 /// use fogray_ops::{Intrinsics, PinholeCamera};
-/// use ndarray::Array3;
+/// use ndarray::{Array2, Array3};
 ///
 /// let k = Intrinsics::from_vertical_fov(8, 8, 0.7)?;
 /// let views = [[3.0, 0.0, 0.0], [0.0, 3.0, 0.0], [0.0, -3.0, 0.0]].map(|eye| {
@@ -259,19 +261,22 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
         };
         let rows: Vec<usize> = (0..settings.batch).map(|_| rng.gen_range(0..pixels)).collect();
         let batch = table.gather::<F>(&rows)?;
+        // A random colour per ray, from the same stream after the rows (none without alpha,
+        // so that a fit of opaque pictures draws the stream it always drew).
+        let (background, colors) = match (&batch.alpha, settings.random_background) {
+            (Some(_), true) => {
+                let drawn = Array2::from_shape_simple_fn((rows.len(), 3), || F::lit(rng.gen::<f64>()));
+                let colors = batch.colors_over(data.background, drawn.view())?;
+                (TrainingBackground::PerRay(drawn), colors)
+            }
+            _ => (TrainingBackground::Shared(data.background), batch.colors),
+        };
         lap(&mut phases.batch);
         let samples = sample_rays(&bounds, occupancy.as_ref(), &batch.rays, model.sample_step())?;
         samples_total += samples.len();
         lap(&mut phases.sample);
-        let target = tape.constant(batch.colors);
-        let objective = model.training_loss(
-            &mut tape,
-            &batch.rays,
-            samples,
-            data.background,
-            target,
-            settings.method,
-        )?;
+        let target = tape.constant(colors);
+        let objective = model.training_loss(&mut tape, &batch.rays, samples, background, target, settings.method)?;
         loss = tape
             .value(objective.photometric)?
             .iter()

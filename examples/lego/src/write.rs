@@ -32,8 +32,7 @@ fn psnr_at(run: &Run, seconds: f64) -> Option<f64> {
     run.result
         .log
         .iter()
-        .filter(|e| e.seconds > 0.0 && e.seconds <= seconds + 0.5)
-        .next_back()
+        .rfind(|e| e.seconds > 0.0 && e.seconds <= seconds + 0.5)
         .map(|e| e.test_psnr)
 }
 

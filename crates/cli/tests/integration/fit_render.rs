@@ -1,14 +1,16 @@
 //! `fogray fit` on an instant-ngp dataset written here (exact photographs of an opaque ball
 //! through an off-centre, distorted lens), then `fogray render` of the saved model from the
-//! same transforms file: the renders must land in register with the photographs.
+//! same transforms file: the renders must land in register with the photographs; the same
+//! photographs as RGBA, fitted over random backgrounds.
 
 use std::path::Path;
 
+use fogray_data::write_instant_ngp;
 use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 use serde_json::Value;
 
-use crate::common::{arg, cameras, fogray, frame_name, intrinsics, psnr, write_ball, LENS};
+use crate::common::{arg, cameras, fogray, frame_name, intrinsics, photograph, psnr, write_ball, LENS};
 
 const VIEWS: usize = 24;
 const SIZE: usize = 24;
@@ -153,4 +155,58 @@ fn a_fitted_ball_renders_in_register_with_its_photographs() {
         off_db < db - 4.0,
         "shifted by one pixel: {off_db} dB, in register {db} dB"
     );
+}
+
+/// The ball's photographs written as RGBA (the ball opaque, the rest transparent black), so
+/// that the loader composites them over `--background` and keeps their alpha: `fogray fit`
+/// trains over random backgrounds by default (the same fit as `--random-background`), and
+/// `--random-background false` is another fit, over the white background alone. Both learn
+/// the ball.
+#[test]
+fn an_rgba_dataset_is_fitted_over_random_backgrounds_by_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("rgba");
+    let cams = cameras(VIEWS, intrinsics(SIZE), LENS);
+    let rgba: Vec<Array3<f64>> = cams
+        .iter()
+        .map(|c| {
+            let photo = photograph(c);
+            Array3::from_shape_fn((SIZE, SIZE, 4), |(r, col, ch)| {
+                let ball = (0..3).any(|a| photo[[r, col, a]] != 1.0);
+                match (ch, ball) {
+                    (3, ball) => f64::from(u8::from(ball)),
+                    (_, true) => photo[[r, col, ch]],
+                    (_, false) => 0.0,
+                }
+            })
+        })
+        .collect();
+    let names: Vec<String> = (0..VIEWS).map(frame_name).collect();
+    let frames: Vec<_> = names
+        .iter()
+        .zip(&cams)
+        .zip(&rgba)
+        .map(|((n, c), p)| (n.as_str(), c, p))
+        .collect();
+    write_instant_ngp(&data, &frames).unwrap();
+    let fit = |flag: &[&str]| {
+        let mut args = vec!["fit", "--data", arg(&data), "--steps", "60", "--grid", "24"];
+        args.extend(["--batch", "1024", "--evaluations", "1", "--json"]);
+        args.extend(flag);
+        let run = fogray(&args);
+        assert_eq!(run.code, 0, "{flag:?}: {}", run.stderr);
+        let json: Value = serde_json::from_str(&run.stdout).unwrap();
+        json["final_test_psnr"].as_f64().unwrap()
+    };
+    let (default, random, fixed) = (
+        fit(&[]),
+        fit(&["--random-background"]),
+        fit(&["--random-background", "false"]),
+    );
+    assert_eq!(default.to_bits(), random.to_bits());
+    // The backgrounds drawn make it another fit (the alpha reached the training).
+    assert_ne!(random.to_bits(), fixed.to_bits());
+    for db in [random, fixed] {
+        assert!(db > 15.0, "random {random} dB, fixed {fixed} dB");
+    }
 }

@@ -2,7 +2,7 @@
 //! against their taped twins, resampling, and its densities against their closed form.
 
 use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::RadianceField;
+use fogray_fit::model::{RadianceField, TrainingBackground};
 use fogray_fit::settings::{Method, SceneBox};
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{PackedSamples, Spacing, Uniform};
@@ -12,6 +12,15 @@ use ndarray::{arr2, Array2, Array4, ArrayD, Ix4};
 
 /// The background of the losses below.
 const BACKGROUND: [f64; 3] = [1.0, 0.95, 0.9];
+
+/// The backgrounds the losses are checked over: [`BACKGROUND`] shared, and one per ray of
+/// [`setup`] (as a fit with random backgrounds draws them).
+fn backgrounds() -> [TrainingBackground<f64>; 2] {
+    [
+        TrainingBackground::Shared(BACKGROUND),
+        TrainingBackground::PerRay(arr2(&[[0.1, 0.7, 0.35], [0.9, 0.05, 0.6], [0.45, 0.2, 1.0]])),
+    ]
+}
 
 /// Weights of the total-variation prior the losses are checked with: none (the photometric
 /// loss alone) and one that weighs about as much as it.
@@ -54,13 +63,14 @@ fn carried_objective(
     tape: &mut Tape<f64>,
     grid: Var,
     method: Method,
+    background: TrainingBackground<f64>,
     build: impl Fn(&ArrayD<f64>) -> DenseGrid<f64>,
 ) -> Result<Var, TapeError> {
     let model = build(&tape.value(grid)?.to_owned());
     let (rays, samples, target) = setup();
     let target = tape.constant(target);
     let loss = model
-        .training_loss(tape, &rays, samples, BACKGROUND, target, method)?
+        .training_loss(tape, &rays, samples, background, target, method)?
         .objective;
     let g = tape.backward(loss)?.param(model.grid_id()).unwrap().to_owned();
     let g = tape.constant(g);
@@ -72,8 +82,14 @@ fn carried_objective(
 }
 
 /// [`carried_objective`] of the view-independent grid with the prior's weight `smoothness`.
-fn objective(tape: &mut Tape<f64>, grid: Var, method: Method, smoothness: f64) -> Result<Var, TapeError> {
-    carried_objective(tape, grid, method, |raw| model(raw, smoothness))
+fn objective(
+    tape: &mut Tape<f64>,
+    grid: Var,
+    method: Method,
+    background: TrainingBackground<f64>,
+    smoothness: f64,
+) -> Result<Var, TapeError> {
+    carried_objective(tape, grid, method, background, |raw| model(raw, smoothness))
 }
 
 #[test]
@@ -84,15 +100,18 @@ fn the_training_loss_passes_gradcheck_fused_and_taped() {
         "the rays must cross the grid: {} samples",
         samples.len()
     );
-    for smoothness in SMOOTHNESS {
+    for (smoothness, background) in SMOOTHNESS.into_iter().zip(backgrounds()) {
         for method in [Method::Fused, Method::Taped] {
             let report = gradcheck(
-                |t, v| objective(t, v[0], method, smoothness),
+                |t, v| objective(t, v[0], method, background.clone(), smoothness),
                 &[raw_grid()],
                 &GradcheckOptions::default(),
             )
             .unwrap();
-            assert!(report.passes(), "{method:?}, smoothness {smoothness}: {report}");
+            assert!(
+                report.passes(),
+                "{method:?}, smoothness {smoothness}, {background:?}: {report}"
+            );
             // Every element was compared, against a gradient that is not all zero.
             assert_eq!(report.checked, 3 * 3 * 3 * 4);
             assert!(report.entries.iter().any(|e| e.analytic.abs() > 1e-3));
@@ -102,7 +121,9 @@ fn the_training_loss_passes_gradcheck_fused_and_taped() {
 
 #[test]
 fn fused_and_taped_give_the_same_loss_and_gradient() {
-    for smoothness in SMOOTHNESS {
+    let cases = SMOOTHNESS.into_iter().flat_map(|s| backgrounds().map(|b| (s, b)));
+    let mut photometric_by_background = Vec::new();
+    for (smoothness, background) in cases {
         let mut results = Vec::new();
         for method in [Method::Fused, Method::Taped] {
             let model = model(&raw_grid(), smoothness);
@@ -110,7 +131,7 @@ fn fused_and_taped_give_the_same_loss_and_gradient() {
             let mut tape = Tape::<f64>::new();
             let target = tape.constant(target);
             let loss = model
-                .training_loss(&mut tape, &rays, samples, BACKGROUND, target, method)
+                .training_loss(&mut tape, &rays, samples, background.clone(), target, method)
                 .unwrap();
             let value = |v: Var| tape.value(v).unwrap()[[]];
             let (photometric, objective) = (value(loss.photometric), value(loss.objective));
@@ -129,9 +150,16 @@ fn fused_and_taped_give_the_same_loss_and_gradient() {
         assert!((o0 - o1).abs() < 1e-14, "{o0} {o1}");
         assert!(g0.iter().any(|v| v.abs() > 1e-3), "a gradient that can fail");
         for (a, b) in g0.iter().zip(g1.iter()) {
-            assert!((a - b).abs() < 1e-13, "smoothness {smoothness}: {a} {b}");
+            assert!(
+                (a - b).abs() < 1e-13,
+                "smoothness {smoothness}, {background:?}: {a} {b}"
+            );
         }
+        photometric_by_background.push(*p0);
     }
+    // The per-ray background reaches the loss: it is not the shared one's.
+    let p = photometric_by_background;
+    assert!((p[0] - p[1]).abs() > 1e-3 && (p[2] - p[3]).abs() > 1e-3, "{p:?}");
 }
 
 #[test]
@@ -210,7 +238,11 @@ fn a_view_dependent_grid_passes_gradcheck_fused_and_taped() {
         let mut losses = Vec::new();
         for method in [Method::Fused, Method::Taped] {
             let report = gradcheck(
-                |t, v| carried_objective(t, v[0], method, |raw| view_dependent_model(raw, degree)),
+                |t, v| {
+                    carried_objective(t, v[0], method, backgrounds()[degree % 2].clone(), |raw| {
+                        view_dependent_model(raw, degree)
+                    })
+                },
                 &[view_dependent_raw(degree)],
                 &GradcheckOptions::default(),
             )
@@ -224,7 +256,14 @@ fn a_view_dependent_grid_passes_gradcheck_fused_and_taped() {
             let mut tape = Tape::<f64>::new();
             let target = tape.constant(target);
             let loss = model
-                .training_loss(&mut tape, &rays, samples, BACKGROUND, target, method)
+                .training_loss(
+                    &mut tape,
+                    &rays,
+                    samples,
+                    backgrounds()[degree % 2].clone(),
+                    target,
+                    method,
+                )
                 .unwrap();
             losses.push(tape.value(loss.objective).unwrap()[[]]);
         }

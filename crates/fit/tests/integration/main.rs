@@ -3,6 +3,7 @@
 //! beside this one). They fit small synthetic datasets ([`common`]); the fits of a real scene
 //! are the examples' tests.
 
+mod background;
 mod checkpoint;
 mod common;
 mod dense;

@@ -1,6 +1,7 @@
 //! A fit stopped at step k, saved, reloaded and continued takes the same steps, bit for bit,
 //! as one never stopped: with a constant rate or through growth and the anneal, stopped by its
-//! budget or by its flag, in f32 and f64, with uniform or occupancy sampling.
+//! budget or by its flag, in f32 and f64, with uniform or occupancy sampling, over the
+//! dataset's background or random ones.
 
 use std::collections::BTreeMap;
 
@@ -12,7 +13,7 @@ use fogray_fit::settings::{Budget, FitSettings, Precision, Sampling};
 use fogray_ops::sample::Refresh;
 use fogray_tape::Float;
 
-use crate::common::{ball_dataset, grid_bits, image_bits, run, temp};
+use crate::common::{alpha_ball_dataset, ball_dataset, grid_bits, image_bits, run, temp};
 
 fn data() -> Dataset {
     ball_dataset(8, 2, 10)
@@ -22,19 +23,30 @@ fn data() -> Dataset {
 /// to `total`: the first part is a fit with a budget of `k` steps, or (`stopped`) a fit to
 /// `total` stopped by its flag after step `k`.
 fn split_equals_whole<F: Float>(settings: FitSettings, total: usize, k: usize, stopped: bool, name: &str) {
-    let data = data();
+    split_equals_whole_of::<F>(&data(), settings, total, k, stopped, name);
+}
+
+/// [`split_equals_whole`] on `data`.
+fn split_equals_whole_of<F: Float>(
+    data: &Dataset,
+    settings: FitSettings,
+    total: usize,
+    k: usize,
+    stopped: bool,
+    name: &str,
+) {
     let settings = FitSettings {
         precision: Precision::of::<F>(),
         ..settings
     };
     let whole_settings = settings.with_budget(Budget::Steps(total));
-    let whole = run::<F>(&data, &whole_settings, None, None);
+    let whole = run::<F>(data, &whole_settings, None, None);
     let first_settings = if stopped {
         whole_settings
     } else {
         settings.with_budget(Budget::Steps(k))
     };
-    let first = run::<F>(&data, &first_settings, None, stopped.then_some(k));
+    let first = run::<F>(data, &first_settings, None, stopped.then_some(k));
     assert_eq!(first.training.step, k);
     assert_eq!(first.interrupted, stopped);
     let file = temp(name);
@@ -42,7 +54,7 @@ fn split_equals_whole<F: Float>(settings: FitSettings, total: usize, k: usize, s
     let back = load::<F, DenseGrid<F>>(&file).unwrap();
     assert_eq!(back.start.training, first.training);
     assert_eq!(back.settings, first_settings);
-    let second = run::<F>(&data, &whole_settings, Some(back.start), None);
+    let second = run::<F>(data, &whole_settings, Some(back.start), None);
     assert_eq!(second.training.step, total);
     assert_eq!(second.model.nodes(), whole.model.nodes());
     assert_eq!(grid_bits(&second.model), grid_bits(&whole.model), "{name}");
@@ -67,7 +79,7 @@ fn split_equals_whole<F: Float>(settings: FitSettings, total: usize, k: usize, s
     assert!(!forgetful.training.adam.is_empty());
     forgetful.training.adam = Vec::new();
     forgetful.training.batch_stream = 0;
-    let differs = run::<F>(&data, &whole_settings, Some(forgetful), None);
+    let differs = run::<F>(data, &whole_settings, Some(forgetful), None);
     assert_ne!(grid_bits(&differs.model), grid_bits(&whole.model));
     let _ = std::fs::remove_file(&file);
 }
@@ -97,6 +109,54 @@ fn k_steps_saved_and_continued_equal_2k_steps_bitwise() {
     };
     split_equals_whole::<f32>(growing, 20, 4, true, "split-grow.safetensors");
     split_equals_whole::<f32>(base, 8, 3, true, "split-stop.safetensors");
+}
+
+#[test]
+fn a_fit_over_random_backgrounds_saved_and_continued_equals_the_whole_bitwise() {
+    // Pictures with alpha: each step draws its rows, then a colour per ray, from the one
+    // stream; the file's position in it continues both.
+    let alpha = alpha_ball_dataset(8, 2, 10, [1.0; 3]);
+    let base = FitSettings {
+        grid: 6,
+        batch: 128,
+        lr: 0.2,
+        lr_final: 0.2,
+        grow: false,
+        sampling: Sampling::Uniform,
+        random_background: true,
+        ..FitSettings::default()
+    };
+    split_equals_whole_of::<f32>(&alpha, base, 12, 6, false, "split-random-f32.safetensors");
+    split_equals_whole_of::<f64>(&alpha, base, 12, 5, true, "split-random-f64.safetensors");
+    // The backgrounds are drawn: the same fit over the dataset's background differs, and so
+    // does the stream's position (a colour per ray more a step).
+    let steps = base.with_budget(Budget::Steps(4));
+    let random = run::<f32>(&alpha, &steps, None, None);
+    let fixed = run::<f32>(
+        &alpha,
+        &FitSettings {
+            random_background: false,
+            ..steps
+        },
+        None,
+        None,
+    );
+    assert_ne!(grid_bits(&random.model), grid_bits(&fixed.model));
+    assert!(random.training.batch_stream > fixed.training.batch_stream);
+    // Without alpha the setting draws nothing: the fit is the one over the fixed background.
+    let opaque = data();
+    let on = run::<f32>(&opaque, &steps, None, None);
+    let off = run::<f32>(
+        &opaque,
+        &FitSettings {
+            random_background: false,
+            ..steps
+        },
+        None,
+        None,
+    );
+    assert_eq!(grid_bits(&on.model), grid_bits(&off.model));
+    assert_eq!(on.training.batch_stream, off.training.batch_stream);
 }
 
 #[test]

@@ -4,7 +4,7 @@
 
 use fogray_fit::checkpoint;
 use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::RadianceField;
+use fogray_fit::model::{RadianceField, TrainingBackground};
 use fogray_fit::settings::{Budget, FitSettings, Method, ModelKind, SceneBox};
 use fogray_fit::shading::Shading;
 use fogray_fit::sparse::{keep_near_occupied, SparseGrid};
@@ -20,6 +20,11 @@ use ndarray::{arr2, Array1, Array2, Array4, ArrayD, Ix2};
 use crate::common::{ball_dataset, temp};
 
 const BACKGROUND: [f64; 3] = [1.0, 0.95, 0.9];
+
+/// A background of its own for each of [`setup`]'s rays (as random backgrounds give).
+fn per_ray_background() -> TrainingBackground<f64> {
+    TrainingBackground::PerRay(arr2(&[[0.2, 0.7, 0.1], [0.9, 0.4, 0.5], [0.0, 1.0, 0.3]]))
+}
 
 /// Three rays crossing a 3^3 lattice over the unit box, sampled every 0.4, and their targets.
 fn setup() -> (RayBatch<f64>, PackedSamples<f64>, Array2<f64>) {
@@ -73,7 +78,7 @@ fn loss_and_gradient<M: RadianceField<f64>>(model: &M, method: Method) -> (f64, 
     let mut tape = Tape::<f64>::new();
     let target = tape.constant(target);
     let loss = model
-        .training_loss(&mut tape, &rays, samples, BACKGROUND, target, method)
+        .training_loss(&mut tape, &rays, samples, TrainingBackground::Shared(BACKGROUND), target, method)
         .unwrap();
     let value = tape.value(loss.objective).unwrap()[[]];
     let id = model.params().ids().next().unwrap();
@@ -112,7 +117,7 @@ fn with_nodes_absent_the_loss_passes_gradcheck_and_fused_is_taped() {
         let (rays, samples, target) = setup();
         let target = tape.constant(target);
         let loss = model
-            .training_loss(tape, &rays, samples, BACKGROUND, target, method)?
+            .training_loss(tape, &rays, samples, per_ray_background(), target, method)?
             .objective;
         let id = model.params().ids().next().unwrap();
         let g = tape.backward(loss)?.param(id).unwrap().to_owned();

@@ -12,7 +12,7 @@ use fogray_fit::state::Start;
 use fogray_fit::train::{fit_from, FitResult, Progress};
 use fogray_ops::{Intrinsics, PinholeCamera};
 use fogray_tape::Float;
-use ndarray::Array3;
+use ndarray::{Array2, Array3};
 
 /// The colour of the ball of [`ball_dataset`].
 pub const BALL: [f64; 3] = [0.8, 0.3, 0.1];
@@ -68,6 +68,31 @@ pub fn ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
         }
     }
     Dataset::new(training, held_out, BACKGROUND).unwrap()
+}
+
+/// [`ball_dataset`]'s views as pictures with alpha: the ball opaque (alpha 1), the rest
+/// transparent (alpha 0) and composited over `background`, the dataset's background.
+pub fn alpha_ball_dataset(train: usize, test: usize, size: usize, background: [f64; 3]) -> Dataset {
+    let with_alpha = |view: View| {
+        let alpha = Array2::from_shape_fn((size, size), |(r, c)| {
+            if view.image[[r, c, 0]] == BACKGROUND[0] {
+                0.0
+            } else {
+                1.0
+            }
+        });
+        let mut view = view.with_alpha(alpha).unwrap();
+        for ((r, c, ch), v) in view.image.indexed_iter_mut() {
+            if view.alpha.as_ref().unwrap()[[r, c]] == 0.0 {
+                *v = background[ch];
+            }
+        }
+        view
+    };
+    let data = ball_dataset(train, test, size);
+    let train = data.train.into_iter().map(with_alpha).collect();
+    let test = data.test.into_iter().map(with_alpha).collect();
+    Dataset::new(train, test, background).unwrap()
 }
 
 /// A fresh path `name` in this process's temporary directory: the tests share one process and
