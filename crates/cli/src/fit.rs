@@ -13,8 +13,8 @@ use fogray_fit::images::write_comparison_png;
 use fogray_fit::interrupt::StopFlag;
 use fogray_fit::metrics::haze_fraction;
 use fogray_fit::plots;
-use fogray_fit::render::{render_picture, RenderOptions};
 use fogray_fit::profile::ProfileTable;
+use fogray_fit::render::{render_picture, RenderOptions};
 use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
 use fogray_fit::sparse::SparseGrid;
 use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
@@ -329,7 +329,14 @@ fn held_out_haze<F: Float, M: RadianceField<F>>(
     let mut opacities = Vec::new();
     for t in &data.test {
         let (origins, directions) = t.rays();
-        let view = render_picture(&result.model, result.occupancy.as_ref(), &origins, &directions, t.size(), &options)?;
+        let view = render_picture(
+            &result.model,
+            result.occupancy.as_ref(),
+            &origins,
+            &directions,
+            t.size(),
+            &options,
+        )?;
         opacities.push(view.opacity);
     }
     let views: Vec<_> = opacities.iter().map(|o| o.view()).collect();

@@ -29,7 +29,7 @@
 use fogray_ops::prior::TotalVariation;
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples};
-use fogray_ops::{twins, CompositeVars, GridBox, GridField};
+use fogray_ops::{CompositeVars, GridBox, GridField};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
@@ -55,9 +55,30 @@ pub struct DenseGrid<F: Float> {
     prior: TotalVariation,
     bounds: Aabb,
     nodes: usize,
+    /// Weight of the distortion loss in the training objective (0: none).
+    distortion: f64,
 }
 
 impl<F: Float> DenseGrid<F> {
+    /// The same grid with the distortion loss (mip-NeRF 360's, over each training ray's
+    /// sample weights) weighted by `weight` in its training objective.
+    ///
+    /// Errors: a weight that is negative or not finite.
+    pub fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(FitError::Config(format!(
+                "--distortion {weight}: must be finite and non-negative"
+            )));
+        }
+        self.distortion = weight;
+        Ok(self)
+    }
+
+    /// The distortion loss's weight.
+    pub fn distortion(&self) -> f64 {
+        self.distortion
+    }
+
     /// A grid of `nodes^3` nodes (at least 2) over `scene_box`, every raw value 0: density
     /// `softplus(shift)` and colour grey (0.5) everywhere; `smoothness` weighs its
     /// total-variation prior (0 for none).
@@ -102,6 +123,7 @@ impl<F: Float> DenseGrid<F> {
             shading,
             prior,
             nodes,
+            distortion: 0.0,
         })
     }
 
@@ -147,15 +169,16 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
             settings.shift,
             settings.smoothness,
             settings.sh_degree,
-        )
+        )?
+        .with_distortion(settings.distortion)
     }
 
     /// Each new node takes the trilinear interpolation of this grid's raw values at its
     /// position.
     fn resampled(&self, nodes: usize, _occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
-        let mut grown =
-            DenseGrid::<F>::with_shading(scene_box, nodes, self.shading, self.prior.weight())?;
+        let mut grown = DenseGrid::<F>::with_shading(scene_box, nodes, self.shading, self.prior.weight())?
+            .with_distortion(self.distortion)?;
         let channels = self.channels();
         let at = |i: usize, axis: usize| {
             let (lo, hi) = (scene_box.min[axis], scene_box.max[axis]);
@@ -211,19 +234,17 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     ) -> Result<CompositeVars, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
         let background = TrainingBackground::Shared(background);
-        let (op, inputs) = self.shading.composite_inputs(
+        let shaded = self.shading.composite_inputs(
             tape,
             rays,
             samples,
             background,
             method,
             wanted.depth,
+            0.0,
             |tape, positions| self.lookup(tape, grid, positions, method),
         )?;
-        match method {
-            Method::Fused => op.apply(tape, &inputs),
-            Method::Taped => twins::stable(tape, &op, &inputs),
-        }
+        shaded.render(tape, method)
     }
 
     /// The fused method records the composite and the loss as one op
@@ -239,27 +260,22 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let (op, inputs) =
-            self.shading
-                .composite_inputs(tape, rays, samples, background, method, false, |tape, positions| {
-                    self.lookup(tape, grid, positions, method)
-                })?;
-        let photometric = match method {
-            Method::Fused => op.apply_mse(tape, &inputs, target)?,
-            Method::Taped => {
-                let color = twins::stable(tape, &op, &inputs)?.color;
-                let residual = tape.sub(color, target)?;
-                let squared = tape.square(residual)?;
-                tape.mean(squared)?
-            }
-        };
-        let objective = if self.prior.weight() > 0.0 {
-            let smooth = self.prior.apply(tape, grid)?;
-            tape.add(photometric, smooth)?
+        let shaded = self.shading.composite_inputs(
+            tape,
+            rays,
+            samples,
+            background,
+            method,
+            false,
+            self.distortion,
+            |tape, positions| self.lookup(tape, grid, positions, method),
+        )?;
+        let prior = if self.prior.weight() > 0.0 {
+            Some(self.prior.apply(tape, grid)?)
         } else {
-            photometric
+            None
         };
-        Ok(TrainingLoss { photometric, objective })
+        shaded.training_loss(tape, target, method, prior)
     }
 
     /// A position outside the box reads raw 0 (density `softplus(shift)`).

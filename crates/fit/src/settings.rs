@@ -271,6 +271,10 @@ pub struct FitSettings {
     )]
     #[serde(skip_serializing_if = "Option::is_none")]
     pub scene_box: Option<SceneBox>,
+    /// Weight of the distortion loss (mip-NeRF 360's: it pulls each ray's weights together,
+    /// against floaters and haze) added to the training objective; 0 for none.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "WEIGHT", default_value_t = FitSettings::DEFAULT.distortion))]
+    pub distortion: f64,
     /// The model: a dense grid, or a sparse one pruned to the occupied space at each growth.
     #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.model))]
     pub model: ModelKind,
@@ -298,6 +302,7 @@ impl FitSettings {
         random_background: true,
         scene_box: None,
         model: ModelKind::Dense,
+        distortion: 0.0,
     };
 
     /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].
@@ -342,6 +347,9 @@ impl FitSettings {
         }
         if !self.shift.is_finite() {
             return bad("--shift must be finite");
+        }
+        if !(self.distortion.is_finite() && self.distortion >= 0.0) {
+            return bad("--distortion must be finite and non-negative");
         }
         if self.sh_degree > 3 {
             return bad("--sh-degree must be 0, 1, 2 or 3");

@@ -4,14 +4,15 @@
 //! only in the lookup they pass in.
 
 use fogray_ops::activation::{twin, DensityColor};
+use fogray_ops::distortion::DistortionLoss;
 use fogray_ops::rays::RayBatch;
 use fogray_ops::sample::PackedSamples;
-use fogray_ops::{Background, Composite, CompositeInputs, ShColor};
+use fogray_ops::{twins, Background, Composite, CompositeInputs, CompositeVars, ShColor};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2};
 
 use crate::error::FitError;
-use crate::model::TrainingBackground;
+use crate::model::{TrainingBackground, TrainingLoss};
 use crate::settings::Method;
 
 /// Channels of a view-independent raw value: density, then red, green, blue.
@@ -24,6 +25,58 @@ pub struct Shading {
     pub activation: DensityColor,
     /// View-dependent colour: channels `1..` of a raw value are its coefficients.
     pub sh: Option<ShColor>,
+}
+
+/// What [`Shading::composite_inputs`] records.
+#[derive(Debug)]
+pub struct Shaded {
+    /// The composite over the samples' rays.
+    pub composite: Composite,
+    /// Its inputs on the tape.
+    pub inputs: CompositeInputs,
+    /// The weighted distortion loss (a 0-d value), when it was asked for.
+    pub distortion: Option<Var>,
+}
+
+impl Shaded {
+    /// Records the composite (colour, opacity and the depth if it was asked for).
+    ///
+    /// Errors: from the ops.
+    pub fn render<F: Float>(self, tape: &mut Tape<F>, method: Method) -> Result<CompositeVars, TapeError> {
+        match method {
+            Method::Fused => self.composite.apply(tape, &self.inputs),
+            Method::Taped => twins::stable(tape, &self.composite, &self.inputs),
+        }
+    }
+
+    /// Records the training loss against `target` (`[R, 3]`): the fused method composites and
+    /// takes the mean squared error in one op ([`Composite::apply_mse`]), the taped one the
+    /// stable twin, then `sub`, `square` and `mean`; the objective adds the distortion loss and
+    /// `prior`, where there are.
+    ///
+    /// Errors: from the ops.
+    pub fn training_loss<F: Float>(
+        self,
+        tape: &mut Tape<F>,
+        target: Var,
+        method: Method,
+        prior: Option<Var>,
+    ) -> Result<TrainingLoss, TapeError> {
+        let photometric = match method {
+            Method::Fused => self.composite.apply_mse(tape, &self.inputs, target)?,
+            Method::Taped => {
+                let color = twins::stable(tape, &self.composite, &self.inputs)?.color;
+                let residual = tape.sub(color, target)?;
+                let squared = tape.square(residual)?;
+                tape.mean(squared)?
+            }
+        };
+        let mut objective = photometric;
+        for term in [self.distortion, prior].into_iter().flatten() {
+            objective = tape.add(objective, term)?;
+        }
+        Ok(TrainingLoss { photometric, objective })
+    }
 }
 
 impl Shading {
@@ -57,7 +110,8 @@ impl Shading {
 
     /// Records `lookup` (sample positions `[n, 3]` to raw values `[n, C]`) of `samples` of
     /// `rays`, the activation and the colour, and returns the composite over the samples' rays
-    /// (over `background`, shared or one per ray; with the depth if `depth`) with its inputs.
+    /// (over `background`, shared or one per ray; with the depth if `depth`) with its inputs,
+    /// and, if `distortion` is above 0, the distortion loss of the samples' weights times it.
     #[allow(clippy::too_many_arguments)] // one call site each in the grid models' render and loss
     pub fn composite_inputs<F: Float>(
         &self,
@@ -67,8 +121,9 @@ impl Shading {
         background: TrainingBackground<F>,
         method: Method,
         depth: bool,
+        distortion: f64,
         lookup: impl FnOnce(&mut Tape<F>, Var) -> Result<Var, TapeError>,
-    ) -> Result<(Composite, CompositeInputs), TapeError> {
+    ) -> Result<Shaded, TapeError> {
         // Each sample's view direction, its ray's (a constant: no gradient).
         let directions = self.sh.as_ref().map(|_| {
             let d = rays.directions();
@@ -108,7 +163,23 @@ impl Shading {
             background: Some(background),
             t: depth.then_some(vars.t),
         };
+        let distortion = if distortion > 0.0 {
+            let op = DistortionLoss::packed(offsets.clone());
+            let loss = match method {
+                Method::Fused => op.apply(tape, activated.sigma, vars.delta, vars.t)?,
+                Method::Taped => {
+                    fogray_ops::distortion::twin::distortion_loss(tape, &op, activated.sigma, vars.delta, vars.t)?
+                }
+            };
+            Some(tape.mul_scalar(loss, F::lit(distortion))?)
+        } else {
+            None
+        };
         let op = Composite::packed(offsets).background(kind);
-        Ok((if depth { op.with_depth() } else { op }, inputs))
+        Ok(Shaded {
+            composite: if depth { op.with_depth() } else { op },
+            inputs,
+            distortion,
+        })
     }
 }

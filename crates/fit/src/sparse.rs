@@ -25,7 +25,7 @@ use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples};
-use fogray_ops::{twins, CompositeVars, GridBox};
+use fogray_ops::{CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView2, Ix2};
@@ -54,6 +54,8 @@ pub struct SparseGrid<F: Float> {
     prior: SparseTotalVariation,
     bounds: Aabb,
     nodes: usize,
+    /// Weight of the distortion loss in the training objective (0: none).
+    distortion: f64,
 }
 
 /// Where node `i` of `nodes` sits along axis `a` of `scene_box`.
@@ -63,6 +65,25 @@ fn node_position(scene_box: &SceneBox, nodes: usize, a: usize, i: usize) -> f64 
 }
 
 impl<F: Float> SparseGrid<F> {
+    /// The same grid with the distortion loss (mip-NeRF 360's, over each training ray's
+    /// sample weights) weighted by `weight` in its training objective.
+    ///
+    /// Errors: a weight that is negative or not finite.
+    pub fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
+        if !(weight.is_finite() && weight >= 0.0) {
+            return Err(FitError::Config(format!(
+                "--distortion {weight}: must be finite and non-negative"
+            )));
+        }
+        self.distortion = weight;
+        Ok(self)
+    }
+
+    /// The distortion loss's weight.
+    pub fn distortion(&self) -> f64 {
+        self.distortion
+    }
+
     /// The grid over `scene_box` of the lattice nodes `index` keeps (`nodes^3`), every raw
     /// value 0, with `shading`; `smoothness` weighs its total-variation prior (0 for none).
     ///
@@ -95,6 +116,7 @@ impl<F: Float> SparseGrid<F> {
             shading,
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
             nodes,
+            distortion: 0.0,
         })
     }
 
@@ -133,7 +155,8 @@ impl<F: Float> SparseGrid<F> {
             NodeIndex::from_mask([nodes; 3], keep)?,
             self.shading,
             self.prior.weight(),
-        )?;
+        )?
+        .with_distortion(self.distortion)?;
         let kept = grown.index().kept_nodes();
         let positions = Array2::from_shape_fn((kept.len(), 3), |(r, a)| {
             let l = kept[r];
@@ -191,7 +214,8 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             NodeIndex::full([nodes; 3])?,
             shading,
             settings.smoothness,
-        )
+        )?
+        .with_distortion(settings.distortion)
     }
 
     /// Keeps the nodes within [`DILATION`] occupancy cells of a cell the fit's occupancy grid
@@ -227,7 +251,8 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             NodeIndex::from_mask([nodes; 3], &keep)?,
             shading,
             settings.smoothness,
-        )
+        )?
+        .with_distortion(settings.distortion)
     }
 
     fn nodes(&self) -> usize {
@@ -264,19 +289,17 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     ) -> Result<CompositeVars, TapeError> {
         let data = tape.param_from(&self.params, self.data)?;
         let background = TrainingBackground::Shared(background);
-        let (op, inputs) = self.shading.composite_inputs(
+        let shaded = self.shading.composite_inputs(
             tape,
             rays,
             samples,
             background,
             method,
             wanted.depth,
+            0.0,
             |tape, positions| self.lookup(tape, data, positions, method),
         )?;
-        match method {
-            Method::Fused => op.apply(tape, &inputs),
-            Method::Taped => twins::stable(tape, &op, &inputs),
-        }
+        shaded.render(tape, method)
     }
 
     fn training_loss(
@@ -289,27 +312,22 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let data = tape.param_from(&self.params, self.data)?;
-        let (op, inputs) =
-            self.shading
-                .composite_inputs(tape, rays, samples, background, method, false, |tape, positions| {
-                    self.lookup(tape, data, positions, method)
-                })?;
-        let photometric = match method {
-            Method::Fused => op.apply_mse(tape, &inputs, target)?,
-            Method::Taped => {
-                let color = twins::stable(tape, &op, &inputs)?.color;
-                let residual = tape.sub(color, target)?;
-                let squared = tape.square(residual)?;
-                tape.mean(squared)?
-            }
-        };
-        let objective = if self.prior.weight() > 0.0 {
-            let smooth = self.prior.apply(tape, data)?;
-            tape.add(photometric, smooth)?
+        let shaded = self.shading.composite_inputs(
+            tape,
+            rays,
+            samples,
+            background,
+            method,
+            false,
+            self.distortion,
+            |tape, positions| self.lookup(tape, data, positions, method),
+        )?;
+        let prior = if self.prior.weight() > 0.0 {
+            Some(self.prior.apply(tape, data)?)
         } else {
-            photometric
+            None
         };
-        Ok(TrainingLoss { photometric, objective })
+        shaded.training_loss(tape, target, method, prior)
     }
 
     /// A position outside the box or among absent nodes reads raw 0 (density

@@ -119,7 +119,9 @@ fn run_one(fogray: &Path, args: &Args, config: &Config, out: &Path) -> Result<Ru
         .arg(out)
         .args(config.flags.split_whitespace());
     eprintln!("fogray-lego: {} ({seconds} s): {}", config.name, config.flags);
-    let output = command.output().with_context(|| format!("running {}", fogray.display()))?;
+    let output = command
+        .output()
+        .with_context(|| format!("running {}", fogray.display()))?;
     if !output.status.success() {
         bail!(
             "{}: fogray fit failed: {}",
@@ -127,7 +129,8 @@ fn run_one(fogray: &Path, args: &Args, config: &Config, out: &Path) -> Result<Ru
             String::from_utf8_lossy(&output.stderr)
         );
     }
-    let result: FitJson = serde_json::from_slice(&output.stdout).with_context(|| format!("{}: its JSON", config.name))?;
+    let result: FitJson =
+        serde_json::from_slice(&output.stdout).with_context(|| format!("{}: its JSON", config.name))?;
     Ok(Run {
         config: config.clone(),
         seconds_budget: seconds,

@@ -119,14 +119,19 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
             md,
             "| {} | `{}` | {:.0} | {} | {} | {} | {:.2} | {:.1} M | {} | {:.4} | {:.1} | {:.1} | {:.1} | {} |",
             run.config.name,
-            if run.config.flags.is_empty() { "(defaults)" } else { run.config.flags },
+            if run.config.flags.is_empty() {
+                "(defaults)"
+            } else {
+                run.config.flags
+            },
             r.seconds,
             r.steps,
             cell(psnr_at(run, 30.0)),
             cell(psnr_at(run, 60.0)),
             r.final_test_psnr,
             r.parameters as f64 / 1e6,
-            r.peak_resident_bytes.map_or("-".into(), |b| format!("{:.2} GB", b as f64 / 1e9)),
+            r.peak_resident_bytes
+                .map_or("-".into(), |b| format!("{:.2} GB", b as f64 / 1e9)),
             r.held_out_haze,
             phase(run, "forward") + phase(run, "backward"),
             phase(run, "optimiser"),
@@ -155,7 +160,10 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
             .collect();
         views.sort();
         if let Some(view) = views.first() {
-            let name = format!("held-out-{}", view.file_name().map_or("view".into(), |n| n.to_string_lossy()));
+            let name = format!(
+                "held-out-{}",
+                view.file_name().map_or("view".into(), |n| n.to_string_lossy())
+            );
             std::fs::copy(view, out.join(&name))?;
             writeln!(
                 md,

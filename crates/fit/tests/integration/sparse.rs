@@ -78,7 +78,14 @@ fn loss_and_gradient<M: RadianceField<f64>>(model: &M, method: Method) -> (f64, 
     let mut tape = Tape::<f64>::new();
     let target = tape.constant(target);
     let loss = model
-        .training_loss(&mut tape, &rays, samples, TrainingBackground::Shared(BACKGROUND), target, method)
+        .training_loss(
+            &mut tape,
+            &rays,
+            samples,
+            TrainingBackground::Shared(BACKGROUND),
+            target,
+            method,
+        )
         .unwrap();
     let value = tape.value(loss.objective).unwrap()[[]];
     let id = model.params().ids().next().unwrap();
@@ -108,12 +115,12 @@ fn with_every_node_kept_it_is_the_dense_grid() {
 }
 
 #[test]
-fn with_nodes_absent_the_loss_passes_gradcheck_and_fused_is_taped() {
+fn with_nodes_absent_a_prior_and_the_distortion_loss_the_loss_passes_gradcheck_and_fused_is_taped() {
     let keep = some_absent();
     let objective = |tape: &mut Tape<f64>, data: Var, method: Method| -> Result<Var, TapeError> {
         // The model's own copy of the values carries its gradient to `data` (exactly 0 added).
         let value = tape.value(data)?.to_owned().into_dimensionality::<Ix2>().unwrap();
-        let model = sparse_model_tv(&keep, &value, 0.05);
+        let model = sparse_model_tv(&keep, &value, 0.05).with_distortion(0.05).unwrap();
         let (rays, samples, target) = setup();
         let target = tape.constant(target);
         let loss = model
@@ -140,7 +147,7 @@ fn with_nodes_absent_the_loss_passes_gradcheck_and_fused_is_taped() {
         assert!(report.passes(), "{method:?}: {report}");
         assert!(report.entries.iter().any(|e| e.analytic.abs() > 1e-3));
     }
-    let model = sparse_model_tv(&keep, &rows, 0.05);
+    let model = sparse_model_tv(&keep, &rows, 0.05).with_distortion(0.05).unwrap();
     let (l0, g0) = loss_and_gradient(&model, Method::Fused);
     let (l1, g1) = loss_and_gradient(&model, Method::Taped);
     assert!((l0 - l1).abs() < 1e-14, "{l0} {l1}");
