@@ -24,6 +24,9 @@
 //! - [`sh`]: view-dependent colour from spherical-harmonics coefficients (degree 0 to 3, the
 //!   Plenoxels / 3D Gaussian splatting basis) through a sigmoid, as a fused op ([`ShColor`])
 //!   with a hand-written backward, and its taped twin;
+//! - [`distortion`]: the mip-NeRF 360 distortion loss of packed rays' weights, as a fused op
+//!   ([`DistortionLoss`]) with a hand-written O(n) backward into the densities, and its
+//!   taped (pairwise) twin;
 //! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]).
 //!
 //! ```
@@ -50,6 +53,7 @@
 
 pub mod activation;
 pub mod composite;
+pub mod distortion;
 mod error;
 pub mod grid;
 pub mod hard;
@@ -66,6 +70,7 @@ pub use composite::{
     Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeInputs,
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
+pub use distortion::DistortionLoss;
 pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError, ShError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted};
 pub use rays::{
