@@ -82,6 +82,15 @@
 //! - Rays run in parallel over fixed chunks, each ray on its own, and the per-ray losses are
 //!   summed in ray order: the results are bitwise the same for any number of threads.
 //!
+//! # Speed
+//!
+//! The exponentials of a ray run over its slices of optical depths (`math::exp`'s branch-free
+//! polynomial kernel, which vectorises), and each chunk of rays is compiled for AVX-512,
+//! AVX2+FMA and the baseline and chosen at run time, as the composite's blocks are (without
+//! FMA the kernel's `mul_add`s are library calls: ten times slower). On 4096 rays of 48 samples
+//! the fused forward + backward on a tape is about 65 times faster than the twin's
+//! (`benches/distortion.rs`).
+//!
 //! Input is checked: offsets that are a packing, `sigma`, `delta` and `t` each `[n]`,
 //! densities finite and non-negative, steps finite and positive, midpoints finite and
 //! non-decreasing along each ray; the errors are the composite's
