@@ -4,14 +4,16 @@
 //! order after the parallel part, so the results are bitwise the same for any number of
 //! threads.
 //!
-//! The weights are the composite's (`crate::math::exp`: `exp(-x)` and `-expm1(-x)`, to the
-//! tier of the data's precision); the pairwise sum is carried by the two recurrences of the
-//! [module docs](super), whose terms are all non-negative.
+//! The weights are the composite's (`crate::math::exp`: `exp(-x)` and `-expm1(-x)` over a
+//! ray's slices, to the tier of the data's precision); the pairwise sum is carried by the two
+//! recurrences of the [module docs](super), whose terms are all non-negative. Each chunk is
+//! compiled for the vector units (multiversion), as the composite's and the activation's are.
 
 use fogray_tape::{Float, Offsets};
+use multiversion::multiversion;
 use rayon::prelude::*;
 
-use crate::math::exp::{exp_neg, one_minus_exp_neg, single_tier};
+use crate::math::exp::{exp_neg_slice, one_minus_exp_neg_slice, single_tier};
 
 /// Rays per parallel task: fixed, so results never depend on the thread count.
 pub(crate) const RAYS_PER_CHUNK: usize = 256;
@@ -21,46 +23,77 @@ fn chunk_starts(rays: usize) -> impl Iterator<Item = usize> {
     (0..rays).step_by(RAYS_PER_CHUNK)
 }
 
-/// `L_r` of one ray (its samples' `sigma`, `delta` and `t`, checked), in f64:
-/// `2 sum_i w_i A_i + (1/3) sum_i w_i^2 delta_i` with `A_i = sum_{j<i} w_j (t_i - t_j)`
-/// accumulated as `A_i = A_{i-1} + S_{<i} (t_i - t_{i-1})`.
-#[inline(always)]
-fn ray_loss<const SINGLE: bool, F: Float>(sigma: &[F], delta: &[F], t: &[F]) -> f64 {
-    let (mut depth, mut s, mut a) = (0.0f64, 0.0f64, 0.0f64);
-    let (mut pairs, mut own) = (0.0f64, 0.0f64);
-    for k in 0..sigma.len() {
-        let d = delta[k].as_f64();
-        if k > 0 {
-            a += s * (t[k].as_f64() - t[k - 1].as_f64());
-        }
-        let tau = sigma[k].as_f64() * d;
-        let w = exp_neg::<SINGLE>(depth) * one_minus_exp_neg::<SINGLE>(tau);
-        depth += tau;
-        pairs += w * a;
-        own += w * w * d;
-        s += w;
-    }
-    2.0 * pairs + own / 3.0
+/// The rays of chunk `r0` (to the end of the rays).
+fn chunk_rays(r0: usize, rays: usize) -> std::ops::Range<usize> {
+    r0..(r0 + RAYS_PER_CHUNK).min(rays)
 }
 
-/// Per-ray work space of the backward: weights, alphas, transmittance after each sample, and
-/// the front-to-back sums `A_i`.
+/// A chunk's work space, sized for its longest ray `n`: optical depths `tau` (`n`), running
+/// depths before each sample and the total (`n + 1`), their transmittances `T_k` (`n + 1`:
+/// `T_{k+1}` is the transmittance after sample `k`), alphas, weights and the front-to-back
+/// sums `A_i` (`n`).
 struct Scratch {
-    w: Vec<f64>,
+    tau: Vec<f64>,
+    depth: Vec<f64>,
+    trans: Vec<f64>,
     alpha: Vec<f64>,
-    after: Vec<f64>,
+    w: Vec<f64>,
     a: Vec<f64>,
 }
 
 impl Scratch {
-    fn new(len: usize) -> Self {
+    fn new(offsets: &[usize], rays: std::ops::Range<usize>) -> Self {
+        let n = rays.map(|r| offsets[r + 1] - offsets[r]).max().unwrap_or(0);
         Scratch {
-            w: vec![0.0; len],
-            alpha: vec![0.0; len],
-            after: vec![0.0; len],
-            a: vec![0.0; len],
+            tau: vec![0.0; n],
+            depth: vec![0.0; n + 1],
+            trans: vec![0.0; n + 1],
+            alpha: vec![0.0; n],
+            w: vec![0.0; n],
+            a: vec![0.0; n],
         }
     }
+
+    /// The weights of one ray of `n = sigma.len()` samples (and `tau`, `T`, `alpha`) into the
+    /// first `n` (`n + 1`) entries: the exponentials run over whole slices, so that they
+    /// vectorise.
+    #[inline(always)]
+    fn weights<const SINGLE: bool, F: Float>(&mut self, sigma: &[F], delta: &[F]) {
+        let n = sigma.len();
+        let mut depth = 0.0f64;
+        self.depth[0] = 0.0;
+        for k in 0..n {
+            let tau = sigma[k].as_f64() * delta[k].as_f64();
+            self.tau[k] = tau;
+            depth += tau;
+            self.depth[k + 1] = depth;
+        }
+        exp_neg_slice::<SINGLE>(&self.depth[..=n], &mut self.trans[..=n]);
+        one_minus_exp_neg_slice::<SINGLE>(&self.tau[..n], &mut self.alpha[..n]);
+        for k in 0..n {
+            self.w[k] = self.trans[k] * self.alpha[k];
+        }
+    }
+}
+
+/// `L_r` of one ray (its samples' `sigma`, `delta` and `t`, checked), in f64:
+/// `2 sum_i w_i A_i + (1/3) sum_i w_i^2 delta_i` with `A_i = sum_{j<i} w_j (t_i - t_j)`
+/// accumulated as `A_i = A_{i-1} + S_{<i} (t_i - t_{i-1})`.
+#[inline(always)]
+fn ray_loss<const SINGLE: bool, F: Float>(sigma: &[F], delta: &[F], t: &[F], s: &mut Scratch) -> f64 {
+    s.weights::<SINGLE, F>(sigma, delta);
+    let w = &s.w[..sigma.len()];
+    let (mut sum, mut a) = (0.0f64, 0.0f64);
+    let (mut pairs, mut own) = (0.0f64, 0.0f64);
+    for k in 0..w.len() {
+        if k > 0 {
+            a += sum * (t[k].as_f64() - t[k - 1].as_f64());
+        }
+        pairs += w[k] * a;
+        own += w[k] * w[k] * delta[k].as_f64();
+        sum += w[k];
+    }
+    2.0 * pairs + own / 3.0
 }
 
 /// `dL_r/dsigma` of one ray times `scale` (the upstream gradient over the number of rays),
@@ -77,14 +110,10 @@ fn ray_grad<const SINGLE: bool, F: Float>(
     s: &mut Scratch,
 ) {
     let n = sigma.len();
-    let (w, alpha, after, a) = (&mut s.w[..n], &mut s.alpha[..n], &mut s.after[..n], &mut s.a[..n]);
-    let (mut depth, mut sum, mut acc) = (0.0f64, 0.0f64, 0.0f64);
+    s.weights::<SINGLE, F>(sigma, delta);
+    let (w, alpha, trans, a) = (&s.w[..n], &s.alpha[..n], &s.trans[..=n], &mut s.a[..n]);
+    let (mut sum, mut acc) = (0.0f64, 0.0f64);
     for k in 0..n {
-        let tau = sigma[k].as_f64() * delta[k].as_f64();
-        alpha[k] = one_minus_exp_neg::<SINGLE>(tau);
-        w[k] = exp_neg::<SINGLE>(depth) * alpha[k];
-        depth += tau;
-        after[k] = exp_neg::<SINGLE>(depth);
         if k > 0 {
             acc += sum * (t[k].as_f64() - t[k - 1].as_f64());
         }
@@ -101,9 +130,52 @@ fn ray_grad<const SINGLE: bool, F: Float>(
         }
         sum += w[k];
         let g = scale * (2.0 * (a[k] + b) + (2.0 / 3.0) * w[k] * d);
-        let g_tau = after[k] * (g - r);
+        let g_tau = trans[k + 1] * (g - r);
         r += alpha[k] * (g - r);
         out[k] = F::lit(d * g_tau);
+    }
+}
+
+/// The losses of the rays `r0..` of one chunk into `losses`. Compiled for the vector units
+/// this machine has (chosen at run time); the values do not depend on which: every fused
+/// multiply-add is written as one, and the compiler contracts nothing else.
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn forward_chunk<F: Float>(offsets: &[usize], r0: usize, sigma: &[F], delta: &[F], t: &[F], losses: &mut [f64]) {
+    let mut scratch = Scratch::new(offsets, r0..r0 + losses.len());
+    for (i, l) in losses.iter_mut().enumerate() {
+        let samples = offsets[r0 + i]..offsets[r0 + i + 1];
+        let (s, d, t) = (&sigma[samples.clone()], &delta[samples.clone()], &t[samples]);
+        *l = if single_tier::<F>() {
+            ray_loss::<true, F>(s, d, t, &mut scratch)
+        } else {
+            ray_loss::<false, F>(s, d, t, &mut scratch)
+        };
+    }
+}
+
+/// The gradients of the rays `rays` of one chunk into `piece`, their samples (as
+/// [`forward_chunk`]).
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn backward_chunk<F: Float>(
+    offsets: &[usize],
+    rays: std::ops::Range<usize>,
+    sigma: &[F],
+    delta: &[F],
+    t: &[F],
+    scale: f64,
+    piece: &mut [F],
+) {
+    let mut scratch = Scratch::new(offsets, rays.clone());
+    let base = offsets[rays.start];
+    for r in rays {
+        let samples = offsets[r]..offsets[r + 1];
+        let out = &mut piece[samples.start - base..samples.end - base];
+        let (s, d, t) = (&sigma[samples.clone()], &delta[samples.clone()], &t[samples]);
+        if single_tier::<F>() {
+            ray_grad::<true, F>(scale, s, d, t, out, &mut scratch);
+        } else {
+            ray_grad::<false, F>(scale, s, d, t, out, &mut scratch);
+        }
     }
 }
 
@@ -112,18 +184,7 @@ pub(crate) fn ray_losses<F: Float>(offsets: &Offsets, sigma: &[F], delta: &[F], 
     losses
         .par_chunks_mut(RAYS_PER_CHUNK)
         .enumerate()
-        .for_each(|(chunk, losses)| {
-            let r0 = chunk * RAYS_PER_CHUNK;
-            for (i, l) in losses.iter_mut().enumerate() {
-                let samples = offsets[r0 + i]..offsets[r0 + i + 1];
-                let (s, d, t) = (&sigma[samples.clone()], &delta[samples.clone()], &t[samples]);
-                *l = if single_tier::<F>() {
-                    ray_loss::<true, F>(s, d, t)
-                } else {
-                    ray_loss::<false, F>(s, d, t)
-                };
-            }
-        });
+        .for_each(|(chunk, losses)| forward_chunk(offsets, chunk * RAYS_PER_CHUNK, sigma, delta, t, losses));
 }
 
 /// The mean of the per-ray losses, summed in ray order (0 for no ray), in f64.
@@ -153,28 +214,16 @@ pub(crate) fn backward<F: Float>(
     let scale = upstream / rays as f64;
     // The chunks' disjoint pieces of the gradient, in order.
     let mut rest = g_sigma;
-    let pieces: Vec<(usize, &mut [F])> = chunk_starts(rays)
+    let pieces: Vec<(std::ops::Range<usize>, &mut [F])> = chunk_starts(rays)
         .map(|r0| {
-            let r1 = (r0 + RAYS_PER_CHUNK).min(rays);
-            let (head, tail) = std::mem::take(&mut rest).split_at_mut(offsets[r1] - offsets[r0]);
+            let chunk = chunk_rays(r0, rays);
+            let len = offsets[chunk.end] - offsets[chunk.start];
+            let (head, tail) = std::mem::take(&mut rest).split_at_mut(len);
             rest = tail;
-            (r0, head)
+            (chunk, head)
         })
         .collect();
-    pieces.into_par_iter().for_each(|(r0, piece)| {
-        let r1 = (r0 + RAYS_PER_CHUNK).min(rays);
-        let longest = (r0..r1).map(|r| offsets[r + 1] - offsets[r]).max().unwrap_or(0);
-        let mut scratch = Scratch::new(longest);
-        let base = offsets[r0];
-        for r in r0..r1 {
-            let samples = offsets[r]..offsets[r + 1];
-            let out = &mut piece[samples.start - base..samples.end - base];
-            let (s, d, t) = (&sigma[samples.clone()], &delta[samples.clone()], &t[samples]);
-            if single_tier::<F>() {
-                ray_grad::<true, F>(scale, s, d, t, out, &mut scratch);
-            } else {
-                ray_grad::<false, F>(scale, s, d, t, out, &mut scratch);
-            }
-        }
-    });
+    pieces
+        .into_par_iter()
+        .for_each(|(chunk, piece)| backward_chunk(offsets, chunk, sigma, delta, t, scale, piece));
 }

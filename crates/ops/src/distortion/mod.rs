@@ -71,8 +71,8 @@
 //!   computed in f64, also for f32 data, and rounded once to the data's precision. The
 //!   differences `t_i - t_{i-1}` of f32 data are exact in f64.
 //! - The pairwise sum is carried by recurrences of non-negative terms (above), never by
-//!   `t_i S - U`: an f32 prefix-sum evaluation at `t ~ 1e4` loses the answer entirely, this one
-//!   keeps it to about `1e-7` relative (tested).
+//!   `t_i S - U`: on rays at `t ~ 1e4` with spacings of `1e-3`, an f32 prefix-sum evaluation
+//!   is 3 % off, this one (on the same f32 data) within `1e-7` of the exact value (tested).
 //! - `alpha = -expm1(-tau)` and `T_k = exp(-running optical depth)` as in the composite
 //!   (`math::exp`, to the tier of the data's precision): a tiny `sigma delta` (`1e-12`) keeps
 //!   every digit of its weight, a huge one saturates to `alpha = 1`, `T = 0`, with finite
@@ -81,6 +81,15 @@
 //!   tape's gradient is bitwise that of [`DistortionLoss::vjp`].
 //! - Rays run in parallel over fixed chunks, each ray on its own, and the per-ray losses are
 //!   summed in ray order: the results are bitwise the same for any number of threads.
+//!
+//! # Speed
+//!
+//! The exponentials of a ray run over its slices of optical depths (`math::exp`'s branch-free
+//! polynomial kernel, which vectorises), and each chunk of rays is compiled for AVX-512,
+//! AVX2+FMA and the baseline and chosen at run time, as the composite's blocks are (without
+//! FMA the kernel's `mul_add`s are library calls: ten times slower). On 4096 rays of 48 samples
+//! the fused forward + backward on a tape is about 65 times faster than the twin's
+//! (`benches/distortion.rs`).
 //!
 //! Input is checked: offsets that are a packing, `sigma`, `delta` and `t` each `[n]`,
 //! densities finite and non-negative, steps finite and positive, midpoints finite and

@@ -118,17 +118,11 @@ fn op_error(e: CompositeError) -> OpError {
     OpError::typed(e)
 }
 
-/// The op's three inputs.
-fn three<'i, 'a, F: Float>(
-    inputs: &'i [ArrayViewD<'a, F>],
-) -> Result<(&'i ArrayViewD<'a, F>, &'i ArrayViewD<'a, F>, &'i ArrayViewD<'a, F>), OpError> {
-    match inputs {
-        [sigma, delta, t] => Ok((sigma, delta, t)),
-        _ => Err(OpError::InvalidArgument(format!(
-            "takes 3 inputs (sigma, delta, t), got {}",
-            inputs.len()
-        ))),
-    }
+/// The op's three inputs, `[sigma, delta, t]`.
+fn three<'i, 'a, F: Float>(inputs: &'i [ArrayViewD<'a, F>]) -> Result<&'i [ArrayViewD<'a, F>; 3], OpError> {
+    inputs
+        .try_into()
+        .map_err(|_| OpError::InvalidArgument(format!("takes 3 inputs (sigma, delta, t), got {}", inputs.len())))
 }
 
 impl<F: Float> CustomOp<F> for DistortionLoss {
@@ -141,7 +135,7 @@ impl<F: Float> CustomOp<F> for DistortionLoss {
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
-        let (sigma, delta, t) = three(inputs)?;
+        let [sigma, delta, t] = three(inputs)?;
         let x = self.check(sigma, delta, t).map_err(op_error)?;
         let loss = F::lit(kernel::mean_loss(&self.offsets, &x.sigma, &x.delta, &x.t));
         Ok((vec![ArrayD::from_elem(IxDyn(&[]), loss)], ()))

@@ -2,7 +2,7 @@
 //! composite's stable twin builds them (`exp` of the exclusive cumsum of `sigma delta`,
 //! `-expm1(-sigma delta)`), every pair `i < j` of a ray gathered (`O(n^2)` per ray), the
 //! pairwise term `2 sum_{i<j} w_i w_j (t_j - t_i)` and the own term `(1/3) sum w_i^2 delta_i`
-//! summed per ray, and their mean: a dozen records and `n_r (n_r - 1) / 2` pairs a ray
+//! summed per ray, and their mean: about twenty records and `n_r (n_r - 1) / 2` pairs a ray
 //! instead of one record. It shares nothing with the fused op but the input checks, so the
 //! fused op is checked against it.
 
