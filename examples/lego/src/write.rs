@@ -152,7 +152,7 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
     )?;
     writeln!(md, "![held-out PSNR against training seconds](psnr-vs-seconds.png)\n")?;
     // The held-out view of the defaults' run, as fogray fit --out wrote it.
-    if let Some(run) = runs.iter().find(|r| r.config.flags.is_empty()) {
+    if let Some(run) = runs.iter().rev().find(|r| r.config.flags.is_empty()) {
         let dir = out.join("runs").join(run.config.name).join("test");
         let mut views: Vec<_> = std::fs::read_dir(&dir)
             .with_context(|| format!("{}", dir.display()))?
