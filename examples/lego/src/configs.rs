@@ -43,7 +43,12 @@ pub fn all() -> Vec<Config> {
             "--random-background false",
             60.0,
         ),
-        c("sparse-128-tv", "sparse 128^3, degree 1, prior 1.5e-4", "--tv 1.5e-4", 60.0),
+        c(
+            "sparse-128-tv",
+            "sparse 128^3, degree 1, prior 1.5e-4",
+            "--tv 1.5e-4",
+            60.0,
+        ),
         c("sparse-128", "sparse 128^3, degree 1 (the defaults)", "", 60.0),
         c(
             "sparse-128-distortion-0.01",
@@ -57,7 +62,12 @@ pub fn all() -> Vec<Config> {
             "--distortion 0.1",
             60.0,
         ),
-        c("sparse-128-300s", "sparse 128^3, degree 1 (the defaults), 300 s", "", 300.0),
+        c(
+            "sparse-128-300s",
+            "sparse 128^3, degree 1 (the defaults), 300 s",
+            "",
+            300.0,
+        ),
         c("sparse-256-300s", "sparse 256^3, degree 1, 300 s", "--grid 256", 300.0),
     ]
 }

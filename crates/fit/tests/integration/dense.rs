@@ -27,7 +27,7 @@ fn backgrounds() -> [TrainingBackground<f64>; 2] {
 const SMOOTHNESS: [f64; 2] = [0.0, 0.05];
 
 /// Three rays crossing a 3^3 grid, sampled every 0.4, and a target colour per ray.
-fn setup() -> (RayBatch<f64>, PackedSamples<f64>, Array2<f64>) {
+pub(crate) fn setup() -> (RayBatch<f64>, PackedSamples<f64>, Array2<f64>) {
     let origins = arr2(&[[0.1, -3.0, 0.2], [-2.5, 0.3, -0.4], [0.5, 0.6, 3.0]]);
     let directions = arr2(&[[0.05, 1.0, -0.1], [1.0, -0.2, 0.1], [-0.1, -0.2, -1.0]]);
     let rays = RayBatch::new(origins, directions).unwrap();
@@ -38,7 +38,7 @@ fn setup() -> (RayBatch<f64>, PackedSamples<f64>, Array2<f64>) {
 }
 
 /// A raw grid with every value different, densities around the shift.
-fn raw_grid() -> ArrayD<f64> {
+pub(crate) fn raw_grid() -> ArrayD<f64> {
     Array4::from_shape_fn((3, 3, 3, 4), |(i, j, k, c)| {
         ((i * 36 + j * 12 + k * 4 + c) as f64 * 0.37).sin() * 1.5
     })

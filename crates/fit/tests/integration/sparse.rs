@@ -11,13 +11,14 @@ use fogray_fit::sparse::{keep_near_occupied, SparseGrid};
 use fogray_fit::state::TrainingState;
 use fogray_fit::train::fit;
 use fogray_ops::grid::NodeIndex;
-use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{CellPoints, OccupancyConfig, OccupancyGrid, PackedSamples, Spacing, Uniform};
+use fogray_ops::rays::Aabb;
+use fogray_ops::sample::{CellPoints, OccupancyConfig, OccupancyGrid};
 use fogray_tape::gradcheck::{gradcheck, GradcheckOptions};
 use fogray_tape::{Tape, TapeError, Var};
 use ndarray::{arr2, Array1, Array2, Array4, ArrayD, Ix2};
 
 use crate::common::{ball_dataset, temp};
+use crate::dense::{raw_grid, setup};
 
 const BACKGROUND: [f64; 3] = [1.0, 0.95, 0.9];
 
@@ -26,22 +27,9 @@ fn per_ray_background() -> TrainingBackground<f64> {
     TrainingBackground::PerRay(arr2(&[[0.2, 0.7, 0.1], [0.9, 0.4, 0.5], [0.0, 1.0, 0.3]]))
 }
 
-/// Three rays crossing a 3^3 lattice over the unit box, sampled every 0.4, and their targets.
-fn setup() -> (RayBatch<f64>, PackedSamples<f64>, Array2<f64>) {
-    let origins = arr2(&[[0.1, -3.0, 0.2], [-2.5, 0.3, -0.4], [0.5, 0.6, 3.0]]);
-    let directions = arr2(&[[0.05, 1.0, -0.1], [1.0, -0.2, 0.1], [-0.1, -0.2, -1.0]]);
-    let rays = RayBatch::new(origins, directions).unwrap();
-    let clip = Aabb::new([-1.0; 3], [1.0; 3]).unwrap().clip(&rays);
-    let samples = Uniform::new(Spacing::Step(0.4)).unwrap().sample(&rays, &clip).unwrap();
-    let target = arr2(&[[0.9, 0.2, 0.1], [0.3, 0.3, 0.8], [0.5, 0.9, 0.4]]);
-    (rays, samples, target)
-}
-
-/// Every raw value different, densities around the shift (-1).
+/// The dense grid's test raw values (every value different, densities around the shift).
 fn raw_lattice() -> Array4<f64> {
-    Array4::from_shape_fn((3, 3, 3, 4), |(i, j, k, c)| {
-        ((i * 36 + j * 12 + k * 4 + c) as f64 * 0.37).sin() * 1.5
-    })
+    raw_grid().into_dimensionality().unwrap()
 }
 
 /// The 3^3 lattice's nodes with an odd linear index absent, except the centre.
