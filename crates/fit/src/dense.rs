@@ -32,7 +32,7 @@ use fogray_ops::sample::{OccupancyGrid, PackedSamples};
 use fogray_ops::{CompositeVars, GridBox, GridField};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
-use ndarray::{Array1, Array2, Array4, ArrayView2, Ix2, IxDyn};
+use ndarray::{Array1, Array2, Array4, ArrayView2, IxDyn};
 
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
@@ -282,9 +282,6 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError> {
         let grid = self.params.get(self.grid)?;
         let raw = self.field.evaluate(&grid, &positions.into_dyn())?;
-        let raw = raw
-            .into_dimensionality::<Ix2>()
-            .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
-        Ok(self.shading.activation.density(raw.view())?)
+        self.shading.densities(raw)
     }
 }

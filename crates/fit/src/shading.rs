@@ -96,6 +96,16 @@ impl Shading {
         })
     }
 
+    /// The density of raw values `raw` (`[m, C]`, as a grid field's lookup returns them).
+    ///
+    /// Errors: raw values that are not 2-d, a NaN density.
+    pub fn densities<F: Float>(&self, raw: ndarray::ArrayD<F>) -> Result<ndarray::Array1<F>, FitError> {
+        let raw = raw
+            .into_dimensionality::<ndarray::Ix2>()
+            .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
+        Ok(self.activation.density(raw.view())?)
+    }
+
     /// Channels of a raw value: the density, then the colour's (3, or the spherical
     /// harmonics' coefficients).
     pub fn channels(&self) -> usize {

@@ -28,7 +28,7 @@ use fogray_ops::sample::{OccupancyGrid, PackedSamples};
 use fogray_ops::{CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
-use ndarray::{Array1, Array2, ArrayView2, Ix2};
+use ndarray::{Array1, Array2, ArrayView2};
 
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
@@ -335,9 +335,6 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError> {
         let data = self.params.get(self.data)?;
         let raw = self.field.evaluate(&data, &positions.into_dyn())?;
-        let raw = raw
-            .into_dimensionality::<Ix2>()
-            .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
-        Ok(self.shading.activation.density(raw.view())?)
+        self.shading.densities(raw)
     }
 }

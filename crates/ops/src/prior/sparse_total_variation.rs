@@ -43,7 +43,6 @@ use crate::grid::{NodeIndex, SparseGridField};
 #[derive(Debug, Clone, PartialEq)]
 pub struct SparseTotalVariation {
     weight: f64,
-    index: Arc<NodeIndex>,
     channels: usize,
     /// Each row's stored neighbours' rows in the order x+, x-, y+, y-, z+, z- ([`NONE`] for
     /// none), found once: a step's prior then reads no index.
@@ -77,11 +76,11 @@ fn neighbours_of(index: &NodeIndex, node: usize) -> [Option<usize>; 6] {
 impl SparseTotalVariation {
     /// The prior `prior` (its weight) on `field`'s packed values.
     pub fn new(prior: TotalVariation, field: &SparseGridField) -> Self {
-        let index = field.shared_index();
+        let index = field.index();
         let neighbours = index
             .kept_nodes()
             .par_iter()
-            .map(|&l| neighbours_of(&index, l).map(|n| n.map_or(NONE, |r| r as u32)))
+            .map(|&l| neighbours_of(index, l).map(|n| n.map_or(NONE, |r| r as u32)))
             .collect::<Vec<_>>();
         let pairs: usize = neighbours
             .iter()
@@ -89,7 +88,6 @@ impl SparseTotalVariation {
             .sum();
         SparseTotalVariation {
             weight: prior.weight(),
-            index,
             channels: field.channels(),
             neighbours: Arc::new(neighbours),
             terms: pairs * field.channels(),
@@ -102,7 +100,7 @@ impl SparseTotalVariation {
     }
 
     fn check<'a, F: Float>(&self, data: &'a ArrayViewD<'_, F>) -> Result<std::borrow::Cow<'a, [F]>, PriorError> {
-        let want = [self.index.kept(), self.channels];
+        let want = [self.neighbours.len(), self.channels];
         if data.shape() != want {
             return Err(PriorError::Shape {
                 what: "sparse grid values",
@@ -175,9 +173,9 @@ impl SparseTotalVariation {
                 }
             });
         }
-        ArrayD::from_shape_vec(IxDyn(&[self.index.kept(), ch]), out).map_err(|e| PriorError::Shape {
+        ArrayD::from_shape_vec(IxDyn(&[self.neighbours.len(), ch]), out).map_err(|e| PriorError::Shape {
             what: "gradient",
-            expected: format!("[{}, {ch}]", self.index.kept()),
+            expected: format!("[{}, {ch}]", self.neighbours.len()),
             got: e.to_string(),
         })
     }

@@ -74,11 +74,6 @@ impl SparseGridField {
         &self.index
     }
 
-    /// The index, shared (a prior over the same nodes keeps it).
-    pub fn shared_index(&self) -> Arc<NodeIndex> {
-        Arc::clone(&self.index)
-    }
-
     /// Channels per node (`C`).
     pub fn channels(&self) -> usize {
         self.channels
