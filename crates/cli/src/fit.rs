@@ -9,10 +9,8 @@ use fogray_data::{load, LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
 use fogray_fit::dense::DenseGrid;
-use fogray_fit::images::write_comparison_png;
 use fogray_fit::interrupt::StopFlag;
 use fogray_fit::metrics::haze_fraction;
-use fogray_fit::plots;
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions};
 use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
@@ -92,8 +90,9 @@ pub struct FitArgs {
     /// Write the fitted model here (safetensors; `fogray render --model` reads it).
     #[arg(long, value_name = "FILE")]
     pub save_model: Option<PathBuf>,
-    /// Write the held-out views (photograph | render | error), the PSNR curve and the log
-    /// (fit.json) into this directory.
+    /// Write a report into this directory: report.md (the final figures, PSNR and SSIM
+    /// against training seconds, each held-out view beside its photograph, the settings, the
+    /// machine and the command), test/<name>.png, psnr.png, ssim.png and fit.json.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print {"final_test_psnr", "seconds", "steps", "log": [...]} on stdout instead of a
@@ -109,6 +108,9 @@ pub struct FitArgs {
 pub struct FitSummary<'a> {
     /// PSNR (dB) over all held-out views at the end.
     pub final_test_psnr: f64,
+    /// SSIM (Gaussian window 11, sigma 1.5) over the held-out views at the end; null for views
+    /// smaller than its window.
+    pub final_test_ssim: f64,
     /// Training seconds (evaluations and loading excluded).
     pub seconds: f64,
     /// Training steps.
@@ -277,6 +279,7 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         held_out_haze: held_out_haze(&result, data, settings)?,
         peak_resident_bytes: crate::memory::peak_resident_bytes(),
         final_test_psnr: result.final_test_psnr,
+        final_test_ssim: result.final_test_ssim,
         seconds: result.seconds,
         steps: result.training.step,
         log: &result.log,
@@ -293,21 +296,22 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
             .sum(),
     };
     if let Some(dir) = &args.out {
-        write_out(dir, data, &result, &summary)?;
+        crate::fit_report::write_out(dir, args, settings, data, &result, &summary)?;
     }
     if args.json {
         return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
     }
-    let mut text = String::from("step      seconds  train loss  test PSNR (dB)\n");
+    let mut text = String::from("step      seconds  train loss  test PSNR (dB)  test SSIM\n");
     for e in &result.log {
         text += &format!(
-            "{:>6} {:>10.1} {:>11.3e} {:>15.2}\n",
-            e.step, e.seconds, e.train_loss, e.test_psnr
+            "{:>6} {:>10.1} {:>11.3e} {:>15.2} {:>10.4}\n",
+            e.step, e.seconds, e.train_loss, e.test_psnr, e.test_ssim
         );
     }
     text += &format!(
-        "final test PSNR {:.2} dB over {} held-out views after {:.1} s ({} steps)",
+        "final test PSNR {:.2} dB, SSIM {:.4}, over {} held-out views after {:.1} s ({} steps)",
         result.final_test_psnr,
+        result.final_test_ssim,
         data.test.len(),
         result.seconds,
         result.training.step
@@ -341,33 +345,4 @@ fn held_out_haze<F: Float, M: RadianceField<F>>(
     }
     let views: Vec<_> = opacities.iter().map(|o| o.view()).collect();
     Ok(haze_fraction(&views, 0.05, 0.95))
-}
-
-/// `DIR/test/<name>.png` (photograph | render | error), `DIR/psnr.png`, `DIR/fit.json`.
-fn write_out<F: Float, M>(
-    dir: &Path,
-    data: &Dataset,
-    result: &FitResult<F, M>,
-    summary: &FitSummary,
-) -> Result<(), CliError> {
-    let views = dir.join("test");
-    std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
-    for (t, render) in data.test.iter().zip(&result.renders) {
-        write_comparison_png(
-            &views.join(format!("{}.png", t.name)),
-            t.image.view(),
-            render.view(),
-            4.0,
-            1,
-        )?;
-    }
-    plots::psnr_curves(
-        &dir.join("psnr"),
-        &[plots::Curve {
-            label: "fogray fit".into(),
-            log: &result.log,
-        }],
-    )?;
-    let path = dir.join("fit.json");
-    std::fs::write(&path, serde_json::to_string_pretty(summary)?).map_err(CliError::file("write", &path))
 }

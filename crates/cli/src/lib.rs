@@ -9,6 +9,7 @@ pub mod composite;
 pub mod error;
 pub mod evaluate;
 pub mod fit;
+pub mod fit_report;
 pub mod gradcheck;
 pub mod grid_bench;
 pub mod heap;

@@ -47,6 +47,11 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     /// The name of the model in a checkpoint's metadata.
     const KIND: &'static str;
 
+    /// Whether [`RadianceField::resampled`] keeps only what the occupancy grid marks occupied:
+    /// the training loop then grows such a model only once the occupancy grid has been
+    /// refreshed from the current stage (a growth before that would keep every node).
+    const PRUNED_BY_OCCUPANCY: bool = false;
+
     /// A fresh model for `settings` with `nodes` per axis (a growth stage's resolution).
     ///
     /// Errors: a resolution or setting the model cannot take.

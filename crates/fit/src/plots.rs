@@ -1,12 +1,13 @@
-//! Test PSNR against training seconds (or steps), one curve per configuration, as SVG and PNG.
+//! Test PSNR (or SSIM) against training seconds (or steps), one curve per configuration, as SVG
+//! and PNG.
 //!
 //! ```
 //! use fogray_fit::train::LogEntry;
 //! use fogray_fit::plots::{psnr_curves, Curve};
 //!
 //! let log = [
-//!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0, samples: 0 },
-//!     LogEntry { step: 50, seconds: 2.0, train_loss: 0.01, test_psnr: 20.0, samples: 6400 },
+//!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0, test_ssim: 0.3, samples: 0 },
+//!     LogEntry { step: 50, seconds: 2.0, train_loss: 0.01, test_psnr: 20.0, test_ssim: 0.8, samples: 6400 },
 //! ];
 //! let dir = std::env::temp_dir().join(format!("fogray-fit-plots-doc-{}", std::process::id()));
 //! std::fs::create_dir_all(&dir)?;
@@ -57,8 +58,52 @@ impl XAxis {
     }
 
     /// Whether the point can be drawn on this axis.
-    fn shows(self, e: &LogEntry) -> bool {
-        e.test_psnr.is_finite() && (self != XAxis::LogSeconds || e.seconds > 0.0)
+    fn shows(self, e: &LogEntry, metric: Metric) -> bool {
+        metric.of(e).is_finite() && (self != XAxis::LogSeconds || e.seconds > 0.0)
+    }
+}
+
+/// What the vertical axis shows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Metric {
+    /// Test PSNR in dB.
+    Psnr,
+    /// Test SSIM.
+    Ssim,
+}
+
+impl Metric {
+    fn of(self, e: &LogEntry) -> f64 {
+        match self {
+            Metric::Psnr => e.test_psnr,
+            Metric::Ssim => e.test_ssim,
+        }
+    }
+
+    /// The axis's range around the values `lo..hi`: whole decibels, or hundredths of SSIM.
+    fn range(self, lo: f64, hi: f64) -> (f64, f64) {
+        match (lo <= hi, self) {
+            (false, _) => (0.0, 1.0),
+            (true, Metric::Psnr) => ((lo - 1.0).floor(), (hi + 1.0).ceil()),
+            (true, Metric::Ssim) => (
+                ((lo - 0.02) * 100.0).floor() / 100.0,
+                ((hi + 0.02) * 100.0).ceil() / 100.0,
+            ),
+        }
+    }
+
+    fn name(self) -> &'static str {
+        match self {
+            Metric::Psnr => "test PSNR",
+            Metric::Ssim => "test SSIM",
+        }
+    }
+
+    fn axis(self) -> &'static str {
+        match self {
+            Metric::Psnr => "test PSNR (dB)",
+            Metric::Ssim => "test SSIM",
+        }
     }
 }
 
@@ -77,6 +122,7 @@ fn draw<DB: DrawingBackend>(
     root: &DrawingArea<DB, Shift>,
     curves: &[Curve<'_>],
     x: XAxis,
+    metric: Metric,
     dashed: &[usize],
 ) -> DrawResult
 where
@@ -84,24 +130,18 @@ where
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
-    let points = || curves.iter().flat_map(|c| c.log.iter()).filter(|e| x.shows(e));
+    let points = || curves.iter().flat_map(|c| c.log.iter()).filter(|e| x.shows(e, metric));
     let t_max = points().map(|e| x.of(e)).fold(0.0, f64::max).max(1e-3) * 1.05;
-    let lo = points().map(|e| e.test_psnr).fold(f64::INFINITY, f64::min);
-    let hi = points().map(|e| e.test_psnr).fold(f64::NEG_INFINITY, f64::max);
-    let (lo, hi) = if lo <= hi {
-        ((lo - 1.0).floor(), (hi + 1.0).ceil())
-    } else {
-        (0.0, 1.0)
-    };
+    let lo = points().map(|e| metric.of(e)).fold(f64::INFINITY, f64::min);
+    let hi = points().map(|e| metric.of(e)).fold(f64::NEG_INFINITY, f64::max);
+    let (lo, hi) = metric.range(lo, hi);
     let mut builder = ChartBuilder::on(root);
+    let against = match x {
+        XAxis::Seconds | XAxis::LogSeconds => "training time",
+        XAxis::Steps => "training steps",
+    };
     builder
-        .caption(
-            match x {
-                XAxis::Seconds | XAxis::LogSeconds => "test PSNR against training time",
-                XAxis::Steps => "test PSNR against training steps",
-            },
-            (FONT, 20),
-        )
+        .caption(format!("{} against {against}", metric.name()), (FONT, 20))
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(56);
@@ -115,10 +155,10 @@ where
         let chart = builder
             .build_cartesian_2d((t_min..t_max).log_scale(), lo..hi)
             .map_err(err)?;
-        draw_curves(chart, curves, x, dashed)
+        draw_curves(chart, curves, x, metric, dashed)
     } else {
         let chart = builder.build_cartesian_2d(0.0..t_max, lo..hi).map_err(err)?;
-        draw_curves(chart, curves, x, dashed)
+        draw_curves(chart, curves, x, metric, dashed)
     }
 }
 
@@ -126,6 +166,7 @@ fn draw_curves<'a, DB, X>(
     mut chart: ChartContext<'a, DB, Cartesian2d<X, RangedCoordf64>>,
     curves: &[Curve<'_>],
     x: XAxis,
+    metric: Metric,
     dashed: &[usize],
 ) -> DrawResult
 where
@@ -141,13 +182,17 @@ where
             XAxis::LogSeconds => "training seconds (evaluations excluded), log scale",
             XAxis::Steps => "training steps",
         })
-        .y_desc("test PSNR (dB)")
+        .y_desc(metric.axis())
         .light_line_style(WHITE)
         .draw()
         .map_err(err)?;
     for (k, c) in curves.iter().enumerate() {
         let color = COLORS[k % COLORS.len()];
-        let line = c.log.iter().filter(|e| x.shows(e)).map(|e| (x.of(e), e.test_psnr));
+        let line = c
+            .log
+            .iter()
+            .filter(|e| x.shows(e, metric))
+            .map(|e| (x.of(e), metric.of(e)));
         let drawn = if dashed.contains(&k) {
             chart.draw_series(DashedLineSeries::new(line, 8, 5, color.stroke_width(2)))
         } else {
@@ -186,6 +231,19 @@ pub fn psnr_curves(stem: &Path, curves: &[Curve<'_>]) -> Result<(), ImageError> 
 ///
 /// Errors: as [`psnr_curves`].
 pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis, dashed: &[usize]) -> Result<(), ImageError> {
+    metric_curves(stem, curves, x, Metric::Psnr, dashed)
+}
+
+/// As [`psnr_curves_against`], of `metric` (points where it is not finite are left out).
+///
+/// Errors: as [`psnr_curves`].
+pub fn metric_curves(
+    stem: &Path,
+    curves: &[Curve<'_>],
+    x: XAxis,
+    metric: Metric,
+    dashed: &[usize],
+) -> Result<(), ImageError> {
     if curves.is_empty() {
         return Err(ImageError::Empty);
     }
@@ -198,10 +256,10 @@ pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis, dashed: 
     };
     {
         let root = SVGBackend::new(&svg, size).into_drawing_area();
-        draw(&root, curves, x, dashed).map_err(wrap(&svg))?;
+        draw(&root, curves, x, metric, dashed).map_err(wrap(&svg))?;
         root.present().map_err(|e| wrap(&svg)(e.to_string()))?;
     }
     let root = BitMapBackend::new(&png, size).into_drawing_area();
-    draw(&root, curves, x, dashed).map_err(wrap(&png))?;
+    draw(&root, curves, x, metric, dashed).map_err(wrap(&png))?;
     root.present().map_err(|e| wrap(&png)(e.to_string()))
 }

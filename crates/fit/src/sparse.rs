@@ -204,6 +204,7 @@ pub fn keep_near_occupied(scene_box: &SceneBox, nodes: usize, occupancy: &Occupa
 
 impl<F: Float> RadianceField<F> for SparseGrid<F> {
     const KIND: &'static str = "sparse-grid";
+    const PRUNED_BY_OCCUPANCY: bool = true;
 
     /// Every node of the lattice stored.
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {

@@ -20,7 +20,7 @@ use serde::Serialize;
 use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
 use crate::error::FitError;
-use crate::metrics::psnr;
+use crate::metrics::{psnr, ssim, SSIM_WINDOW};
 use crate::model::{RadianceField, TrainingBackground};
 use crate::profile::{Phases, StepProfile};
 use crate::render::{render_picture, RenderOptions};
@@ -40,6 +40,9 @@ pub struct LogEntry {
     pub train_loss: f64,
     /// Test PSNR (dB) over all test views.
     pub test_psnr: f64,
+    /// Test SSIM, the mean over the test views ([`ssim`](crate::metrics::ssim)); NaN for views
+    /// smaller than its window.
+    pub test_ssim: f64,
     /// Training samples so far, over all rays of all steps (what a step's cost grows with).
     pub samples: usize,
 }
@@ -51,6 +54,8 @@ pub struct FitResult<F: Float, M> {
     pub log: Vec<LogEntry>,
     /// Test PSNR at the end.
     pub final_test_psnr: f64,
+    /// Test SSIM at the end.
+    pub final_test_ssim: f64,
     /// Training seconds, evaluations excluded.
     pub seconds: f64,
     /// Mean samples per training ray over this call's steps (NaN if it took none).
@@ -111,6 +116,19 @@ pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitErro
     let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
     let e: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
     Ok(psnr(&r, &e)?)
+}
+
+/// The mean SSIM of `renders` against the test views' pictures; NaN (not measured) when a
+/// view is smaller than SSIM's 11 x 11 window, so that tiny test scenes still fit.
+///
+/// Errors: renders that do not match the views.
+pub fn test_ssim(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
+    if data.test.iter().any(|t| t.size().iter().any(|&n| n < SSIM_WINDOW)) {
+        return Ok(f64::NAN);
+    }
+    let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
+    let e: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
+    Ok(ssim(&r, &e)?)
 }
 
 /// Fits a fresh model to `data` for its budget: [`fit_from`] with no start and no stop flag.
@@ -210,6 +228,15 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
         }
     }
     let first_step = step;
+    // A model pruned by the occupancy grid grows to stage k no sooner than k first refreshes
+    // in: a short budget's growth would otherwise come before the first refresh and keep the
+    // whole lattice. (A function of the step alone, so that a resumed fit grows where the
+    // uninterrupted one did.)
+    let first_refresh = occupancy
+        .as_ref()
+        .filter(|_| M::PRUNED_BY_OCCUPANCY)
+        .map(|grid| grid.config().refresh().first_due());
+    let grown_enough = |stage: usize, step: usize| first_refresh.is_none_or(|first| step >= stage * first);
     let mut interrupted = false;
     let mut tape = Tape::<F>::new();
     // A few clock reads a step: nothing beside a step's milliseconds.
@@ -229,6 +256,7 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
             seconds,
             train_loss: loss,
             test_psnr: test_psnr(&renders, data)?,
+            test_ssim: test_ssim(&renders, data)?,
             samples,
         })
     };
@@ -247,7 +275,10 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
             break;
         }
         let start = Instant::now();
-        if next_stage < stages.len() && fraction(step, seconds) >= stages[next_stage].0 {
+        if next_stage < stages.len()
+            && fraction(step, seconds) >= stages[next_stage].0
+            && grown_enough(next_stage, step)
+        {
             model = model.resampled(stages[next_stage].1, occupancy.as_ref())?;
             adam = Adam::new(adam_config)?;
             next_stage += 1;
@@ -332,6 +363,7 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
     let occupied_fraction = occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction());
     Ok(FitResult {
         final_test_psnr: test_psnr(&renders, data)?,
+        final_test_ssim: test_ssim(&renders, data)?,
         log,
         seconds,
         samples_per_ray_mean: samples_total as f64 / ((step - first_step) * settings.batch) as f64,

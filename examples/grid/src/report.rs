@@ -13,7 +13,7 @@
 //! use fogray::fit::train::LogEntry;
 //! use fogray_grid::report::reach::{psnr_at, reach};
 //!
-//! let e = |step, seconds, test_psnr| LogEntry { step, seconds, train_loss: 0.0, test_psnr, samples: 100 * step };
+//! let e = |step, seconds, test_psnr| LogEntry { step, seconds, train_loss: 0.0, test_psnr, test_ssim: f64::NAN, samples: 100 * step };
 //! let log = [e(0, 0.0, 10.0), e(10, 2.0, 20.0), e(20, 4.0, 24.0)];
 //! assert_eq!(psnr_at(&log, 1.0)?, Some(15.0)); // halfway from 10 dB to 20 dB
 //! assert_eq!(reach(&log, 22.0)?.unwrap().seconds, 3.0);

@@ -52,6 +52,9 @@ struct Evaluation {
     seconds: f64,
     train_loss: Option<f64>,
     test_psnr: f64,
+    /// Null before SSIM was logged, and for views smaller than its window.
+    #[serde(default)]
+    test_ssim: Option<f64>,
     samples: usize,
 }
 
@@ -73,6 +76,8 @@ struct Profile {
 #[derive(Debug, Clone, Deserialize, Serialize)]
 struct FitJson {
     final_test_psnr: f64,
+    #[serde(default)]
+    final_test_ssim: Option<f64>,
     seconds: f64,
     steps: usize,
     log: Vec<Evaluation>,

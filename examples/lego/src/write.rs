@@ -21,6 +21,7 @@ fn log_entries(run: &Run) -> Vec<LogEntry> {
             seconds: e.seconds,
             train_loss: e.train_loss.unwrap_or(f64::NAN),
             test_psnr: e.test_psnr,
+            test_ssim: e.test_ssim.unwrap_or(f64::NAN),
             samples: e.samples,
         })
         .collect()
@@ -64,6 +65,7 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
             seconds,
             train_loss: f64::NAN,
             test_psnr,
+            test_ssim: f64::NAN,
             samples: 0,
         })
         .collect();

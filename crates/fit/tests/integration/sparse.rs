@@ -258,3 +258,23 @@ fn a_sparse_fit_prunes_the_empty_space_and_fits_as_well_as_the_dense_grid() {
         dense.final_test_psnr
     );
 }
+
+#[test]
+fn a_short_fit_grows_only_after_the_occupancy_grid_has_seen_each_stage() {
+    // 200 steps: the budget's growth points (steps 20 and 60) come before the occupancy grid's
+    // first refresh (step 64), where a growth would keep every node; the growths wait for it
+    // (steps 64 and 128) and prune.
+    let data = ball_dataset(10, 2, 16);
+    let settings = FitSettings {
+        grid: 32,
+        batch: 256,
+        evaluations: 1,
+        model: ModelKind::Sparse,
+        ..FitSettings::default()
+    }
+    .with_budget(Budget::Steps(200));
+    let sparse = fit::<f32, SparseGrid<f32>>(&data, &settings, &mut |_| {}).unwrap();
+    assert_eq!(sparse.model.nodes(), 32);
+    let kept = sparse.model.kept() as f64 / 32f64.powi(3);
+    assert!(kept < 0.4, "kept {kept}");
+}

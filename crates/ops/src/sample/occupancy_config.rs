@@ -53,6 +53,12 @@ impl Refresh {
     pub fn is_due(&self, step: usize) -> bool {
         step >= self.warmup && step % self.every == 0
     }
+
+    /// The first step after which the grid is refreshed: the first multiple of `every` at or
+    /// after `warmup`.
+    pub fn first_due(&self) -> usize {
+        self.warmup.div_ceil(self.every.max(1)) * self.every.max(1)
+    }
 }
 
 pub(crate) fn config_error(what: &'static str, value: f64, rule: &'static str) -> SampleError {

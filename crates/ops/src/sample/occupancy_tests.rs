@@ -239,6 +239,8 @@ fn a_refresh_policy_updates_from_its_warmup_every_n_steps_only() {
         .filter(|&s| grid.update_every_n_steps(s, constant(0.0), CellPoints::Centre).unwrap())
         .collect();
     assert_eq!(due, vec![12, 16, 20]);
+    assert_eq!(config.refresh().first_due(), 12);
+    assert_eq!(Refresh { warmup: 64, every: 16 }.first_due(), 64);
     // Before any due step the grid is untouched (every cell occupied); after, density 0 empties it.
     let mut fresh = OccupancyGrid::new(cube(), 2, config).unwrap();
     assert!(!fresh

@@ -96,6 +96,7 @@ impl Anchor {
                 seconds: p.seconds,
                 train_loss: f64::NAN,
                 test_psnr: p.test_psnr,
+                test_ssim: f64::NAN,
                 samples: 0,
             })
             .collect()

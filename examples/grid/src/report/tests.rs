@@ -18,6 +18,7 @@ fn entry(step: usize, seconds: f64, test_psnr: f64, samples: usize) -> LogEntry 
         seconds,
         train_loss: 0.0,
         test_psnr,
+        test_ssim: f64::NAN,
         samples,
     }
 }

@@ -1,4 +1,4 @@
-//! How close renders are to their pictures.
+//! How close renders are to their pictures: PSNR, SSIM, and the haze of their opacity.
 //!
 //! ```
 //! use fogray_fit::metrics::psnr;
@@ -13,6 +13,9 @@
 //! ```
 
 use ndarray::{ArrayView3, Zip};
+
+mod ssim;
+pub use ssim::{ssim, SSIM_SIGMA, SSIM_WINDOW};
 
 use crate::images::{check_same, ImageError};
 

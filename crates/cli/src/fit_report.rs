@@ -1,0 +1,168 @@
+//! What `fogray fit --out DIR` leaves: a report a person reads without running anything
+//! (`report.md`: the final figures, PSNR and SSIM against training seconds, every held-out view
+//! beside its photograph, the settings, the machine and the command), and the same as data
+//! (`fit.json`).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use fogray::stamp::Stamp;
+use fogray_fit::dataset::Dataset;
+use fogray_fit::images::write_comparison_png;
+use fogray_fit::plots::{self, Curve, Metric, XAxis};
+use fogray_fit::settings::FitSettings;
+use fogray_fit::train::FitResult;
+use fogray_tape::Float;
+
+use crate::error::CliError;
+use crate::fit::{FitArgs, FitSummary};
+
+/// Writes `DIR/test/<name>.png` (photograph | render | error x4), `DIR/psnr.{png,svg}`,
+/// `DIR/ssim.{png,svg}`, `DIR/fit.json` (the summary) and `DIR/report.md`.
+///
+/// Errors: a file that cannot be written, naming it.
+pub fn write_out<F: Float, M>(
+    dir: &Path,
+    args: &FitArgs,
+    settings: &FitSettings,
+    data: &Dataset,
+    result: &FitResult<F, M>,
+    summary: &FitSummary,
+) -> Result<(), CliError> {
+    let views = dir.join("test");
+    std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
+    for (t, render) in data.test.iter().zip(&result.renders) {
+        write_comparison_png(
+            &views.join(format!("{}.png", t.name)),
+            t.image.view(),
+            render.view(),
+            4.0,
+            1,
+        )?;
+    }
+    let curve = [Curve {
+        label: "fogray fit".into(),
+        log: &result.log,
+    }];
+    plots::psnr_curves(&dir.join("psnr"), &curve)?;
+    plots::metric_curves(&dir.join("ssim"), &curve, XAxis::Seconds, Metric::Ssim, &[])?;
+    let path = dir.join("fit.json");
+    std::fs::write(&path, serde_json::to_string_pretty(summary)?).map_err(CliError::file("write", &path))?;
+    let stamp = Stamp::now(&command_line());
+    let names: Vec<&str> = data.test.iter().map(|t| t.name.as_str()).collect();
+    let text = markdown(args, settings, summary, &stamp, &names)?;
+    let path = dir.join("report.md");
+    std::fs::write(&path, text).map_err(CliError::file("write", &path))
+}
+
+/// The command as it was typed, each argument quoted where a shell would need it.
+fn command_line() -> String {
+    std::env::args()
+        .map(|a| {
+            let plain = !a.is_empty() && a.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=,:+@%".contains(c));
+            if plain {
+                a
+            } else {
+                format!("'{}'", a.replace('\'', r"'\''"))
+            }
+        })
+        .collect::<Vec<_>>()
+        .join(" ")
+}
+
+/// `show(v)`, or "-" for a value that was not measured (NaN).
+fn number(v: f64, show: impl Fn(f64) -> String) -> String {
+    if v.is_nan() {
+        "-".into()
+    } else {
+        show(v)
+    }
+}
+
+/// report.md's text; `names` are the held-out views' names, in order.
+fn markdown(
+    args: &FitArgs,
+    settings: &FitSettings,
+    s: &FitSummary,
+    stamp: &Stamp,
+    names: &[&str],
+) -> Result<String, CliError> {
+    let mut md = String::new();
+    let [h, w] = s.size;
+    let w_ = |e: std::fmt::Error| CliError::Option(format!("report.md: {e}"));
+    writeln!(md, "# fogray fit of {}\n", args.data.display()).map_err(w_)?;
+    writeln!(md, "{}\n", stamp.markdown()).map_err(w_)?;
+    writeln!(
+        md,
+        "Trained on {} views of {w}x{h}, judged on {} held-out views it never saw, measured off the \
+         training clock.\n",
+        s.views[0], s.views[1]
+    )
+    .map_err(w_)?;
+    writeln!(md, "| figure | value |\n|---|---|").map_err(w_)?;
+    let rows = [
+        ("held-out PSNR", format!("{:.2} dB", s.final_test_psnr)),
+        ("held-out SSIM", number(s.final_test_ssim, |v| format!("{v:.4}"))),
+        ("training seconds (evaluations excluded)", format!("{:.1}", s.seconds)),
+        ("steps", s.steps.to_string()),
+        (
+            "steps a second",
+            format!("{:.1}", s.steps as f64 / s.seconds.max(f64::MIN_POSITIVE)),
+        ),
+        ("trainable values", s.parameters.to_string()),
+        (
+            "peak resident memory",
+            s.peak_resident_bytes
+                .map_or("not known".into(), |b| format!("{:.2} GB", b as f64 / 1e9)),
+        ),
+        (
+            "held-out pixels with opacity in (0.05, 0.95)",
+            format!("{:.4}", s.held_out_haze),
+        ),
+        ("seconds to load the data", format!("{:.1}", s.load_seconds)),
+    ];
+    for (name, value) in rows {
+        writeln!(md, "| {name} | {value} |").map_err(w_)?;
+    }
+    writeln!(md, "\n## Against training time\n").map_err(w_)?;
+    writeln!(md, "![held-out PSNR against training seconds](psnr.png)\n").map_err(w_)?;
+    writeln!(md, "![held-out SSIM against training seconds](ssim.png)\n").map_err(w_)?;
+    writeln!(
+        md,
+        "| step | seconds | train loss | PSNR (dB) | SSIM |\n|---|---|---|---|---|"
+    )
+    .map_err(w_)?;
+    for e in s.log {
+        writeln!(
+            md,
+            "| {} | {:.1} | {} | {:.2} | {} |",
+            e.step,
+            e.seconds,
+            number(e.train_loss, |v| format!("{v:.3e}")),
+            e.test_psnr,
+            number(e.test_ssim, |v| format!("{v:.4}"))
+        )
+        .map_err(w_)?;
+    }
+    writeln!(md, "\n## Held-out views\n").map_err(w_)?;
+    writeln!(
+        md,
+        "Each row: the photograph, the render, the absolute error times 4.\n"
+    )
+    .map_err(w_)?;
+    for name in names {
+        writeln!(md, "![{name}](test/{name}.png)\n").map_err(w_)?;
+    }
+    writeln!(md, "## Where a step went\n\n```\n{}```\n", s.profile).map_err(w_)?;
+    writeln!(md, "## Settings\n").map_err(w_)?;
+    writeln!(
+        md,
+        "Data: `{}`, downscale {}, background {:?}.\n",
+        args.data.display(),
+        args.data_args.downscale,
+        args.data_args.background
+    )
+    .map_err(w_)?;
+    writeln!(md, "```json\n{}\n```", serde_json::to_string_pretty(settings)?).map_err(w_)?;
+    Ok(md)
+}

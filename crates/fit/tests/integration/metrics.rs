@@ -1,0 +1,68 @@
+//! SSIM against an independent implementation (scikit-image 0.26's `structural_similarity`
+//! with `gaussian_weights=True, sigma=1.5, use_sample_covariance=False, data_range=1.0,
+//! channel_axis=-1`, the field's settings) on fixed images that both sides build from the same
+//! formulas, and against closed forms.
+
+use fogray_fit::images::ImageError;
+use fogray_fit::metrics::ssim;
+use ndarray::Array3;
+
+const H: usize = 24;
+const W: usize = 31;
+
+/// `0.5 + 0.4 sin(0.3 i + 0.7 j + 1.1 c)`: smooth structure in [0.1, 0.9].
+fn smooth() -> Array3<f64> {
+    Array3::from_shape_fn((H, W, 3), |(i, j, c)| {
+        0.5 + 0.4 * (0.3 * i as f64 + 0.7 * j as f64 + 1.1 * c as f64).sin()
+    })
+}
+
+/// `smooth + 0.1 cos(1.3 i - 0.4 j + 2 c)`: the same structure, slightly changed.
+fn perturbed() -> Array3<f64> {
+    let x = smooth();
+    Array3::from_shape_fn((H, W, 3), |(i, j, c)| {
+        x[[i, j, c]] + 0.1 * (1.3 * i as f64 - 0.4 * j as f64 + 2.0 * c as f64).cos()
+    })
+}
+
+/// An integer hash in [0, 1]: structure unrelated to [`smooth`].
+fn noise() -> Array3<f64> {
+    Array3::from_shape_fn((H, W, 3), |(i, j, c)| {
+        (((i * 73856093) ^ (j * 19349663) ^ (c * 83492791)) % 1000) as f64 / 999.0
+    })
+}
+
+#[test]
+fn ssim_matches_scikit_image_on_fixed_images() {
+    let x = smooth();
+    for (render, expected) in [(perturbed(), 0.9581692085795915), (noise(), -0.010560046067742109)] {
+        let got = ssim(&[render.view()], &[x.view()]).unwrap();
+        assert!((got - expected).abs() < 1e-12, "{got} vs scikit-image's {expected}");
+    }
+}
+
+#[test]
+fn ssim_averages_images_and_clamps_renders_as_psnr_does() {
+    let (x, y) = (smooth(), perturbed());
+    let two = ssim(&[y.view(), x.view()], &[x.view(), x.view()]).unwrap();
+    assert!((two - (0.9581692085795915 + 1.0) / 2.0).abs() < 1e-12);
+    // A render above 1 where the photograph is 1 is as good as 1.
+    let white = Array3::from_elem((H, W, 3), 1.0);
+    let over = Array3::from_elem((H, W, 3), 1.7);
+    assert_eq!(ssim(&[over.view()], &[white.view()]).unwrap(), 1.0);
+}
+
+#[test]
+fn ssim_refuses_what_it_cannot_measure() {
+    let x = smooth();
+    assert_eq!(ssim(&[], &[]), Err(ImageError::Empty));
+    assert!(matches!(ssim(&[x.view()], &[]), Err(ImageError::Shape { .. })));
+    let small = Array3::from_elem((10, 40, 3), 0.5);
+    let e = ssim(&[small.view()], &[small.view()]).unwrap_err().to_string();
+    assert!(e.contains("11 x 11"), "{e}");
+    let other = Array3::from_elem((H, W + 1, 3), 0.5);
+    assert!(matches!(
+        ssim(&[other.view()], &[x.view()]),
+        Err(ImageError::Shape { .. })
+    ));
+}
