@@ -255,8 +255,9 @@ and compared with
   - the stable taped twin in f64, every element;
   - finite differences of the fused op in f64, every element, ray by ray (central, step 1e-6
     relative; one-sided where sigma or delta is within a step of 0, their lower bound), or
-    with --fast along random unit directions through every input (step 1e-5; one-sided and
-    inward when any sigma or delta is near 0), in time linear in the number of samples.
+    with --fast along random unit directions through every input (step 1e-5; central through
+    the elements the step keeps at or above 0, and a second, one-sided and inward direction
+    through the samples at or next to 0), in time linear in the number of samples.
 Each comparison passes if |fused - reference| <= atol + rtol |reference|. Defaults: atol 1e-6,
 rtol 1e-5 for f64 input; atol 1e-4, rtol 1e-3 for f32 input.
 

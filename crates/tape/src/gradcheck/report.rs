@@ -9,7 +9,9 @@ use super::domain::Difference;
 pub struct GradcheckEntry {
     /// Which input (`None` in fast mode, where a direction spans every input).
     pub input: Option<usize>,
-    /// The element's multi-index (in fast mode: `[k]`, the direction's number).
+    /// The element's multi-index (in fast mode: `[k]`, the direction's number; a direction's
+    /// elements at or near an end of their domain are checked by a second, one-sided entry of
+    /// the same number).
     pub index: Vec<usize>,
     /// Central finite difference.
     pub numeric: f64,
