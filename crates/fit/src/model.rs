@@ -6,7 +6,7 @@
 //! [`DenseGrid`]: crate::dense::DenseGrid
 
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{OccupancyGrid, PackedSamples};
+use fogray_ops::sample::{KnownCells, OccupancyGrid, PackedSamples};
 use fogray_ops::CompositeVars;
 use fogray_tape::params::Params;
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -82,6 +82,16 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     ) -> Result<Self, FitError> {
         let _ = structure;
         Self::fresh(settings, nodes)
+    }
+
+    /// The cells of `occupancy` where this model's density is one known constant (a sparse
+    /// grid's pruned space), so that a refresh evaluates only the others
+    /// ([`OccupancyGrid::set_known_cells`]); none by default.
+    ///
+    /// Errors: from the density (a NaN density).
+    fn known_cells(&self, occupancy: &OccupancyGrid) -> Result<Option<KnownCells>, FitError> {
+        let _ = occupancy;
+        Ok(None)
     }
 
     /// Nodes per axis.

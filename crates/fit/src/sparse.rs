@@ -24,7 +24,7 @@
 use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{OccupancyGrid, PackedSamples};
+use fogray_ops::sample::{KnownCells, OccupancyGrid, PackedSamples};
 use fogray_ops::{CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -177,6 +177,65 @@ impl<F: Float> SparseGrid<F> {
     }
 }
 
+/// The cells of `occupancy` in which no lookup reaches a node that `index` keeps (its lattice
+/// over `scene_box`), one entry per cell in the grid's order. A point in lattice cell `i` reads
+/// nodes `i` and `i + 1` on each axis; each occupancy cell's range of nodes is widened by one
+/// on each side against rounding, so a cell is only ever marked when it is surely empty.
+pub fn cells_without_kept_nodes(index: &NodeIndex, scene_box: &SceneBox, occupancy: &OccupancyGrid) -> Vec<bool> {
+    let n = index.nodes();
+    let r = occupancy.resolution();
+    let (lo, hi) = (occupancy.bounds().min(), occupancy.bounds().max());
+    // Per axis, the lattice nodes a point of occupancy cell c can read: lo[c]..=hi[c].
+    let ranges: [Vec<(usize, usize)>; 3] = std::array::from_fn(|a| {
+        let spacing = (scene_box.max[a] - scene_box.min[a]) / (n[a] - 1) as f64;
+        let cell = (hi[a] - lo[a]) / r as f64;
+        (0..r)
+            .map(|c| {
+                let node = |x: f64| ((x - scene_box.min[a]) / spacing).floor();
+                let first = node(lo[a] + c as f64 * cell) - 1.0;
+                let last = node(lo[a] + (c + 1) as f64 * cell) + 2.0;
+                let clamp = |v: f64| v.clamp(0.0, (n[a] - 1) as f64) as usize;
+                (clamp(first), clamp(last))
+            })
+            .collect()
+    });
+    // A summed-volume table of the kept nodes: any kept node in a box in eight reads.
+    let (nx, ny, nz) = (n[0] + 1, n[1] + 1, n[2] + 1);
+    let mut table = vec![0u32; nx * ny * nz];
+    let at = |x: usize, y: usize, z: usize| (x * ny + y) * nz + z;
+    let mut kept = vec![false; n[0] * n[1] * n[2]];
+    for l in index.kept_nodes() {
+        kept[l] = true;
+    }
+    for x in 1..nx {
+        for y in 1..ny {
+            for z in 1..nz {
+                let own = u32::from(kept[((x - 1) * n[1] + y - 1) * n[2] + z - 1]);
+                table[at(x, y, z)] = own + table[at(x - 1, y, z)] + table[at(x, y - 1, z)] + table[at(x, y, z - 1)]
+                    - table[at(x - 1, y - 1, z)]
+                    - table[at(x - 1, y, z - 1)]
+                    - table[at(x, y - 1, z - 1)]
+                    + table[at(x - 1, y - 1, z - 1)];
+            }
+        }
+    }
+    (0..r * r * r)
+        .map(|l| {
+            let c = [l / (r * r), l / r % r, l % r];
+            let (x0, x1) = ranges[0][c[0]];
+            let (y0, y1) = ranges[1][c[1]];
+            let (z0, z1) = ranges[2][c[2]];
+            let (x1, y1, z1) = (x1 + 1, y1 + 1, z1 + 1);
+            let count = table[at(x1, y1, z1)] + table[at(x0, y0, z1)] + table[at(x0, y1, z0)] + table[at(x1, y0, z0)]
+                - table[at(x0, y1, z1)]
+                - table[at(x1, y0, z1)]
+                - table[at(x1, y1, z0)]
+                - table[at(x0, y0, z0)];
+            count == 0
+        })
+        .collect()
+}
+
 /// The nodes of a `nodes^3` lattice over `scene_box` within `dilation` cells (per axis) of an
 /// occupied cell of `occupancy`: one entry per node, in linear order.
 pub fn keep_near_occupied(scene_box: &SceneBox, nodes: usize, occupancy: &OccupancyGrid, dilation: usize) -> Vec<bool> {
@@ -254,6 +313,15 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             settings.smoothness,
         )?
         .with_distortion(settings.distortion)
+    }
+
+    /// The cells none of whose points' lookups reach a kept node: they read raw 0 everywhere,
+    /// the density `softplus(shift)`.
+    fn known_cells(&self, occupancy: &OccupancyGrid) -> Result<Option<KnownCells>, FitError> {
+        let zero = ndarray::ArrayD::<F>::zeros(ndarray::IxDyn(&[1, self.shading.channels()]));
+        let fog = self.shading.densities(zero)?[0].as_f64();
+        let cells = cells_without_kept_nodes(self.index(), &self.scene_box(), occupancy);
+        Ok(Some(KnownCells { cells, density: fog }))
     }
 
     fn nodes(&self) -> usize {

@@ -208,6 +208,9 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
     if let (Some(grid), Some(state)) = (&mut occupancy, resumed.as_ref().and_then(|t| t.occupancy.as_ref())) {
         grid.restore(state)?;
     }
+    if let Some(grid) = &mut occupancy {
+        grid.set_known_cells(model.known_cells(grid)?)?;
+    }
     let adam_config = AdamConfig {
         lr: settings.lr,
         ..AdamConfig::default()
@@ -280,6 +283,9 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
             && grown_enough(next_stage, step)
         {
             model = model.resampled(stages[next_stage].1, occupancy.as_ref())?;
+            if let Some(grid) = &mut occupancy {
+                grid.set_known_cells(model.known_cells(grid)?)?;
+            }
             adam = Adam::new(adam_config)?;
             next_stage += 1;
         }

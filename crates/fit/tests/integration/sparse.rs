@@ -278,3 +278,42 @@ fn a_short_fit_grows_only_after_the_occupancy_grid_has_seen_each_stage() {
     let kept = sparse.model.kept() as f64 / 32f64.powi(3);
     assert!(kept < 0.4, "kept {kept}");
 }
+
+#[test]
+fn a_refresh_that_skips_the_known_cells_is_the_refresh_of_every_cell() {
+    // A 9^3 lattice keeping a block of nodes off centre, every kept value different.
+    let n = 9;
+    let keep: Vec<bool> = (0..n * n * n)
+        .map(|l| {
+            let i = [l / (n * n), l / n % n, l % n];
+            (2..=4).contains(&i[0]) && (3..=6).contains(&i[1]) && (1..=4).contains(&i[2])
+        })
+        .collect();
+    let index = NodeIndex::from_mask([n; 3], &keep).unwrap();
+    let kept = index.kept();
+    let shading = Shading::new(-4.0, 1).unwrap();
+    let mut model = SparseGrid::<f32>::new(SceneBox::UNIT, n, index, shading, 0.0).unwrap();
+    let id = model.params().ids().next().unwrap();
+    let raw = Array2::from_shape_fn((kept, shading.channels()), |(r, c)| ((r * 7 + c * 3) % 11) as f32 - 2.0);
+    model.params_mut().get_mut(id).unwrap().assign(&raw);
+    let bounds = Aabb::new([-1.0; 3], [1.0; 3]).unwrap();
+    // Occupancy cells finer, coarser and out of step with the lattice's.
+    for r in [4, 7, 8, 13] {
+        let config = OccupancyConfig::density(0.5).unwrap();
+        let mut every = OccupancyGrid::new(bounds, r, config).unwrap();
+        let mut skipping = every.clone();
+        let known = model.known_cells(&skipping).unwrap().unwrap();
+        let marked = known.cells.iter().filter(|&&k| k).count();
+        assert!(marked > 0 && marked < r * r * r, "r {r}: {marked} cells known");
+        // raw 0 through softplus(x - 4), in f32: ln(1 + e^-4) to f32's rounding.
+        let fog = (-4.0f64).exp().ln_1p();
+        assert!((known.density - fog).abs() < 1e-9, "{} vs {fog}", known.density);
+        skipping.set_known_cells(Some(known)).unwrap();
+        for seed in [1, 2] {
+            let points = CellPoints::CentreAndRandom { seed };
+            every.update(|p| model.densities(p), points).unwrap();
+            skipping.update(|p| model.densities(p), points).unwrap();
+            assert_eq!(every.state(), skipping.state(), "r {r}, seed {seed}");
+        }
+    }
+}

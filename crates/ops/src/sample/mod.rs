@@ -64,7 +64,7 @@ mod visible;
 mod visible_tests;
 
 pub use importance::Importance;
-pub use occupancy::{GridAxis, OccupancyGrid, OccupancySlice, OccupancyState};
+pub use occupancy::{GridAxis, KnownCells, OccupancyGrid, OccupancySlice, OccupancyState};
 pub use occupancy_config::{CellPoints, OccupancyConfig, Refresh, Threshold};
 pub use packed::{PackedSamples, SampleVars};
 pub use stratified::{Jitter, Stratified};

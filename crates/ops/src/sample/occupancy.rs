@@ -57,6 +57,21 @@ pub struct OccupancyGrid {
     estimate: Vec<f32>,
     bits: Vec<u64>,
     config: OccupancyConfig,
+    known: Option<KnownCells>,
+}
+
+/// Cells whose density the caller knows without evaluating it: the same `density` at every
+/// point of each cell marked (a sparse model's pruned space, which reads one constant). An
+/// update takes that value for them and calls the density function only for the others, so
+/// that a refresh costs what the unknown cells do; the result is the same, bit for bit, as
+/// evaluating every cell.
+#[derive(Debug, Clone, PartialEq)]
+pub struct KnownCells {
+    /// One entry per cell, in the grid's linear order (`[ix, iy, iz]`, z fastest): true where
+    /// the density is known.
+    pub cells: Vec<bool>,
+    /// The density at every point of the marked cells: finite, at least 0.
+    pub density: f64,
 }
 
 /// Cells per call of the density function (and per parallel task) in an update.
@@ -82,7 +97,35 @@ impl OccupancyGrid {
             estimate: vec![0.0; cells],
             bits,
             config,
+            known: None,
         })
+    }
+
+    /// Sets the cells whose density is known (or none: every cell evaluated), used by every
+    /// update from now on.
+    ///
+    /// Errors (nothing changed): a mask that is not one entry per cell, a density that is
+    /// negative or not finite.
+    pub fn set_known_cells(&mut self, known: Option<KnownCells>) -> Result<(), SampleError> {
+        if let Some(k) = &known {
+            if k.cells.len() != self.estimate.len() {
+                return Err(config_error(
+                    "known cells",
+                    k.cells.len() as f64,
+                    "must be one entry per cell",
+                ));
+            }
+            if !(k.density.is_finite() && k.density >= 0.0) {
+                return Err(config_error("known density", k.density, "must be finite and >= 0"));
+            }
+        }
+        self.known = known;
+        Ok(())
+    }
+
+    /// The cells whose density is known, if set.
+    pub fn known_cells(&self) -> Option<&KnownCells> {
+        self.known.as_ref()
     }
 
     /// Cells per axis.
@@ -260,29 +303,45 @@ impl OccupancyGrid {
         // whatever the number of threads.
         let mut rng = seed.map(|s| StdRng::seed_from_u64(s ^ (cells.start as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15)));
         let per_cell = usize::from(centre) + usize::from(seed.is_some());
+        let known = |i: usize| self.known.as_ref().is_some_and(|k| k.cells[i]);
         let mut xyz = Vec::with_capacity(3 * per_cell * cells.len());
         for i in cells.clone() {
-            if centre {
+            if centre && !known(i) {
                 xyz.extend(self.point(i, None).map(F::lit));
             }
             if let Some(rng) = rng.as_mut() {
-                xyz.extend(self.point(i, Some(rng)).map(F::lit));
+                // A known cell's point is drawn too, so that the others' points do not depend
+                // on which cells are known.
+                let p = self.point(i, Some(rng));
+                if !known(i) {
+                    xyz.extend(p.map(F::lit));
+                }
             }
         }
         let m = xyz.len() / 3;
-        let xyz = Array2::from_shape_vec((m, 3), xyz).expect("three coordinates per point");
-        let sigma = density(xyz.view()).map_err(|e| SampleError::Density(e.to_string()))?;
-        if sigma.len() != m {
-            return Err(SampleError::Density(format!(
-                "returned {} densities for {m} points",
-                sigma.len()
-            )));
-        }
-        let sigma: Vec<f64> = sigma.iter().map(|s| s.as_f64()).collect();
+        let sigma: Vec<f64> = if m == 0 {
+            Vec::new()
+        } else {
+            let xyz = Array2::from_shape_vec((m, 3), xyz).expect("three coordinates per point");
+            let sigma = density(xyz.view()).map_err(|e| SampleError::Density(e.to_string()))?;
+            if sigma.len() != m {
+                return Err(SampleError::Density(format!(
+                    "returned {} densities for {m} points",
+                    sigma.len()
+                )));
+            }
+            sigma.iter().map(|s| s.as_f64()).collect()
+        };
         let mut out = Vec::with_capacity(cells.len());
-        for (k, i) in cells.enumerate() {
+        let mut next = 0;
+        for i in cells {
+            if let Some(k) = self.known.as_ref().filter(|k| k.cells[i]) {
+                out.push(k.density);
+                continue;
+            }
             let mut best = 0.0f64;
-            for &s in &sigma[k * per_cell..(k + 1) * per_cell] {
+            next += per_cell;
+            for &s in &sigma[next - per_cell..next] {
                 if !(s.is_finite() && s >= 0.0) {
                     return Err(SampleError::InvalidValue {
                         ray: i,

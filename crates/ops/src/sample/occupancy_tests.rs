@@ -253,3 +253,68 @@ fn a_refresh_policy_updates_from_its_warmup_every_n_steps_only() {
         .with_refresh(Refresh { warmup: 0, every: 0 })
         .is_err());
 }
+
+/// The ball's density outside the radius-0.5 ball replaced by `fog`: constant there.
+fn ball_in_fog(fog: f64) -> impl Fn(ArrayView2<'_, f64>) -> Result<Array1<f64>, Infallible> + Sync {
+    move |p| {
+        let inside = ball_density(p)?;
+        Ok(Array1::from_shape_fn(p.nrows(), |i| {
+            let r2: f64 = (0..3).map(|a| p[[i, a]] * p[[i, a]]).sum();
+            if r2 <= 0.25 {
+                inside[i]
+            } else {
+                fog
+            }
+        }))
+    }
+}
+
+#[test]
+fn known_cells_give_the_update_of_every_cell_bit_for_bit_and_are_not_evaluated() {
+    let fog = 0.0183;
+    let config = OccupancyConfig::density(0.5).unwrap();
+    let mut every = OccupancyGrid::new(cube(), 16, config).unwrap();
+    let mut known = every.clone();
+    // The cells wholly outside a ball of radius 0.5 + a cell's diagonal, where the density is
+    // the fog at every point.
+    let r = 16;
+    let cells: Vec<bool> = (0..r * r * r)
+        .map(|l| {
+            let c = [l / (r * r), l / r % r, l % r];
+            let centre: f64 = (0..3)
+                .map(|a| (-1.0 + (c[a] as f64 + 0.5) * 2.0 / r as f64).powi(2))
+                .sum();
+            centre.sqrt() > 0.5 + 3f64.sqrt() * 2.0 / r as f64
+        })
+        .collect();
+    let marked = cells.iter().filter(|&&k| k).count();
+    assert!(marked > r * r * r / 2, "{marked}");
+    known.set_known_cells(Some(KnownCells { cells, density: fog })).unwrap();
+    let evaluated = std::sync::atomic::AtomicUsize::new(0);
+    let counting = |p: ArrayView2<'_, f64>| {
+        evaluated.fetch_add(p.nrows(), std::sync::atomic::Ordering::Relaxed);
+        ball_in_fog(fog)(p)
+    };
+    for seed in [1, 2, 3] {
+        let points = CellPoints::CentreAndRandom { seed };
+        every.update(ball_in_fog(fog), points).unwrap();
+        known.update(counting, points).unwrap();
+        assert_eq!(every.state(), known.state(), "seed {seed}");
+    }
+    // Two points a cell, for the unknown cells only.
+    assert_eq!(evaluated.into_inner(), 3 * 2 * (r * r * r - marked));
+    assert!(every.occupied_fraction() > 0.0 && every.occupied_fraction() < 0.5);
+}
+
+#[test]
+fn known_cells_of_the_wrong_size_or_density_are_refused() {
+    let mut grid = OccupancyGrid::new(cube(), 4, OccupancyConfig::density(0.5).unwrap()).unwrap();
+    for (cells, density) in [
+        (vec![true; 63], 0.0),
+        (vec![true; 64], -1.0),
+        (vec![true; 64], f64::NAN),
+    ] {
+        assert!(grid.set_known_cells(Some(KnownCells { cells, density })).is_err());
+        assert_eq!(grid.known_cells(), None);
+    }
+}
