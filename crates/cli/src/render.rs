@@ -133,15 +133,19 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
         }
     };
     let views = views(args, &info)?;
-    let mut names = std::collections::BTreeSet::new();
-    for v in &views {
-        let clash = !names.insert(v.name.clone()) || (args.depth && !names.insert(format!("{}-depth", v.name)));
-        if clash {
-            return Err(CliError::Option(format!(
-                "{}: two frames' files are named {:?} (their PNGs would overwrite each other)",
-                args.cameras.as_deref().unwrap_or(Path::new("--orbit")).display(),
-                v.name
-            )));
+    // Only a transforms file's names can clash (frame `a-depth` beside frame `a`'s depth map
+    // too); an orbit's are numbered.
+    if let Some(cameras) = &args.cameras {
+        let mut names = std::collections::BTreeSet::new();
+        for v in &views {
+            let clash = !names.insert(v.name.clone()) || (args.depth && !names.insert(format!("{}-depth", v.name)));
+            if clash {
+                return Err(CliError::Option(format!(
+                    "{}: two frames' files are named {:?} (their PNGs would overwrite each other)",
+                    cameras.display(),
+                    v.name
+                )));
+            }
         }
     }
     let background = match info.extra.get("background") {
