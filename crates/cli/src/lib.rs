@@ -3,6 +3,7 @@
 //! criterion bench (`benches/composite.rs`) times the very steps `fogray bench` times, on the
 //! same rays ([`bench`]); the command line, not this crate's API, is the contract.
 
+pub mod animation;
 pub mod bandwidth;
 pub mod bench;
 pub mod composite;
@@ -10,6 +11,7 @@ pub mod error;
 pub mod evaluate;
 pub mod fit;
 pub mod fit_report;
+pub mod framing;
 pub mod gradcheck;
 pub mod grid_bench;
 pub mod heap;

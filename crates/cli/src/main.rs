@@ -66,7 +66,8 @@ enum Command {
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms
-    /// file: DIR/<name>.png, 8-bit RGB, over the model's background.
+    /// file, or from N cameras orbiting its scene box: DIR/<name>.png, 8-bit RGB, over the
+    /// model's background; with --depth its depth maps, with --gif (an orbit) an animated GIF.
     Render(render::RenderArgs),
     /// Composite packed rays given as JSON; print colour, opacity, depth, weights, transmittance
     /// and, with grad_color, the gradients, as JSON.

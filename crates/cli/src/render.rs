@@ -1,21 +1,25 @@
 //! `fogray render`: a saved model rendered from every camera of a transforms file (either
-//! format), one 8-bit RGB PNG per frame.
+//! format) or from an orbit around its scene box, one 8-bit RGB PNG per frame, and on request
+//! each frame's depth map and (an orbit) an animated GIF.
 
 use std::path::{Path, PathBuf};
 
-use fogray_data::{load_cameras, NamedCamera};
-use fogray_fit::checkpoint::{self, read_info};
+use fogray_data::load_cameras;
+use fogray_fit::checkpoint::{self, read_info, ModelInfo};
 use fogray_fit::dataset::camera_rays;
 use fogray_fit::dense::DenseGrid;
+use fogray_fit::depth::write_depth_png;
 use fogray_fit::images::write_png;
 use fogray_fit::model::RadianceField;
 use fogray_fit::render::{render_picture, RenderOptions};
 use fogray_fit::settings::{Method, Precision};
 use fogray_fit::sparse::SparseGrid;
+use fogray_ops::PinholeCamera;
 use fogray_tape::Float;
-use ndarray::Array3;
 
+use crate::animation::GifWriter;
 use crate::error::CliError;
+use crate::framing::{self, ImageSize};
 
 /// The flags of `fogray render`.
 #[derive(Debug, Clone, clap::Args)]
@@ -25,22 +29,97 @@ pub struct RenderArgs {
     pub model: PathBuf,
     /// A transforms file or dataset folder (Blender or instant-ngp/nerfstudio) whose every
     /// frame is rendered (a Blender folder: train, val and test frames).
-    #[arg(long, value_name = "TRANSFORMS")]
-    pub cameras: PathBuf,
+    #[arg(
+        long,
+        value_name = "TRANSFORMS",
+        required_unless_present = "orbit",
+        conflicts_with = "orbit"
+    )]
+    pub cameras: Option<PathBuf>,
     /// Divide the cameras' image size, focal lengths and principal point by K.
-    #[arg(long, default_value_t = 1, value_name = "K")]
+    #[arg(long, default_value_t = 1, value_name = "K", conflicts_with = "orbit")]
     pub downscale: usize,
+    // Clap waives an orbit flag's `requires = "orbit"` beside --cameras (which conflicts with
+    // --orbit): each also conflicts with --cameras.
+    /// Render N frames on a circle around the centre of the model's scene box instead (world
+    /// +z up, as in Blender scenes), frame k at azimuth 360 k / N degrees from +x towards +y,
+    /// each looking at the centre: DIR/frame-000.png ...
+    #[arg(long, value_name = "N")]
+    pub orbit: Option<usize>,
+    /// The orbit's angle above the horizontal plane through the centre, in degrees, in
+    /// (-90, 90) [default: 30].
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        requires = "orbit",
+        conflicts_with = "cameras"
+    )]
+    pub elevation: Option<f64>,
+    /// The orbit's distance from the centre [default: the mean distance of the cameras of the
+    /// model's dataset from the centre, else the distance at which the scene box's bounding
+    /// sphere fits in the view].
+    #[arg(
+        long,
+        value_name = "R",
+        allow_negative_numbers = true,
+        requires = "orbit",
+        conflicts_with = "cameras"
+    )]
+    pub radius: Option<f64>,
+    /// The orbit's image size [default: that of the model's dataset's first camera, else
+    /// 200x200].
+    #[arg(
+        long,
+        value_name = "WxH",
+        requires = "orbit",
+        conflicts_with_all = ["cameras", "width", "height"]
+    )]
+    pub size: Option<ImageSize>,
+    /// The orbit's image width alone [default: --size's].
+    #[arg(long, value_name = "W", requires = "orbit", conflicts_with = "cameras")]
+    pub width: Option<usize>,
+    /// The orbit's image height alone [default: --size's].
+    #[arg(long, value_name = "H", requires = "orbit", conflicts_with = "cameras")]
+    pub height: Option<usize>,
+    /// The orbit's vertical field of view in degrees [default: that of the model's dataset's
+    /// first camera, else 40].
+    #[arg(
+        long,
+        value_name = "DEG",
+        allow_negative_numbers = true,
+        requires = "orbit",
+        conflicts_with = "cameras"
+    )]
+    pub fov: Option<f64>,
     /// The directory of the PNGs, `DIR/<name>.png` with `<name>` the frame's file name
-    /// without folder and extension.
+    /// without folder and extension (`frame-000` ... for an orbit).
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Also write the orbit's frames as an animated GIF (looping forever, 20 frames a
+    /// second, a 256-colour palette per frame).
+    #[arg(long, value_name = "OUT.gif", requires = "orbit", conflicts_with = "cameras")]
+    pub gif: Option<PathBuf>,
+    /// Also write each frame's depth map, `DIR/<name>-depth.png`: the expected depth along
+    /// the ray given that it stops, in the viridis colour map with a labelled colour bar, grey
+    /// where the opacity is below 0.1.
+    #[arg(long)]
+    pub depth: bool,
+}
+
+/// A view to render and the stem of its files.
+struct View {
+    name: String,
+    camera: PinholeCamera,
 }
 
 /// Runs `fogray render`: the paths written, one per line.
 ///
-/// Errors: a model file that is not a fogray dense-grid model, a bad transforms file (naming
-/// it), two frames of one name, a file that cannot be written.
+/// Errors: a flag outside its domain (one line naming it), a model file that is not a fogray
+/// grid model, a bad transforms file (naming it), two frames of one name, a file that cannot
+/// be written.
 pub fn run(args: &RenderArgs) -> Result<String, CliError> {
+    framing::check_flags(args)?;
     let info = read_info(&args.model)?;
     let sparse = match info.kind.as_str() {
         k if k == DenseGrid::<f32>::KIND => false,
@@ -53,49 +132,102 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
             )))
         }
     };
-    let cameras = load_cameras(&args.cameras, args.downscale)?;
-    let mut names = std::collections::BTreeSet::new();
-    if let Some(twice) = cameras.iter().find(|c| !names.insert(c.name.as_str())) {
-        return Err(CliError::Option(format!(
-            "{}: two frames are named {:?} (their PNGs would overwrite each other)",
-            args.cameras.display(),
-            twice.name
-        )));
+    let views = views(args, &info)?;
+    // Only a transforms file's names can clash (frame `a-depth` beside frame `a`'s depth map
+    // too); an orbit's are numbered.
+    if let Some(cameras) = &args.cameras {
+        let mut names = std::collections::BTreeSet::new();
+        for v in &views {
+            let clash = !names.insert(v.name.clone()) || (args.depth && !names.insert(format!("{}-depth", v.name)));
+            if clash {
+                return Err(CliError::Option(format!(
+                    "{}: two frames' files are named {:?} (their PNGs would overwrite each other)",
+                    cameras.display(),
+                    v.name
+                )));
+            }
+        }
     }
     let background = match info.extra.get("background") {
         Some(text) => serde_json::from_str::<[f64; 3]>(text)
             .map_err(|e| CliError::Option(format!("{}: its background {text:?}: {e}", args.model.display())))?,
         None => [1.0; 3],
     };
+    // Started before the first frame, so that a GIF that cannot be created costs no render.
+    let gif = match (&args.gif, views.first()) {
+        (Some(path), Some(v)) => {
+            let k = v.camera.intrinsics();
+            Some(GifWriter::create(path, k.width, k.height)?)
+        }
+        _ => None,
+    };
     std::fs::create_dir_all(&args.out).map_err(CliError::file("create", &args.out))?;
+    let output = Output { args, background, gif };
     match (info.settings.precision, sparse) {
-        (Precision::F32, false) => render_all::<f32, DenseGrid<f32>>(args, &cameras, background),
-        (Precision::F64, false) => render_all::<f64, DenseGrid<f64>>(args, &cameras, background),
-        (Precision::F32, true) => render_all::<f32, SparseGrid<f32>>(args, &cameras, background),
-        (Precision::F64, true) => render_all::<f64, SparseGrid<f64>>(args, &cameras, background),
+        (Precision::F32, false) => render_all::<f32, DenseGrid<f32>>(output, &views),
+        (Precision::F64, false) => render_all::<f64, DenseGrid<f64>>(output, &views),
+        (Precision::F32, true) => render_all::<f32, SparseGrid<f32>>(output, &views),
+        (Precision::F64, true) => render_all::<f64, SparseGrid<f64>>(output, &views),
     }
 }
 
-fn render_all<F: Float, M: RadianceField<F>>(
-    args: &RenderArgs,
-    cameras: &[NamedCamera],
+/// The views the flags ask for: every frame of `--cameras`, or the orbit's.
+fn views(args: &RenderArgs, info: &ModelInfo) -> Result<Vec<View>, CliError> {
+    if let Some(cameras) = &args.cameras {
+        return Ok(load_cameras(cameras, args.downscale)?
+            .into_iter()
+            .map(|c| View {
+                name: c.name,
+                camera: c.camera,
+            })
+            .collect());
+    }
+    let scene_box = info.settings.model_box();
+    let centre: [f64; 3] = std::array::from_fn(|i| (scene_box.min[i] + scene_box.max[i]) / 2.0);
+    let half_diagonal = (0..3)
+        .map(|i| ((scene_box.max[i] - scene_box.min[i]) / 2.0).powi(2))
+        .sum::<f64>()
+        .sqrt();
+    let dataset = framing::dataset_views(&args.model, info, centre);
+    let (orbit, k) = framing::orbit_of(args, dataset.as_ref(), centre, half_diagonal)?;
+    let digits = (orbit.frames - 1).max(1).ilog10() as usize + 1;
+    let cameras = orbit
+        .cameras(k)
+        .map_err(|e| CliError::Option(format!("--orbit: {e}")))?;
+    Ok(cameras
+        .into_iter()
+        .enumerate()
+        .map(|(i, camera)| View {
+            name: format!("frame-{i:0width$}", width = digits.max(3)),
+            camera,
+        })
+        .collect())
+}
+
+/// Where the frames go.
+struct Output<'a> {
+    args: &'a RenderArgs,
     background: [f64; 3],
-) -> Result<String, CliError> {
+    gif: Option<GifWriter>,
+}
+
+fn render_all<F: Float, M: RadianceField<F>>(mut output: Output<'_>, views: &[View]) -> Result<String, CliError> {
+    let args = output.args;
     let saved = checkpoint::load::<F, M>(&args.model)?;
     let occupancy = saved.occupancy_grid()?;
     let options = RenderOptions {
-        background,
+        background: output.background,
         method: Method::Fused,
-        depth: false,
+        depth: args.depth,
     };
-    let bar = indicatif::ProgressBar::new(cameras.len() as u64);
+    let bar = indicatif::ProgressBar::new(views.len() as u64);
     if let Ok(style) = indicatif::ProgressStyle::with_template("render [{bar:40}] {pos}/{len} ({elapsed})") {
         bar.set_style(style.progress_chars("=> "));
     }
     let mut written = Vec::new();
-    for c in cameras {
-        let k = c.camera.intrinsics();
-        let (origins, directions) = camera_rays(&c.camera);
+    for v in views {
+        let k = v.camera.intrinsics();
+        let (origins, directions) = camera_rays(&v.camera);
         let picture = render_picture(
             &saved.start.model,
             occupancy.as_ref(),
@@ -104,23 +236,42 @@ fn render_all<F: Float, M: RadianceField<F>>(
             [k.height, k.width],
             &options,
         )?;
-        let path = args.out.join(format!("{}.png", c.name));
-        write_whole(&path, &picture.color)?;
+        let path = args.out.join(format!("{}.png", v.name));
+        write_whole(&path, |partial| Ok(write_png(partial, picture.color.view())?))?;
         written.push(path.display().to_string());
+        if let Some(depth) = &picture.depth {
+            let path = args.out.join(format!("{}-depth.png", v.name));
+            // Magnified so that the bar's labels have room beside a small image.
+            let scale = (DEPTH_MAP_SIDE / k.width.max(k.height)).max(1) as u32;
+            write_whole(&path, |partial| {
+                write_depth_png(partial, depth.view(), &v.name, scale)?;
+                Ok(())
+            })?;
+            written.push(path.display().to_string());
+        }
+        if let Some(gif) = output.gif.as_mut() {
+            gif.push(picture.color.view())?;
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let Some(gif) = output.gif.take() {
+        written.push(gif.finish()?.display().to_string());
+    }
     Ok(written.join("\n"))
 }
 
-/// Writes the PNG beside its final name and renames it, so that an interrupted render leaves
-/// whole files only.
-fn write_whole(path: &Path, image: &Array3<f64>) -> Result<(), CliError> {
+/// Depth maps of smaller images are magnified to about this many pixels on their longer side.
+const DEPTH_MAP_SIDE: usize = 256;
+
+/// Writes a PNG through `write` beside its final name and renames it, so that an interrupted
+/// render leaves whole files only.
+fn write_whole(path: &Path, write: impl FnOnce(&Path) -> Result<(), CliError>) -> Result<(), CliError> {
     let name = path
         .file_name()
         .map(|n| n.to_string_lossy().into_owned())
         .unwrap_or_default();
     let partial = path.with_file_name(format!(".{name}.partial.png"));
-    write_png(&partial, image.view())?;
+    write(&partial)?;
     std::fs::rename(&partial, path).map_err(CliError::file("write", path))
 }

@@ -89,15 +89,15 @@ pub fn write_depth_png(
     });
     let (rows, columns) = (depth.nrows() as u32, depth.ncols() as u32);
     let (h, w) = (rows * scale, columns * scale);
-    let width = GAP + w + 2 * GAP + BAR_WIDTH + LABEL_WIDTH;
+    let heading = format!("{title}: expected depth (grey: opacity < {BACKGROUND_OPACITY})");
+    let font = (FONT, 16).into_font();
+    // As wide as the heading, so that it is not cut off beside a small image.
+    let heading_width = font.box_size(&heading).map_or(0, |(w, _)| w) + 2 * GAP;
+    let width = (GAP + w + 2 * GAP + BAR_WIDTH + LABEL_WIDTH).max(heading_width);
     let root = BitMapBackend::new(path, (width.max(300), h + TITLE_HEIGHT + GAP)).into_drawing_area();
     let draw = |r: Result<(), DrawingAreaErrorKind<_>>| r.map_err(|e| wrap(e.to_string()));
     draw(root.fill(&WHITE))?;
-    draw(root.draw(&Text::new(
-        format!("{title}: expected depth (grey: opacity < {BACKGROUND_OPACITY})"),
-        (GAP as i32, 4),
-        (FONT, 16).into_font(),
-    )))?;
+    draw(root.draw(&Text::new(heading, (GAP as i32, 4), font)))?;
     let y0 = TITLE_HEIGHT as i32;
     for ((a, b), d) in depth.indexed_iter() {
         let (x, y) = (GAP as i32 + (b as u32 * scale) as i32, y0 + (a as u32 * scale) as i32);

@@ -74,6 +74,6 @@ pub use distortion::DistortionLoss;
 pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError, ShError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted, NodeIndex, SparseGridField};
 pub use rays::{
-    rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, PinholeCamera, RayBatch, RayIntervals,
+    rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, Orbit, PinholeCamera, RayBatch, RayIntervals,
 };
 pub use sh::ShColor;

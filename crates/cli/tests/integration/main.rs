@@ -6,3 +6,4 @@ mod cli;
 mod common;
 mod fit_render;
 mod lego;
+mod orbit;

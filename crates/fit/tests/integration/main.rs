@@ -7,6 +7,7 @@ mod background;
 mod checkpoint;
 mod common;
 mod dense;
+mod depth;
 mod metrics;
 mod resume;
 mod sparse;

@@ -1,4 +1,4 @@
-//! Rays: pinhole cameras, batches of rays, and where rays cross an axis-aligned box.
+//! Rays: pinhole cameras and orbits of them, batches of rays, and where rays cross an axis-aligned box.
 //!
 //! Camera frame convention (OpenCV): x right, y down, z forward; pixel (row `a`, column `b`)
 //! is centred at `(b + 0.5, a + 0.5)` and indexed `a * width + b`. All geometry is computed
@@ -38,8 +38,10 @@ pub mod camera;
 mod camera_tests;
 mod distortion;
 mod frame;
+pub mod orbit;
 
 pub use aabb::{Aabb, RayIntervals};
 pub use batch::RayBatch;
 pub use camera::{rays_for_camera_pixels, CameraPixel, Intrinsics, PinholeCamera};
 pub use distortion::Distortion;
+pub use orbit::Orbit;

@@ -1,0 +1,96 @@
+//! An animated GIF of rendered frames, looping forever, written whole: the frames go to a
+//! partial file beside the final name, which is renamed only once the last frame is in, so an
+//! interrupted render leaves no truncated GIF under that name.
+//!
+//! Each frame gets its own 256-colour palette, quantised by the `gif` crate (NeuQuant).
+
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+
+use fogray_fit::images::to_u8;
+use ndarray::ArrayView3;
+
+use crate::error::CliError;
+
+/// Each frame's time on screen, in hundredths of a second: 20 frames a second (viewers
+/// slow down delays under 2).
+pub const FRAME_DELAY: u16 = 5;
+
+/// NeuQuant's sampling factor (1 best and slowest, 30 fastest; 10 is the crate's default).
+const QUANTISE_SPEED: i32 = 10;
+
+/// A GIF being written.
+pub struct GifWriter {
+    encoder: gif::Encoder<BufWriter<File>>,
+    partial: PathBuf,
+    path: PathBuf,
+    size: [u16; 2],
+}
+
+impl GifWriter {
+    /// Starts a GIF of `width x height` frames at `path` (at most 65535 pixels each way, the
+    /// format's limit).
+    ///
+    /// Errors: a size beyond the format, a file that cannot be created.
+    pub fn create(path: &Path, width: usize, height: usize) -> Result<Self, CliError> {
+        let (Ok(w), Ok(h)) = (u16::try_from(width), u16::try_from(height)) else {
+            return Err(CliError::Option(format!(
+                "--gif: {width}x{height} frames, the format holds at most 65535 pixels each way"
+            )));
+        };
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let partial = path.with_file_name(format!(".{name}.partial"));
+        let file = File::create(&partial).map_err(CliError::file("create", path))?;
+        let gif_error = |e: gif::EncodingError| CliError::Option(format!("cannot write {}: {e}", path.display()));
+        let mut encoder = gif::Encoder::new(BufWriter::new(file), w, h, &[]).map_err(gif_error)?;
+        encoder.set_repeat(gif::Repeat::Infinite).map_err(gif_error)?;
+        Ok(GifWriter {
+            encoder,
+            partial,
+            path: path.to_path_buf(),
+            size: [w, h],
+        })
+    }
+
+    /// Appends `image` (`[height][width][3]` in `[0, 1]`, clamped, as the PNGs are).
+    ///
+    /// Errors: an image of another size, a failed write.
+    pub fn push(&mut self, image: ArrayView3<'_, f64>) -> Result<(), CliError> {
+        let [w, h] = self.size;
+        if image.dim() != (usize::from(h), usize::from(w), 3) {
+            return Err(CliError::Option(format!(
+                "{}: a frame of {:?}, the GIF's are {h}x{w}x3",
+                self.path.display(),
+                image.dim()
+            )));
+        }
+        let rgb: Vec<u8> = image.iter().map(|&v| to_u8(v)).collect();
+        let mut frame = gif::Frame::from_rgb_speed(w, h, &rgb, QUANTISE_SPEED);
+        frame.delay = FRAME_DELAY;
+        self.encoder
+            .write_frame(&frame)
+            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", self.path.display())))
+    }
+
+    /// Ends the GIF and gives it its name; returns it.
+    ///
+    /// Errors: a failed write or rename.
+    pub fn finish(self) -> Result<PathBuf, CliError> {
+        let path = self.path;
+        let writer = self
+            .encoder
+            .into_inner()
+            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", path.display())))?;
+        writer
+            .into_inner()
+            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", path.display())))?
+            .sync_all()
+            .map_err(CliError::file("write", &path))?;
+        std::fs::rename(&self.partial, &path).map_err(CliError::file("write", &path))?;
+        Ok(path)
+    }
+}
