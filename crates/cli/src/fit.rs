@@ -12,7 +12,7 @@ use fogray_fit::dense::DenseGrid;
 use fogray_fit::interrupt::StopFlag;
 use fogray_fit::metrics::haze_fraction;
 use fogray_fit::profile::ProfileTable;
-use fogray_fit::render::{render_picture, RenderOptions};
+use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
 use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
 use fogray_fit::sparse::SparseGrid;
 use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
@@ -275,8 +275,13 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
     if let (true, Some(path)) = (result.interrupted, save_path) {
         return Ok(FitOutcome::Interrupted(path));
     }
+    let held_out = held_out_views(&result, data, settings)?;
     let summary = FitSummary {
-        held_out_haze: held_out_haze(&result, data, settings)?,
+        held_out_haze: haze_fraction(
+            &held_out.iter().map(|v| v.opacity.view()).collect::<Vec<_>>(),
+            0.05,
+            0.95,
+        ),
         peak_resident_bytes: crate::memory::peak_resident_bytes(),
         final_test_psnr: result.final_test_psnr,
         final_test_ssim: result.final_test_ssim,
@@ -296,7 +301,7 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
             .sum(),
     };
     if let Some(dir) = &args.out {
-        crate::fit_report::write_out(dir, args, settings, data, &result, &summary)?;
+        crate::fit_report::write_out(dir, args, settings, data, &result, &held_out, &summary)?;
     }
     if args.json {
         return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
@@ -319,18 +324,18 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
     Ok(FitOutcome::Done(text))
 }
 
-/// [`haze_fraction`] in (0.05, 0.95) of the fitted model's held-out views.
-fn held_out_haze<F: Float, M: RadianceField<F>>(
+/// The fitted model's held-out views rendered with their opacity and depth (off the clock).
+fn held_out_views<F: Float, M: RadianceField<F>>(
     result: &FitResult<F, M>,
     data: &Dataset,
     settings: &FitSettings,
-) -> Result<f64, CliError> {
+) -> Result<Vec<RenderedView>, CliError> {
     let options = RenderOptions {
         background: data.background,
         method: settings.method,
-        depth: false,
+        depth: true,
     };
-    let mut opacities = Vec::new();
+    let mut views = Vec::new();
     for t in &data.test {
         let (origins, directions) = t.rays();
         let view = render_picture(
@@ -341,8 +346,7 @@ fn held_out_haze<F: Float, M: RadianceField<F>>(
             t.size(),
             &options,
         )?;
-        opacities.push(view.opacity);
+        views.push(view);
     }
-    let views: Vec<_> = opacities.iter().map(|o| o.view()).collect();
-    Ok(haze_fraction(&views, 0.05, 0.95))
+    Ok(views)
 }

@@ -8,8 +8,10 @@ use std::path::Path;
 
 use fogray::stamp::Stamp;
 use fogray_fit::dataset::Dataset;
+use fogray_fit::depth::write_depth_png;
 use fogray_fit::images::write_comparison_png;
 use fogray_fit::plots::{self, Curve, Metric, XAxis};
+use fogray_fit::render::RenderedView;
 use fogray_fit::settings::FitSettings;
 use fogray_fit::train::FitResult;
 use fogray_tape::Float;
@@ -17,7 +19,8 @@ use fogray_tape::Float;
 use crate::error::CliError;
 use crate::fit::{FitArgs, FitSummary};
 
-/// Writes `DIR/test/<name>.png` (photograph | render | error x4), `DIR/psnr.{png,svg}`,
+/// Writes `DIR/test/<name>.png` (photograph | render | error x4) and `DIR/test/<name>-depth.png`
+/// for each held-out view (`held_out`: its render with depth), `DIR/psnr.{png,svg}`,
 /// `DIR/ssim.{png,svg}`, `DIR/fit.json` (the summary) and `DIR/report.md`.
 ///
 /// Errors: a file that cannot be written, naming it.
@@ -27,11 +30,12 @@ pub fn write_out<F: Float, M>(
     settings: &FitSettings,
     data: &Dataset,
     result: &FitResult<F, M>,
+    held_out: &[RenderedView],
     summary: &FitSummary,
 ) -> Result<(), CliError> {
     let views = dir.join("test");
     std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
-    for (t, render) in data.test.iter().zip(&result.renders) {
+    for ((t, render), view) in data.test.iter().zip(&result.renders).zip(held_out) {
         write_comparison_png(
             &views.join(format!("{}.png", t.name)),
             t.image.view(),
@@ -39,6 +43,9 @@ pub fn write_out<F: Float, M>(
             4.0,
             1,
         )?;
+        if let Some(depth) = &view.depth {
+            write_depth_png(&views.join(format!("{}-depth.png", t.name)), depth.view(), &t.name, 1)?;
+        }
     }
     let curve = [Curve {
         label: "fogray fit".into(),
@@ -147,11 +154,16 @@ fn markdown(
     writeln!(md, "\n## Held-out views\n").map_err(w_)?;
     writeln!(
         md,
-        "Each row: the photograph, the render, the absolute error times 4.\n"
+        "Each row: the photograph, the render, the absolute error times 4, and the render's expected \
+         depth (scene units; grey where the opacity is below 0.1).\n"
     )
     .map_err(w_)?;
     for name in names {
-        writeln!(md, "![{name}](test/{name}.png)\n").map_err(w_)?;
+        writeln!(
+            md,
+            "![{name}](test/{name}.png) ![{name}: depth](test/{name}-depth.png)\n"
+        )
+        .map_err(w_)?;
     }
     writeln!(md, "## Where a step went\n\n```\n{}```\n", s.profile).map_err(w_)?;
     writeln!(md, "## Settings\n").map_err(w_)?;

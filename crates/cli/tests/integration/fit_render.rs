@@ -73,6 +73,7 @@ fn check_report(dir: &Path, json: &Value) {
         "test/view_00.png",
         "test/view_08.png",
         "test/view_16.png",
+        "test/view_00-depth.png",
     ] {
         assert!(md.contains(picture), "report.md shows no {picture}");
         assert!(dir.join(picture).is_file(), "{picture} was not written");
