@@ -4,18 +4,17 @@
 use std::path::{Path, PathBuf};
 
 use fogray_data::{load_cameras, NamedCamera};
-use fogray_fit::checkpoint::{self, read_info};
+use fogray_fit::checkpoint;
 use fogray_fit::dataset::camera_rays;
-use fogray_fit::dense::DenseGrid;
 use fogray_fit::images::write_png;
 use fogray_fit::model::RadianceField;
 use fogray_fit::render::{render_picture, RenderOptions};
-use fogray_fit::settings::{Method, Precision};
-use fogray_fit::sparse::SparseGrid;
+use fogray_fit::settings::Method;
 use fogray_tape::Float;
 use ndarray::Array3;
 
 use crate::error::CliError;
+use crate::saved::{SavedModel, WithModel};
 
 /// The flags of `fogray render`.
 #[derive(Debug, Clone, clap::Args)]
@@ -38,21 +37,10 @@ pub struct RenderArgs {
 
 /// Runs `fogray render`: the paths written, one per line.
 ///
-/// Errors: a model file that is not a fogray dense-grid model, a bad transforms file (naming
+/// Errors: a model file that is not a fogray dense- or sparse-grid model, a bad transforms file (naming
 /// it), two frames of one name, a file that cannot be written.
 pub fn run(args: &RenderArgs) -> Result<String, CliError> {
-    let info = read_info(&args.model)?;
-    let sparse = match info.kind.as_str() {
-        k if k == DenseGrid::<f32>::KIND => false,
-        k if k == SparseGrid::<f32>::KIND => true,
-        _ => {
-            return Err(CliError::Option(format!(
-                "{}: a {:?} model, which fogray render does not know",
-                args.model.display(),
-                info.kind
-            )))
-        }
-    };
+    let saved = SavedModel::open(&args.model, "fogray render")?;
     let cameras = load_cameras(&args.cameras, args.downscale)?;
     let mut names = std::collections::BTreeSet::new();
     if let Some(twice) = cameras.iter().find(|c| !names.insert(c.name.as_str())) {
@@ -62,55 +50,66 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
             twice.name
         )));
     }
-    let background = match info.extra.get("background") {
+    let background = match saved.info.extra.get("background") {
         Some(text) => serde_json::from_str::<[f64; 3]>(text)
             .map_err(|e| CliError::Option(format!("{}: its background {text:?}: {e}", args.model.display())))?,
         None => [1.0; 3],
     };
     std::fs::create_dir_all(&args.out).map_err(CliError::file("create", &args.out))?;
-    match (info.settings.precision, sparse) {
-        (Precision::F32, false) => render_all::<f32, DenseGrid<f32>>(args, &cameras, background),
-        (Precision::F64, false) => render_all::<f64, DenseGrid<f64>>(args, &cameras, background),
-        (Precision::F32, true) => render_all::<f32, SparseGrid<f32>>(args, &cameras, background),
-        (Precision::F64, true) => render_all::<f64, SparseGrid<f64>>(args, &cameras, background),
-    }
+    saved.with(RenderAll {
+        args,
+        cameras: &cameras,
+        background,
+    })
 }
 
-fn render_all<F: Float, M: RadianceField<F>>(
-    args: &RenderArgs,
-    cameras: &[NamedCamera],
+/// Every camera's render of the model.
+struct RenderAll<'a> {
+    args: &'a RenderArgs,
+    cameras: &'a [NamedCamera],
     background: [f64; 3],
-) -> Result<String, CliError> {
-    let saved = checkpoint::load::<F, M>(&args.model)?;
-    let occupancy = saved.occupancy_grid()?;
-    let options = RenderOptions {
-        background,
-        method: Method::Fused,
-        depth: false,
-    };
-    let bar = indicatif::ProgressBar::new(cameras.len() as u64);
-    if let Ok(style) = indicatif::ProgressStyle::with_template("render [{bar:40}] {pos}/{len} ({elapsed})") {
-        bar.set_style(style.progress_chars("=> "));
+}
+
+impl WithModel for RenderAll<'_> {
+    type Output = String;
+
+    fn run<F: Float, M: RadianceField<F>>(self, path: &Path) -> Result<String, CliError> {
+        let RenderAll {
+            args,
+            cameras,
+            background,
+        } = self;
+        let saved = checkpoint::load::<F, M>(path)?;
+        let occupancy = saved.occupancy_grid()?;
+        let options = RenderOptions {
+            background,
+            method: Method::Fused,
+            depth: false,
+        };
+        let bar = indicatif::ProgressBar::new(cameras.len() as u64);
+        if let Ok(style) = indicatif::ProgressStyle::with_template("render [{bar:40}] {pos}/{len} ({elapsed})") {
+            bar.set_style(style.progress_chars("=> "));
+        }
+        let mut written = Vec::new();
+        for c in cameras {
+            let k = c.camera.intrinsics();
+            let (origins, directions) = camera_rays(&c.camera);
+            let picture = render_picture(
+                &saved.start.model,
+                occupancy.as_ref(),
+                &origins,
+                &directions,
+                [k.height, k.width],
+                &options,
+            )?;
+            let path = args.out.join(format!("{}.png", c.name));
+            write_whole(&path, &picture.color)?;
+            written.push(path.display().to_string());
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+        Ok(written.join("\n"))
     }
-    let mut written = Vec::new();
-    for c in cameras {
-        let k = c.camera.intrinsics();
-        let (origins, directions) = camera_rays(&c.camera);
-        let picture = render_picture(
-            &saved.start.model,
-            occupancy.as_ref(),
-            &origins,
-            &directions,
-            [k.height, k.width],
-            &options,
-        )?;
-        let path = args.out.join(format!("{}.png", c.name));
-        write_whole(&path, &picture.color)?;
-        written.push(path.display().to_string());
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    Ok(written.join("\n"))
 }
 
 /// Writes the PNG beside its final name and renames it, so that an interrupted render leaves

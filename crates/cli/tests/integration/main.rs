@@ -4,5 +4,6 @@
 mod bad_files;
 mod cli;
 mod common;
+mod export;
 mod fit_render;
 mod lego;

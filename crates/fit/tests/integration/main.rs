@@ -7,6 +7,7 @@ mod background;
 mod checkpoint;
 mod common;
 mod dense;
+mod mesh;
 mod resume;
 mod sparse;
 mod train;
