@@ -10,7 +10,7 @@ use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use fogray_cli::error::CliError;
 use fogray_cli::evaluate::Method;
-use fogray_cli::{bench, composite, fit, gradcheck, grid_bench, heap, input, markdown, render, tape_cost};
+use fogray_cli::{bench, composite, export, fit, gradcheck, grid_bench, heap, input, markdown, render, tape_cost};
 
 /// Counts allocated bytes, so that `fogray bench` can report each method's peak extra memory.
 /// (A counter that forwards `alloc_zeroed` and `realloc` to the system allocator: one that
@@ -69,6 +69,10 @@ enum Command {
     /// file, or from N cameras orbiting its scene box: DIR/<name>.png, 8-bit RGB, over the
     /// model's background; with --depth its depth maps, with --gif (an orbit) an animated GIF.
     Render(render::RenderArgs),
+    /// Export a model saved by `fogray fit --save-model` for other tools: --mesh OUT.ply, the
+    /// surface where its density crosses a level (marching cubes), binary PLY with vertex
+    /// colours, which MeshLab, Blender and trimesh open.
+    Export(export::ExportArgs),
     /// Composite packed rays given as JSON; print colour, opacity, depth, weights, transmittance
     /// and, with grad_color, the gradients, as JSON.
     #[command(long_about = COMPOSITE_HELP)]
@@ -379,6 +383,7 @@ fn main() -> ExitCode {
             Err(e) => ("fit", Err(e)),
         },
         Command::Render(args) => ("render", render::run(args)),
+        Command::Export(args) => ("export", export::run(args)),
         Command::Bench {
             op,
             quick,

@@ -5,21 +5,20 @@
 use std::path::{Path, PathBuf};
 
 use fogray_data::load_cameras;
-use fogray_fit::checkpoint::{self, read_info, ModelInfo};
+use fogray_fit::checkpoint::{self, ModelInfo};
 use fogray_fit::dataset::camera_rays;
-use fogray_fit::dense::DenseGrid;
 use fogray_fit::depth::write_depth_png;
 use fogray_fit::images::write_png;
 use fogray_fit::model::RadianceField;
 use fogray_fit::render::{render_picture, RenderOptions};
-use fogray_fit::settings::{Method, Precision};
-use fogray_fit::sparse::SparseGrid;
+use fogray_fit::settings::Method;
 use fogray_ops::PinholeCamera;
 use fogray_tape::Float;
 
 use crate::animation::GifWriter;
 use crate::error::CliError;
 use crate::framing::{self, ImageSize};
+use crate::saved::{SavedModel, WithModel};
 
 /// The flags of `fogray render`.
 #[derive(Debug, Clone, clap::Args)]
@@ -120,19 +119,9 @@ struct View {
 /// be written.
 pub fn run(args: &RenderArgs) -> Result<String, CliError> {
     framing::check_flags(args)?;
-    let info = read_info(&args.model)?;
-    let sparse = match info.kind.as_str() {
-        k if k == DenseGrid::<f32>::KIND => false,
-        k if k == SparseGrid::<f32>::KIND => true,
-        _ => {
-            return Err(CliError::Option(format!(
-                "{}: a {:?} model, which fogray render does not know",
-                args.model.display(),
-                info.kind
-            )))
-        }
-    };
-    let views = views(args, &info)?;
+    let saved = SavedModel::open(&args.model, "fogray render")?;
+    let info = &saved.info;
+    let views = views(args, info)?;
     // Only a transforms file's names can clash (frame `a-depth` beside frame `a`'s depth map
     // too); an orbit's are numbered.
     if let Some(cameras) = &args.cameras {
@@ -162,13 +151,12 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
         _ => None,
     };
     std::fs::create_dir_all(&args.out).map_err(CliError::file("create", &args.out))?;
-    let output = Output { args, background, gif };
-    match (info.settings.precision, sparse) {
-        (Precision::F32, false) => render_all::<f32, DenseGrid<f32>>(output, &views),
-        (Precision::F64, false) => render_all::<f64, DenseGrid<f64>>(output, &views),
-        (Precision::F32, true) => render_all::<f32, SparseGrid<f32>>(output, &views),
-        (Precision::F64, true) => render_all::<f64, SparseGrid<f64>>(output, &views),
-    }
+    saved.with(Output {
+        args,
+        background,
+        gif,
+        views: &views,
+    })
 }
 
 /// The views the flags ask for: every frame of `--cameras`, or the orbit's.
@@ -204,16 +192,25 @@ fn views(args: &RenderArgs, info: &ModelInfo) -> Result<Vec<View>, CliError> {
         .collect())
 }
 
-/// Where the frames go.
+/// The views to render and where their frames go.
 struct Output<'a> {
     args: &'a RenderArgs,
     background: [f64; 3],
     gif: Option<GifWriter>,
+    views: &'a [View],
 }
 
-fn render_all<F: Float, M: RadianceField<F>>(mut output: Output<'_>, views: &[View]) -> Result<String, CliError> {
-    let args = output.args;
-    let saved = checkpoint::load::<F, M>(&args.model)?;
+impl WithModel for Output<'_> {
+    type Output = String;
+
+    fn run<F: Float, M: RadianceField<F>>(self, path: &Path) -> Result<String, CliError> {
+        render_all::<F, M>(self, path)
+    }
+}
+
+fn render_all<F: Float, M: RadianceField<F>>(mut output: Output<'_>, model: &Path) -> Result<String, CliError> {
+    let (args, views) = (output.args, output.views);
+    let saved = checkpoint::load::<F, M>(model)?;
     let occupancy = saved.occupancy_grid()?;
     let options = RenderOptions {
         background: output.background,

@@ -151,6 +151,12 @@ impl<F: Float> DenseGrid<F> {
         self.grid
     }
 
+    /// The raw values `[m, C]` at `positions` (`[m, 3]`), looked up without a tape.
+    fn raw_values(&self, positions: ArrayView2<'_, F>) -> Result<ndarray::ArrayD<F>, FitError> {
+        let grid = self.params.get(self.grid)?;
+        Ok(self.field.evaluate(&grid, &positions.into_dyn())?)
+    }
+
     fn lookup(&self, tape: &mut Tape<F>, grid: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
         match method {
             Method::Fused => self.field.apply(tape, grid, positions),
@@ -280,8 +286,11 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
 
     /// A position outside the box reads raw 0 (density `softplus(shift)`).
     fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError> {
-        let grid = self.params.get(self.grid)?;
-        let raw = self.field.evaluate(&grid, &positions.into_dyn())?;
-        self.shading.densities(raw)
+        self.shading.densities(self.raw_values(positions)?)
+    }
+
+    /// A position outside the box reads raw 0 (grey).
+    fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
+        self.shading.base_colors(self.raw_values(positions)?)
     }
 }

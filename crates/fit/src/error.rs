@@ -7,6 +7,7 @@ use fogray_tape::TapeError;
 use thiserror::Error;
 
 use crate::images::ImageError;
+use crate::mesh::MeshError;
 
 /// Why a fit, a render or a model could not run.
 #[non_exhaustive]
@@ -33,6 +34,9 @@ pub enum FitError {
     /// From the parameter store or the optimiser.
     #[error(transparent)]
     Param(#[from] ParamError),
+    /// From a mesh's extraction (a level or resolution it cannot take).
+    #[error(transparent)]
+    Mesh(#[from] MeshError),
     /// From an image (PSNR, PNG).
     #[error(transparent)]
     Image(#[from] ImageError),

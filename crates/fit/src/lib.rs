@@ -13,6 +13,7 @@
 //! - [`render`]: any rays or views rendered in chunks without a tape's record (colour,
 //!   opacity, depth);
 //! - [`checkpoint`]: a fit to a safetensors file and back; [`metrics`]: PSNR;
+//!   [`mesh`]: a model's surface as a coloured triangle mesh (marching cubes, PLY);
 //!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves.
 //!
 //! A user's whole fit: cameras and pictures in, a fitted model, its test PSNR, a checkpoint
@@ -70,6 +71,7 @@ pub mod depth;
 pub mod error;
 pub mod images;
 pub mod interrupt;
+pub mod mesh;
 pub mod metrics;
 pub mod model;
 pub mod plots;

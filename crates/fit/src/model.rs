@@ -144,4 +144,13 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     ///
     /// Errors: from the ops, or a NaN density (a diverged fit).
     fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError>;
+
+    /// The view-independent colour `[m, 3]` at `positions` (`[m, 3]`), without a tape: for a
+    /// mesh's vertex colours, which no view direction goes with (with spherical harmonics,
+    /// the degree-0 term through the colour activation: [`Shading::base_colors`]).
+    ///
+    /// Errors: from the ops, or a NaN raw value (a diverged fit).
+    ///
+    /// [`Shading::base_colors`]: crate::shading::Shading::base_colors
+    fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError>;
 }

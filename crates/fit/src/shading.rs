@@ -106,6 +106,42 @@ impl Shading {
         Ok(self.activation.density(raw.view())?)
     }
 
+    /// The view-independent colour `[m, 3]` of raw values `raw` (`[m, C]`, as a grid field's
+    /// lookup returns them), for a mesh's vertex colours: with spherical harmonics, the
+    /// degree-0 term alone through the colour activation, `sigmoid(Y_0 k_c0)` (the colour of
+    /// the mean over all directions of the activation's input: the higher bands average to 0
+    /// over the sphere); otherwise the view-independent colour itself, `sigmoid(raw_1..4)`.
+    /// Each value is computed by the render's own ops, so it rounds as a render does.
+    ///
+    /// Errors: raw values that are not 2-d or have too few channels, a NaN value.
+    pub fn base_colors<F: Float>(&self, raw: ndarray::ArrayD<F>) -> Result<Array2<F>, FitError> {
+        let raw = raw
+            .into_dimensionality::<ndarray::Ix2>()
+            .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
+        if raw.ncols() != self.channels() {
+            return Err(FitError::Config(format!(
+                "raw values: {} channels, the shading's are {}",
+                raw.ncols(),
+                self.channels()
+            )));
+        }
+        match &self.sh {
+            None => Ok(self.activation.evaluate(raw.view())?.color),
+            Some(sh) => {
+                // Channel c's degree-0 coefficient is column 1 + c B; degree 0's one basis
+                // function is a constant, so any unit direction gives the same colour.
+                let b = sh.basis_count();
+                let dc = Array2::from_shape_fn((raw.nrows(), 3), |(i, c)| raw[[i, 1 + c * b]]);
+                let direction =
+                    Array2::from_shape_fn((raw.nrows(), 3), |(_, a)| F::lit(if a == 2 { 1.0 } else { 0.0 }));
+                let constant = ShColor::new(0).map_err(|e| FitError::Config(format!("degree 0: {e}")))?;
+                constant
+                    .evaluate(dc.view(), direction.view())
+                    .map_err(|e| FitError::Config(format!("base colour: {e}")))
+            }
+        }
+    }
+
     /// Channels of a raw value: the density, then the colour's (3, or the spherical
     /// harmonics' coefficients).
     pub fn channels(&self) -> usize {

@@ -169,6 +169,12 @@ impl<F: Float> SparseGrid<F> {
         Ok(grown)
     }
 
+    /// The raw values `[m, C]` at `positions` (`[m, 3]`), looked up without a tape.
+    fn raw_values(&self, positions: ArrayView2<'_, F>) -> Result<ndarray::ArrayD<F>, FitError> {
+        let data = self.params.get(self.data)?;
+        Ok(self.field.evaluate(&data, &positions.into_dyn())?)
+    }
+
     fn lookup(&self, tape: &mut Tape<F>, data: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
         match method {
             Method::Fused => self.field.apply(tape, data, positions),
@@ -402,8 +408,12 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     /// A position outside the box or among absent nodes reads raw 0 (density
     /// `softplus(shift)`).
     fn densities(&self, positions: ArrayView2<'_, F>) -> Result<Array1<F>, FitError> {
-        let data = self.params.get(self.data)?;
-        let raw = self.field.evaluate(&data, &positions.into_dyn())?;
-        self.shading.densities(raw)
+        self.shading.densities(self.raw_values(positions)?)
+    }
+
+    /// As [`RadianceField::densities`]: a position outside the box or among absent nodes reads
+    /// raw 0 (grey).
+    fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
+        self.shading.base_colors(self.raw_values(positions)?)
     }
 }

@@ -8,6 +8,7 @@ mod checkpoint;
 mod common;
 mod dense;
 mod depth;
+mod mesh;
 mod metrics;
 mod resume;
 mod sparse;

@@ -1,0 +1,84 @@
+//! A model file that a command reads (`fogray render`, `fogray export`): its metadata, read
+//! first, and the dispatch from its kind and precision to the model type that loads it, so
+//! that each command writes its work once, generic over the model.
+
+use std::path::{Path, PathBuf};
+
+use fogray_fit::checkpoint::{read_info, ModelInfo};
+use fogray_fit::dense::DenseGrid;
+use fogray_fit::model::RadianceField;
+use fogray_fit::settings::Precision;
+use fogray_fit::sparse::SparseGrid;
+use fogray_tape::Float;
+
+use crate::error::CliError;
+
+/// The kinds of model the command line reads.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Kind {
+    /// [`DenseGrid`].
+    Dense,
+    /// [`SparseGrid`].
+    Sparse,
+}
+
+/// What a command does with a model, once its type is known.
+pub trait WithModel {
+    /// What the work gives.
+    type Output;
+    /// Does the work with the model file `path`, whose model is an `M` in `F` (load it with
+    /// [`fogray_fit::checkpoint::load`]).
+    ///
+    /// Errors: the command's.
+    fn run<F: Float, M: RadianceField<F>>(self, path: &Path) -> Result<Self::Output, CliError>;
+}
+
+/// A model file whose metadata has been read and whose kind is known.
+#[derive(Debug, Clone)]
+pub struct SavedModel {
+    /// The file.
+    pub path: PathBuf,
+    /// Its metadata (settings, nodes, the application's entries).
+    pub info: ModelInfo,
+    /// Its kind.
+    pub kind: Kind,
+}
+
+impl SavedModel {
+    /// Reads the metadata of `path` for `command` (named in the refusal of an unknown kind).
+    ///
+    /// Errors: a file that cannot be read or is not a fogray model, a model of a kind the
+    /// command line does not know.
+    pub fn open(path: &Path, command: &str) -> Result<Self, CliError> {
+        let info = read_info(path)?;
+        let kind = match info.kind.as_str() {
+            k if k == DenseGrid::<f32>::KIND => Kind::Dense,
+            k if k == SparseGrid::<f32>::KIND => Kind::Sparse,
+            _ => {
+                return Err(CliError::Option(format!(
+                    "{}: a {:?} model, which {command} does not know",
+                    path.display(),
+                    info.kind
+                )))
+            }
+        };
+        Ok(SavedModel {
+            path: path.to_path_buf(),
+            info,
+            kind,
+        })
+    }
+
+    /// Runs `work` with the model type of the file's kind and precision.
+    ///
+    /// Errors: `work`'s.
+    pub fn with<W: WithModel>(&self, work: W) -> Result<W::Output, CliError> {
+        let path = &self.path;
+        match (self.info.settings.precision, self.kind) {
+            (Precision::F32, Kind::Dense) => work.run::<f32, DenseGrid<f32>>(path),
+            (Precision::F64, Kind::Dense) => work.run::<f64, DenseGrid<f64>>(path),
+            (Precision::F32, Kind::Sparse) => work.run::<f32, SparseGrid<f32>>(path),
+            (Precision::F64, Kind::Sparse) => work.run::<f64, SparseGrid<f64>>(path),
+        }
+    }
+}
