@@ -25,19 +25,9 @@ use crate::images::{check_same, ImageError};
 /// Errors: [`ImageError::Empty`] for no images, [`ImageError::Shape`] if the counts or any
 /// pair's shapes differ.
 pub fn psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
-    if renders.is_empty() {
-        return Err(ImageError::Empty);
-    }
-    if renders.len() != exacts.len() {
-        return Err(ImageError::Shape {
-            what: "number of renders".into(),
-            expected: vec![exacts.len()],
-            got: vec![renders.len()],
-        });
-    }
+    check_pairs(renders, exacts)?;
     let (mut sum, mut count) = (0.0, 0usize);
-    for (i, (r, e)) in renders.iter().zip(exacts).enumerate() {
-        check_same(&format!("render {i}"), r, e)?;
+    for (r, e) in renders.iter().zip(exacts) {
         sum += Zip::from(r)
             .and(e)
             .fold(0.0, |acc, r, e| acc + (r.clamp(0.0, 1.0) - e).powi(2));
@@ -64,4 +54,23 @@ pub fn haze_fraction(opacities: &[ndarray::ArrayView2<'_, f64>], lo: f64, hi: f6
         .map(|o| o.iter().filter(|&&a| lo < a && a < hi).count())
         .sum();
     hazy as f64 / pixels as f64
+}
+
+/// Errors: [`ImageError::Empty`] for no renders, [`ImageError::Shape`] if the counts or any
+/// pair's shapes differ.
+fn check_pairs(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<(), ImageError> {
+    if renders.is_empty() {
+        return Err(ImageError::Empty);
+    }
+    if renders.len() != exacts.len() {
+        return Err(ImageError::Shape {
+            what: "number of renders".into(),
+            expected: vec![exacts.len()],
+            got: vec![renders.len()],
+        });
+    }
+    for (i, (r, e)) in renders.iter().zip(exacts).enumerate() {
+        check_same(&format!("render {i}"), r, e)?;
+    }
+    Ok(())
 }

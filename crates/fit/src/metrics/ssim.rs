@@ -22,7 +22,7 @@
 use ndarray::{s, Array2, ArrayView2, ArrayView3, Axis};
 use rayon::prelude::*;
 
-use crate::images::{check_same, ImageError};
+use crate::images::ImageError;
 
 /// Taps of the Gaussian window (its radius is 5).
 pub const SSIM_WINDOW: usize = 11;
@@ -40,18 +40,8 @@ const K2: f64 = 0.03;
 /// Errors: [`ImageError::Empty`] for no images, [`ImageError::Shape`] if the counts or any
 /// pair's shapes differ or an image is smaller than the window (11 x 11).
 pub fn ssim(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
-    if renders.is_empty() {
-        return Err(ImageError::Empty);
-    }
-    if renders.len() != exacts.len() {
-        return Err(ImageError::Shape {
-            what: "number of renders".into(),
-            expected: vec![exacts.len()],
-            got: vec![renders.len()],
-        });
-    }
-    for (i, (r, e)) in renders.iter().zip(exacts).enumerate() {
-        check_same(&format!("render {i}"), r, e)?;
+    super::check_pairs(renders, exacts)?;
+    for (i, r) in renders.iter().enumerate() {
         let (h, w, _) = r.dim();
         if h < SSIM_WINDOW || w < SSIM_WINDOW {
             return Err(ImageError::Shape {
