@@ -43,9 +43,11 @@ pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitErr
     }
     // The final stage's sample step (half its node spacing along the shortest side), as the
     // dense grid's: `1 / (grid - 1)` for [-1, 1]^3.
-    let (lo, hi) = (bounds.min(), bounds.max());
-    let side = (0..3).map(|a| hi[a] - lo[a]).fold(f64::INFINITY, f64::min);
-    let final_step = side / (2 * (grid - 1)) as f64;
+    let scene_box = crate::settings::SceneBox {
+        min: bounds.min(),
+        max: bounds.max(),
+    };
+    let final_step = scene_box.half_node_spacing(grid);
     Ok(OccupancyGrid::new(
         bounds,
         (grid - 1).min(OCCUPANCY_CELLS_MAX),

@@ -139,6 +139,13 @@ impl SceneBox {
         }
     }
 
+    /// Half the spacing of a lattice of `nodes` per axis along the box's shortest side: the
+    /// sample step that resolves a grid over the box (`1 / (nodes - 1)` for `[-1, 1]^3`).
+    pub fn half_node_spacing(&self, nodes: usize) -> f64 {
+        let side = (0..3).map(|a| self.max[a] - self.min[a]).fold(f64::INFINITY, f64::min);
+        side / (2 * (nodes - 1)) as f64
+    }
+
     /// Errors: [`FitError::Config`] for a bound that is not finite or an axis whose minimum is
     /// not below its maximum.
     pub fn check(&self) -> Result<(), FitError> {

@@ -340,9 +340,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
 
     /// Half the lattice spacing along the box's shortest side, as the dense grid's.
     fn sample_step(&self) -> f64 {
-        let b = self.scene_box();
-        let side = (0..3).map(|a| b.max[a] - b.min[a]).fold(f64::INFINITY, f64::min);
-        side / (2 * (self.nodes - 1)) as f64
+        self.scene_box().half_node_spacing(self.nodes)
     }
 
     fn params(&self) -> &Params<F> {
