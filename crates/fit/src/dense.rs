@@ -34,6 +34,7 @@ use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, IxDyn};
 
+use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
@@ -50,6 +51,8 @@ pub const GRID: &str = "grid";
 pub struct DenseGrid<F: Float> {
     params: Params<F>,
     grid: ParamId,
+    /// The learned background's coefficients, with a shading that has one.
+    environment: Option<ParamId>,
     field: GridField,
     shading: Shading,
     prior: TotalVariation,
@@ -114,11 +117,13 @@ impl<F: Float> DenseGrid<F> {
         )?;
         let mut params = Params::new();
         let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, channels)))?;
+        let environment = add_environment(&mut params, &shading)?;
         let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
         Ok(DenseGrid {
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
             params,
             grid,
+            environment,
             field,
             shading,
             prior,
@@ -169,14 +174,8 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     const KIND: &'static str = "dense-grid";
 
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
-        DenseGrid::view_dependent(
-            settings.model_box(),
-            nodes,
-            settings.shift,
-            settings.smoothness,
-            settings.sh_degree,
-        )?
-        .with_distortion(settings.distortion)
+        DenseGrid::with_shading(settings.model_box(), nodes, Shading::of(settings)?, settings.smoothness)?
+            .with_distortion(settings.distortion)
     }
 
     /// Each new node takes the trilinear interpolation of this grid's raw values at its
@@ -202,6 +201,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
             .into_shape_with_order(IxDyn(&[nodes, nodes, nodes, channels]))
             .map_err(|e| FitError::Config(format!("resampled grid: {e}")))?;
         grown.params.get_mut(grown.grid)?.assign(&raw);
+        copy_environment(&self.params, self.environment, &mut grown.params, grown.environment)?;
         Ok(grown)
     }
 
@@ -237,12 +237,17 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
+        let environment = self
+            .environment
+            .map(|id| tape.param_from(&self.params, id))
+            .transpose()?;
         let background = TrainingBackground::Shared(background);
         let shaded = self.shading.composite_inputs(
             tape,
             rays,
             samples,
             background,
+            environment,
             method,
             wanted.depth,
             0.0,
@@ -264,11 +269,16 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
+        let environment = self
+            .environment
+            .map(|id| tape.param_from(&self.params, id))
+            .transpose()?;
         let shaded = self.shading.composite_inputs(
             tape,
             rays,
             samples,
             background,
+            environment,
             method,
             false,
             self.distortion,

@@ -68,6 +68,7 @@ pub mod checkpoint;
 pub mod dataset;
 pub mod dense;
 pub mod depth;
+pub mod environment;
 pub mod error;
 pub mod images;
 pub mod interrupt;

@@ -2,7 +2,7 @@
 //! cells of an occupancy grid (its midpoint sampler).
 
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{Jitter, OccupancyConfig, OccupancyGrid, PackedSamples, Spacing, Uniform};
+use fogray_ops::sample::{Jitter, OccupancyConfig, OccupancyGrid, PackedSamples, Refresh, Spacing, Uniform};
 use fogray_tape::Float;
 
 use crate::error::FitError;
@@ -25,6 +25,14 @@ pub fn sample_rays<F: Float>(
     })
 }
 
+/// When a fit refreshes its occupancy grid: from step 16, every 16 steps. Until the first
+/// refresh every cell is occupied, and a step of the coarsest stage then samples the whole box
+/// (several times the samples of a pruned step), so a warm-up as long as the occupancy grid's
+/// default (64 steps) costs a minute's fit a good part of its budget. By step 16 Adam has
+/// already raised the density where the views put matter, and on lego a fit first refreshed
+/// there ends where one first refreshed at step 64 does, step for step.
+pub const FIT_REFRESH: Refresh = Refresh { warmup: 16, every: 16 };
+
 /// Cells per axis of a fit's occupancy grid at most: past it a cell spans several voxels, so
 /// that its refresh (a density per cell) costs what a 128^3 grid's does however fine the
 /// model.
@@ -33,8 +41,8 @@ pub const OCCUPANCY_CELLS_MAX: usize = 128;
 /// An occupancy grid as a fit of `grid` nodes per axis over `bounds` keeps one: one cell per
 /// voxel (up to [`OCCUPANCY_CELLS_MAX`] per axis), a cell occupied while a step of half the final voxel through it would stop at least
 /// 1 % of the light (the final grid's half voxel sets the threshold, so it means the same at
-/// every growth stage). Every cell is occupied until its first refresh, which its default
-/// [`Refresh`](fogray_ops::sample::Refresh) policy times.
+/// every growth stage). Every cell is occupied until its first refresh, which
+/// [`FIT_REFRESH`] times.
 ///
 /// Errors: fewer than 2 nodes.
 pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitError> {
@@ -51,6 +59,6 @@ pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitErr
     Ok(OccupancyGrid::new(
         bounds,
         (grid - 1).min(OCCUPANCY_CELLS_MAX),
-        OccupancyConfig::opacity(final_step, 0.01)?,
+        OccupancyConfig::opacity(final_step, 0.01)?.with_refresh(FIT_REFRESH)?,
     )?)
 }

@@ -285,6 +285,12 @@ pub struct FitSettings {
     /// The model: a dense grid, or a sparse one pruned to the occupied space at each growth.
     #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.model))]
     pub model: ModelKind,
+    /// For captures without alpha (photographs whose background lies beyond the box): learn
+    /// the background, a colour that depends on the view direction (spherical harmonics of
+    /// degree 2), in place of the dataset's fixed background colour; renders use it too.
+    /// Views with alpha are trained over random colours instead (--random-background).
+    #[cfg_attr(feature = "cli", arg(long))]
+    pub learn_background: bool,
 }
 
 impl FitSettings {
@@ -310,6 +316,7 @@ impl FitSettings {
         scene_box: None,
         model: ModelKind::Dense,
         distortion: 0.0,
+        learn_background: false,
     };
 
     /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].

@@ -11,9 +11,10 @@ use fogray_ops::{twins, Background, Composite, CompositeInputs, CompositeVars, S
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2};
 
+use crate::environment::Environment;
 use crate::error::FitError;
 use crate::model::{TrainingBackground, TrainingLoss};
-use crate::settings::Method;
+use crate::settings::{FitSettings, Method};
 
 /// Channels of a view-independent raw value: density, then red, green, blue.
 pub const VIEW_INDEPENDENT_CHANNELS: usize = 4;
@@ -25,6 +26,9 @@ pub struct Shading {
     pub activation: DensityColor,
     /// View-dependent colour: channels `1..` of a raw value are its coefficients.
     pub sh: Option<ShColor>,
+    /// A learned background in place of the dataset's fixed one (its coefficients are the
+    /// model's [`ENVIRONMENT`](crate::environment::ENVIRONMENT) parameter).
+    pub environment: Option<Environment>,
 }
 
 /// What [`Shading::composite_inputs`] records.
@@ -93,6 +97,18 @@ impl Shading {
         Ok(Shading {
             activation: DensityColor::new(shift)?,
             sh,
+            environment: None,
+        })
+    }
+
+    /// The shading `settings` name: [`Shading::new`] of their shift and degree, with a learned
+    /// background if they ask for one.
+    ///
+    /// Errors: as [`Shading::new`].
+    pub fn of(settings: &FitSettings) -> Result<Self, FitError> {
+        Ok(Shading {
+            environment: settings.learn_background.then(Environment::new),
+            ..Shading::new(settings.shift, settings.sh_degree)?
         })
     }
 
@@ -158,6 +174,10 @@ impl Shading {
     /// `rays`, the activation and the colour, and returns the composite over the samples' rays
     /// (over `background`, shared or one per ray; with the depth if `depth`) with its inputs,
     /// and, if `distortion` is above 0, the distortion loss of the samples' weights times it.
+    ///
+    /// With a learned background, `environment` (its coefficients on the tape) stands in for a
+    /// shared `background`; a per-ray background (random colours against pictures with alpha)
+    /// is still composited over as given.
     #[allow(clippy::too_many_arguments)] // one call site each in the grid models' render and loss
     pub fn composite_inputs<F: Float>(
         &self,
@@ -165,6 +185,7 @@ impl Shading {
         rays: &RayBatch<F>,
         samples: PackedSamples<F>,
         background: TrainingBackground<F>,
+        environment: Option<Var>,
         method: Method,
         depth: bool,
         distortion: f64,
@@ -198,9 +219,13 @@ impl Shading {
             }
             _ => activated.color,
         };
-        let (background, kind) = match background {
-            TrainingBackground::Shared(b) => (tape.constant(Array1::from_iter(b.map(F::lit))), Background::Shared),
-            TrainingBackground::PerRay(b) => (tape.constant(b), Background::PerRay),
+        let (background, kind) = match (background, self.environment.zip(environment)) {
+            (TrainingBackground::Shared(_), Some((learned, coefficients))) => (
+                learned.record(tape, coefficients, rays.directions())?,
+                Background::PerRay,
+            ),
+            (TrainingBackground::Shared(b), _) => (tape.constant(Array1::from_iter(b.map(F::lit))), Background::Shared),
+            (TrainingBackground::PerRay(b), _) => (tape.constant(b), Background::PerRay),
         };
         let inputs = CompositeInputs {
             sigma: activated.sigma,

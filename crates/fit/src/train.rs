@@ -176,7 +176,8 @@ pub fn fit<F: Float, M: RadianceField<F>>(
 /// The occupancy grid is part of the state; a start without one begins with every cell
 /// occupied until the next refresh.
 ///
-/// Errors: a setting out of range ([`FitError::Config`]), a start whose model is not a growth
+/// Errors: a setting out of range or a learned background for views with alpha
+/// ([`FitError::Config`]), a start whose model is not a growth
 /// stage of these settings, or an error of the ops.
 pub fn fit_from<F: Float, M: RadianceField<F>>(
     data: &Dataset,
@@ -186,6 +187,15 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
     progress: &mut dyn FnMut(Progress),
 ) -> Result<FitResult<F, M>, FitError> {
     settings.check()?;
+    if settings.learn_background && data.train.iter().any(|v| v.alpha.is_some()) {
+        // Its pictures say where the background shows; a learned one would only see the
+        // colour they were composited over.
+        return Err(FitError::Config(
+            "--learn-background is for views without alpha: these have alpha (their training rays are \
+             composited over random colours instead, --random-background)"
+                .into(),
+        ));
+    }
     let stages = growth_stages(settings);
     let (mut model, resumed) = match start {
         Some(s) => (s.model, Some(s.training)),

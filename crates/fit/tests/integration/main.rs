@@ -8,6 +8,7 @@ mod checkpoint;
 mod common;
 mod dense;
 mod depth;
+mod environment;
 mod mesh;
 mod metrics;
 mod resume;

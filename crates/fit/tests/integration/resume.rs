@@ -9,8 +9,8 @@ use fogray_fit::checkpoint::{load, save};
 use fogray_fit::dataset::Dataset;
 use fogray_fit::dense::DenseGrid;
 use fogray_fit::model::RadianceField;
+use fogray_fit::sampling::FIT_REFRESH;
 use fogray_fit::settings::{Budget, FitSettings, Precision, Sampling};
-use fogray_ops::sample::Refresh;
 use fogray_tape::Float;
 
 use crate::common::{alpha_ball_dataset, ball_dataset, grid_bits, image_bits, run, temp};
@@ -112,6 +112,34 @@ fn k_steps_saved_and_continued_equal_2k_steps_bitwise() {
 }
 
 #[test]
+fn a_fit_with_a_learned_background_saved_and_continued_equals_the_whole_bitwise() {
+    // The background's coefficients and their Adam moments are in the file, and it grows
+    // with the grid (3, 5 then 10 nodes): the renders compared below are over it.
+    let learned = FitSettings {
+        grid: 10,
+        batch: 128,
+        lr: 0.2,
+        lr_final: 0.02,
+        sampling: Sampling::Uniform,
+        learn_background: true,
+        ..FitSettings::default()
+    };
+    split_equals_whole::<f32>(learned, 20, 4, true, "split-environment.safetensors");
+    let file = temp("environment.safetensors");
+    let first = run::<f32>(&data(), &learned.with_budget(Budget::Steps(5)), None, None);
+    save(&file, &first.model, &first.training, &learned, &BTreeMap::new()).unwrap();
+    let back = load::<f32, DenseGrid<f32>>(&file).unwrap().start.model;
+    let id = |m: &DenseGrid<f32>| m.params().id(fogray_fit::environment::ENVIRONMENT).unwrap();
+    let (saved, read) = (
+        first.model.params().get(id(&first.model)).unwrap(),
+        back.params().get(id(&back)).unwrap(),
+    );
+    assert!(saved.iter().any(|&v| v != 0.0), "the fit moved the background");
+    assert_eq!(saved, read);
+    let _ = std::fs::remove_file(&file);
+}
+
+#[test]
 fn a_fit_over_random_backgrounds_saved_and_continued_equals_the_whole_bitwise() {
     // Pictures with alpha: each step draws its rows, then a colour per ray, from the one
     // stream; the file's position in it continues both.
@@ -161,8 +189,8 @@ fn a_fit_over_random_backgrounds_saved_and_continued_equals_the_whole_bitwise() 
 
 #[test]
 fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
-    // The occupancy grid is first refreshed at step 64, then every 16 steps: saved at step 72
-    // (one refresh in), continued through the refreshes at 80 and 96.
+    // The fit's occupancy grid is first refreshed at step 16, then every 16 steps: saved at
+    // step 24 (one refresh in), continued through the refreshes at 32 and 48.
     let occupancy = FitSettings {
         grid: 6,
         batch: 64,
@@ -172,13 +200,13 @@ fn an_occupancy_fit_saved_and_continued_equals_the_whole_bitwise() {
         sampling: Sampling::Occupancy,
         ..FitSettings::default()
     };
-    let refresh = Refresh::default();
-    assert!(refresh.warmup < 72 && 72 < refresh.warmup + 2 * refresh.every);
-    split_equals_whole::<f32>(occupancy, 100, 72, false, "split-occupancy.safetensors");
+    let refresh = FIT_REFRESH;
+    assert!(refresh.warmup < 24 && 24 < refresh.warmup + refresh.every);
+    split_equals_whole::<f32>(occupancy, 52, 24, false, "split-occupancy.safetensors");
     // The grid in the file is the one the fit had, and it is not the fresh grid a file
     // without one would give.
     let data = data();
-    let first_settings = occupancy.with_budget(Budget::Steps(72));
+    let first_settings = occupancy.with_budget(Budget::Steps(24));
     let first = run::<f32>(&data, &first_settings, None, None);
     let fraction = first.occupancy.as_ref().unwrap().occupied_fraction();
     assert!(fraction < 1.0, "{fraction}");

@@ -1,0 +1,138 @@
+//! A background the fit learns, for captures without alpha (phone photographs): what lies
+//! beyond the scene's box is seen as an environment at infinity, a colour that depends on the
+//! ray's direction alone, `sigmoid(sum_b k[c B + b] Y_b(d))` with the spherical harmonics of
+//! [`DEGREE`] ([`ShColor`], one set of coefficients for the whole scene, learned with the
+//! grid). Without it such a capture's background must be painted into the box (haze at its
+//! walls) or stays an error the fit cannot remove.
+//!
+//! ```
+//! use fogray_fit::environment::Environment;
+//! use fogray_tape::Tape;
+//! use ndarray::{arr2, Array2};
+//!
+//! let environment = Environment::new();
+//! let coefficients = Array2::<f64>::zeros((1, environment.coefficient_count()));
+//! let directions = arr2(&[[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]]);
+//! // Fresh coefficients are 0: grey (sigmoid 0) from every direction.
+//! let colors = environment.colors(coefficients.view(), directions.view())?;
+//! assert!(colors.iter().all(|&c| c == 0.5));
+//! # Ok::<(), Box<dyn std::error::Error>>(())
+//! ```
+
+use fogray_ops::ShColor;
+use fogray_tape::params::{ParamId, Params};
+use fogray_tape::{Float, Tape, TapeError, Var};
+use ndarray::{Array2, ArrayView2};
+
+use crate::error::FitError;
+use crate::shading::Shading;
+
+/// The name of the coefficients `[1, 3 (DEGREE + 1)^2]` in a model's parameter store and a
+/// checkpoint.
+pub const ENVIRONMENT: &str = "environment";
+
+/// The degree of the environment's spherical harmonics: a sky brighter than the ground, a
+/// window on one side, with 27 values in all (a capture's background seen from tens of
+/// directions constrains no more).
+pub const DEGREE: usize = 2;
+
+/// The learned background's colour model (its coefficients are a model's parameter).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Environment {
+    colour: ShColor,
+}
+
+impl Default for Environment {
+    fn default() -> Self {
+        Environment::new()
+    }
+}
+
+impl Environment {
+    /// The environment of spherical harmonics of [`DEGREE`].
+    pub fn new() -> Self {
+        // DEGREE is at most ShColor's highest degree (a test holds it there).
+        let colour = ShColor::new(DEGREE).unwrap_or_else(|_| unreachable!("degree {DEGREE} is supported"));
+        Environment { colour }
+    }
+
+    /// Values of its coefficients: 3 channels of `(DEGREE + 1)^2`.
+    pub fn coefficient_count(&self) -> usize {
+        self.colour.coefficient_count()
+    }
+
+    /// Records the colour `[R, 3]` behind each of `R` rays of unit `directions` (`[R, 3]`, a
+    /// constant) for the coefficients `coefficients` (`[1, 3 B]`, on the tape): each ray reads
+    /// the same row, so the backward sums the rays' gradients into it.
+    ///
+    /// Errors: from the ops (coefficients not `[1, 3 B]`, a direction that is not a unit
+    /// vector).
+    pub fn record<F: Float>(
+        &self,
+        tape: &mut Tape<F>,
+        coefficients: Var,
+        directions: ArrayView2<'_, F>,
+    ) -> Result<Var, TapeError> {
+        let rows = tape.gather(coefficients, &vec![0; directions.nrows()])?;
+        let directions = tape.constant(directions.to_owned());
+        self.colour.apply(tape, rows, directions)
+    }
+
+    /// The colour `[R, 3]` seen along unit `directions` (`[R, 3]`) for `coefficients`
+    /// (`[1, 3 B]`), without a tape.
+    ///
+    /// Errors: [`FitError::Config`] for coefficients not `[1, 3 B]`; the op's errors.
+    pub fn colors<F: Float>(
+        &self,
+        coefficients: ArrayView2<'_, F>,
+        directions: ArrayView2<'_, F>,
+    ) -> Result<Array2<F>, FitError> {
+        if coefficients.dim() != (1, self.coefficient_count()) {
+            return Err(FitError::Config(format!(
+                "environment coefficients: expected [1, {}], got {:?}",
+                self.coefficient_count(),
+                coefficients.shape()
+            )));
+        }
+        let row = coefficients.row(0);
+        let rows = Array2::from_shape_fn((directions.nrows(), row.len()), |(_, k)| row[k]);
+        Ok(self.colour.evaluate(rows.view(), directions).map_err(TapeError::from)?)
+    }
+}
+
+/// Adds the coefficients of `shading`'s learned background to `params` as [`ENVIRONMENT`],
+/// all 0 (grey from every direction); nothing for a shading without one.
+///
+/// Errors: the store already has a parameter of that name.
+pub(crate) fn add_environment<F: Float>(
+    params: &mut Params<F>,
+    shading: &Shading,
+) -> Result<Option<ParamId>, FitError> {
+    shading
+        .environment
+        .map(|e| params.add(ENVIRONMENT, Array2::<F>::zeros((1, e.coefficient_count()))))
+        .transpose()
+        .map_err(FitError::from)
+}
+
+/// A grown model keeps the background it learned: `from`'s coefficients into `to`'s.
+///
+/// Errors: one model has the parameter and the other not, or the ids name no parameter.
+pub(crate) fn copy_environment<F: Float>(
+    from: &Params<F>,
+    from_id: Option<ParamId>,
+    to: &mut Params<F>,
+    to_id: Option<ParamId>,
+) -> Result<(), FitError> {
+    match (from_id, to_id) {
+        (None, None) => Ok(()),
+        (Some(a), Some(b)) => {
+            let values = from.get(a)?.to_owned();
+            to.get_mut(b)?.assign(&values);
+            Ok(())
+        }
+        _ => Err(FitError::Config(
+            "a grown model must keep the learned background exactly when the model had one".into(),
+        )),
+    }
+}
