@@ -36,6 +36,9 @@ pub const ENVIRONMENT: &str = "environment";
 /// directions constrains no more).
 pub const DEGREE: usize = 2;
 
+// ShColor is written out to degree 3: `Environment::new` cannot fail.
+const _: () = assert!(DEGREE <= fogray_ops::sh::basis::MAX_DEGREE);
+
 /// The learned background's colour model (its coefficients are a model's parameter).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Environment {
@@ -51,7 +54,7 @@ impl Default for Environment {
 impl Environment {
     /// The environment of spherical harmonics of [`DEGREE`].
     pub fn new() -> Self {
-        // DEGREE is at most ShColor's highest degree (a test holds it there).
+        // DEGREE is at most ShColor's highest degree (asserted at compile time above).
         let colour = ShColor::new(DEGREE).unwrap_or_else(|_| unreachable!("degree {DEGREE} is supported"));
         Environment { colour }
     }

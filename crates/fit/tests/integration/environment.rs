@@ -6,7 +6,7 @@ use fogray_fit::dataset::{Dataset, View};
 use fogray_fit::environment::{Environment, DEGREE, ENVIRONMENT};
 use fogray_fit::model::RadianceField;
 use fogray_fit::settings::{FitSettings, SceneBox};
-use fogray_ops::sh::basis::{C0, C1, MAX_DEGREE};
+use fogray_ops::sh::basis::{C0, C1};
 use ndarray::{Array2, ArrayView1};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha12Rng;
@@ -49,7 +49,6 @@ fn sky_ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
 
 #[test]
 fn the_environment_is_the_sigmoid_of_the_harmonics_in_the_ray_direction() {
-    assert!(DEGREE <= MAX_DEGREE);
     let environment = Environment::new();
     let b = (DEGREE + 1) * (DEGREE + 1);
     assert_eq!(environment.coefficient_count(), 3 * b);
