@@ -7,6 +7,7 @@
 //! [`crate::math::logistic`]) and rounded once to the data's precision.
 
 use fogray_tape::Float;
+use multiversion::multiversion;
 use rayon::prelude::*;
 
 use super::basis::basis;
@@ -55,18 +56,33 @@ pub(crate) fn forward<F: Float>(b: usize, coeffs: &[F], directions: &[F], color:
         .par_chunks_mut(CHUNK * 3)
         .zip(coeffs.par_chunks(CHUNK * 3 * b))
         .zip(directions.par_chunks(CHUNK * 3))
-        .for_each(|((color, coeffs), directions)| {
-            let rows = color
-                .chunks_exact_mut(3)
-                .zip(coeffs.chunks_exact(3 * b))
-                .zip(directions.chunks_exact(3));
-            for ((out, row), d) in rows {
-                let y = basis(direction(d));
-                for (o, channel) in out.iter_mut().zip(row.chunks_exact(b)) {
-                    *o = F::lit(sigmoid::<F>(dot(channel, &y[..b])));
-                }
-            }
-        });
+        .for_each(|((color, coeffs), directions)| forward_chunk(b, coeffs, directions, color));
+}
+
+/// The sums of one chunk's rows, `x[3 i + c] = sum_k coeffs[i, c b + k] Y_k(d_i)`.
+#[inline(always)]
+fn sums<F: Float>(b: usize, coeffs: &[F], directions: &[F], x: &mut [f64]) {
+    let rows = coeffs.chunks_exact(3 * b).zip(directions.chunks_exact(3));
+    for ((row, d), x) in rows.zip(x.chunks_exact_mut(3)) {
+        let y = basis(direction(d));
+        for (x, channel) in x.iter_mut().zip(row.chunks_exact(b)) {
+            *x = dot(channel, &y[..b]);
+        }
+    }
+}
+
+/// One chunk of [`forward`]: the sums first, then the sigmoid over all of them in one loop.
+/// Compiled for the vector units this machine has (chosen at run time; the exponential's
+/// fused multiply-adds are otherwise the C library's slow `fma`); the values do not depend on
+/// which, each being the same sequence of correctly rounded operations.
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn forward_chunk<F: Float>(b: usize, coeffs: &[F], directions: &[F], color: &mut [F]) {
+    let mut x = [0.0; CHUNK * 3];
+    let x = &mut x[..color.len()];
+    sums(b, coeffs, directions, x);
+    for (o, &x) in color.iter_mut().zip(x.iter()) {
+        *o = F::lit(sigmoid::<F>(x));
+    }
 }
 
 /// `g_coeffs[i, c b + k] = g_color[i, c] sigmoid'(x_ic) Y_k(d_i)`, with `x_ic` recomputed as
@@ -78,20 +94,27 @@ pub(crate) fn backward<F: Float>(b: usize, coeffs: &[F], directions: &[F], g_col
         .zip(directions.par_chunks(CHUNK * 3))
         .zip(g_color.par_chunks(CHUNK * 3))
         .for_each(|(((g_coeffs, coeffs), directions), g_color)| {
-            let rows = g_coeffs
-                .chunks_exact_mut(3 * b)
-                .zip(coeffs.chunks_exact(3 * b))
-                .zip(directions.chunks_exact(3))
-                .zip(g_color.chunks_exact(3));
-            for (((g_row, row), d), g_out) in rows {
-                let y = basis(direction(d));
-                let channels = g_row.chunks_exact_mut(b).zip(row.chunks_exact(b)).zip(g_out);
-                for ((g, channel), g_c) in channels {
-                    let s = g_c.as_f64() * slope::<F>(dot(channel, &y[..b]));
-                    for (g, &y) in g.iter_mut().zip(&y[..b]) {
-                        *g = F::lit(s * y);
-                    }
-                }
-            }
+            backward_chunk(b, coeffs, directions, g_color, g_coeffs)
         });
+}
+
+/// One chunk of [`backward`] (compiled as [`forward_chunk`] is): the sums, the sigmoid's
+/// slope times the upstream gradient over all of them, then the products with the basis.
+#[multiversion(targets("x86_64+avx512f+avx512dq+fma", "x86_64+avx2+fma", "aarch64+neon"))]
+fn backward_chunk<F: Float>(b: usize, coeffs: &[F], directions: &[F], g_color: &[F], g_coeffs: &mut [F]) {
+    let mut x = [0.0; CHUNK * 3];
+    let x = &mut x[..g_color.len()];
+    sums(b, coeffs, directions, x);
+    for (x, g) in x.iter_mut().zip(g_color) {
+        *x = g.as_f64() * slope::<F>(*x);
+    }
+    let rows = g_coeffs.chunks_exact_mut(3 * b).zip(directions.chunks_exact(3));
+    for ((g_row, d), s) in rows.zip(x.chunks_exact(3)) {
+        let y = basis(direction(d));
+        for (g, &s) in g_row.chunks_exact_mut(b).zip(s) {
+            for (g, &y) in g.iter_mut().zip(&y[..b]) {
+                *g = F::lit(s * y);
+            }
+        }
+    }
 }
