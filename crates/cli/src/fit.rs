@@ -35,6 +35,15 @@ pub const RECOMMENDED_MODEL: &str = "sparse";
 /// without buying held-out PSNR (the lego comparison in reports/lego/report.md).
 pub const RECOMMENDED_TV: &str = "0";
 
+/// Adam's learning rate `fogray fit` uses unless `--lr` is given, and where it anneals to
+/// unless `--lr-final` is: twice the library's. The grid example's few hundred rays a pixel
+/// settle at the library's rate; tens of photographs seen through a sparse grid with
+/// view-dependent colour gain held-out PSNR step for step at this one, and no more above it
+/// (lego, fits of a fixed number of steps).
+pub const RECOMMENDED_LR: &str = "0.4";
+/// See [`RECOMMENDED_LR`].
+pub const RECOMMENDED_LR_FINAL: &str = "0.04";
+
 /// The lattice `fogray fit` grows to unless `--grid` is given: 128 nodes per axis (32, 64,
 /// then 128), the finest that a minute's fit on two cores still trains well.
 pub const RECOMMENDED_GRID: &str = "128";
@@ -217,7 +226,14 @@ fn entries(args: &FitArgs) -> Result<BTreeMap<String, String>, CliError> {
             "background".to_string(),
             serde_json::to_string(&args.data_args.background)?,
         ),
-        ("data".to_string(), args.data.display().to_string()),
+        // Absolute (the fit has just read it), so that a render from another folder finds it.
+        (
+            "data".to_string(),
+            std::fs::canonicalize(&args.data)
+                .unwrap_or_else(|_| args.data.clone())
+                .display()
+                .to_string(),
+        ),
         ("downscale".to_string(), args.data_args.downscale.to_string()),
     ]))
 }

@@ -62,7 +62,9 @@ enum Command {
         mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)),
         mut_arg("model", |a| a.default_value(fit::RECOMMENDED_MODEL)),
         mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID)),
-        mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV))
+        mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV)),
+        mut_arg("lr", |a| a.default_value(fit::RECOMMENDED_LR)),
+        mut_arg("lr_final", |a| a.default_value(fit::RECOMMENDED_LR_FINAL))
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms

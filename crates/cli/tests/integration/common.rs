@@ -17,7 +17,21 @@ pub struct Run {
 
 /// Runs `fogray` with `args` (no standard input).
 pub fn fogray(args: &[&str]) -> Run {
-    let out = Command::new(env!("CARGO_BIN_EXE_fogray")).args(args).output().unwrap();
+    run_output(Command::new(env!("CARGO_BIN_EXE_fogray")).args(args).output().unwrap())
+}
+
+/// [`fogray`] run in the folder `cwd` (relative paths in `args` are relative to it).
+pub fn fogray_in(cwd: &Path, args: &[&str]) -> Run {
+    run_output(
+        Command::new(env!("CARGO_BIN_EXE_fogray"))
+            .current_dir(cwd)
+            .args(args)
+            .output()
+            .unwrap(),
+    )
+}
+
+fn run_output(out: std::process::Output) -> Run {
     Run {
         code: out.status.code().unwrap_or(-1),
         stdout: String::from_utf8(out.stdout).unwrap(),

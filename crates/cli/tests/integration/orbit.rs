@@ -3,7 +3,7 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::common::{arg, assert_refused, cameras, fogray, frame_name, intrinsics, write_ball, LENS};
+use crate::common::{arg, assert_refused, cameras, fogray, fogray_in, frame_name, intrinsics, write_ball, LENS};
 
 /// A one-step fit of the ball's dataset (8 views of 8x8 pixels) in `dir`: the dataset and the
 /// model file.
@@ -132,6 +132,38 @@ fn an_orbit_takes_its_defaults_from_the_models_dataset() {
     assert_eq!(run.code, 0, "{}", run.stderr);
     assert!(run.stderr.contains("dataset cannot be read"), "{}", run.stderr);
     assert_eq!(png_info(&out.join("frame-001.png")), (200, 200, image::ColorType::Rgb8));
+}
+
+/// A model fitted from a relative `--data` path still finds its dataset from another folder:
+/// the checkpoint names it absolutely.
+#[test]
+fn a_model_fitted_from_a_relative_path_finds_its_dataset_from_anywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    write_ball(&dir.path().join("data"), &cameras(8, intrinsics(8), LENS));
+    let fit = fogray_in(
+        dir.path(),
+        &[
+            "fit",
+            "--data",
+            "data",
+            "--steps",
+            "1",
+            "--grid",
+            "8",
+            "--batch",
+            "64",
+            "--json",
+            "--save-model",
+            "m.safetensors",
+        ],
+    );
+    assert_eq!(fit.code, 0, "{}", fit.stderr);
+    let out = dir.path().join("frames");
+    let model = dir.path().join("m.safetensors");
+    let run = fogray(&["render", "--model", arg(&model), "--orbit", "2", "--out", arg(&out)]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(run.stderr.is_empty(), "{}", run.stderr);
+    assert_eq!(png_info(&out.join("frame-001.png")), (8, 8, image::ColorType::Rgb8));
 }
 
 /// `--depth` with `--cameras`: `DIR/<name>-depth.png` beside each frame.
