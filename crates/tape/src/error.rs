@@ -148,8 +148,9 @@ pub enum TapeError {
         got: Vec<usize>,
     },
     /// An op failed for another reason: it is not differentiable, or it reported an error of
-    /// its own type (read it back with [`TapeError::downcast_ref`]).
-    #[error("{op}: {source}")]
+    /// its own type (read it back with [`TapeError::downcast_ref`]). The message begins with
+    /// the op's name once: an op's own error whose message already does is written as it is.
+    #[error("{}", OpMessage(.op, .source))]
     Op {
         /// The op's name.
         op: &'static str,
@@ -195,6 +196,23 @@ impl TapeError {
                 ..
             } => t.downcast_ref(),
             _ => None,
+        }
+    }
+}
+
+/// `op: source`, unless the source's message already begins with `op: ` (an op's own error
+/// type that names its op, so that it reads the same alone and through the tape).
+struct OpMessage<'a>(&'a str, &'a OpError);
+
+impl fmt::Display for OpMessage<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let OpMessage(op, source) = *self;
+        let message = source.to_string();
+        let named = message.strip_prefix(op).is_some_and(|rest| rest.starts_with(": "));
+        if named {
+            f.write_str(&message)
+        } else {
+            write!(f, "{op}: {message}")
         }
     }
 }
