@@ -219,3 +219,23 @@ impl fmt::Display for OpMessage<'_> {
 
 /// Shorthand for results of tape calls.
 pub type Result<T, E = TapeError> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::{OpError, TapeError};
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("{0}")]
+    struct Said(&'static str);
+
+    #[test]
+    fn the_op_name_is_written_once() {
+        let said = |m| TapeError::from_op("render", OpError::typed(Said(m))).to_string();
+        assert_eq!(said("ray 3: no samples"), "render: ray 3: no samples");
+        // An error that names its op already reads the same through the tape.
+        assert_eq!(said("render: ray 3: no samples"), "render: ray 3: no samples");
+        // Only the whole name followed by ": " counts.
+        assert_eq!(said("renderer: ray 3"), "render: renderer: ray 3");
+        assert_eq!(said("render"), "render: render");
+    }
+}

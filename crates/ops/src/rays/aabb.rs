@@ -114,8 +114,8 @@ impl RayIntervals {
         for (r, (&n, &f)) in t_near.iter().zip(&t_far).enumerate() {
             let bad = |what: &str, value: f64, rule| OpsError::Domain {
                 op: Op::Rays,
-                at: At::Value,
-                what: format!("{what}[{r}]"),
+                at: At::Ray(r),
+                what: what.into(),
                 value,
                 rule,
             };

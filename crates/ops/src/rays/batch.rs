@@ -39,8 +39,11 @@ impl<F: Float> RayBatch<F> {
             if let Some((k, v)) = a.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(OpsError::Domain {
                     op: Op::Rays,
-                    at: At::Value,
-                    what: format!("{what}[{}, {}]", k / 3, k % 3),
+                    at: At::Entry {
+                        row: k / 3,
+                        column: k % 3,
+                    },
+                    what: what.into(),
                     value: v.as_f64(),
                     rule: "must be finite",
                 });
@@ -59,8 +62,8 @@ impl<F: Float> RayBatch<F> {
             let d = [d[0].as_f64(), d[1].as_f64(), d[2].as_f64()];
             let n = normalise(d).ok_or_else(|| OpsError::Domain {
                 op: Op::Rays,
-                at: At::Value,
-                what: format!("length of directions[{r}]"),
+                at: At::Ray(r),
+                what: "direction's length".into(),
                 value: norm(d),
                 rule: "must be positive and finite",
             })?;
@@ -216,7 +219,7 @@ mod tests {
         ));
         let nan = arr2(&[[0.0f32, f32::NAN, 1.0]]);
         let e = RayBatch::new(nan, ok.clone()).unwrap_err();
-        assert_eq!(e.to_string(), "origins[0, 1] is NaN (must be finite)");
+        assert_eq!(e.to_string(), "rays: row 0, column 1: origins is NaN (must be finite)");
         let zero = arr2(&[[0.0f32, 0.0, 0.0]]);
         assert!(matches!(
             RayBatch::new(ok.clone(), zero),

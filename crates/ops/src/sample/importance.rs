@@ -125,18 +125,21 @@ fn check_previous<F: Float>(
     }
     for r in 0..offsets.len() - 1 {
         for k in offsets[r]..offsets[r + 1] {
-            let bad =
-                |what: String, value: F, rule| OpsError::domain(Op::Sample, At::Ray(r), what, value.as_f64(), rule);
+            let at = At::Sample {
+                ray: r,
+                sample: k - offsets[r],
+            };
+            let bad = |what: &str, value: F, rule| OpsError::domain(Op::Sample, at, what, value.as_f64(), rule);
             let w = weights[k];
             if !(w.is_finite() && w >= F::zero()) {
-                return Err(bad(format!("weights[{k}]"), w, "must be finite and non-negative"));
+                return Err(bad("weights", w, "must be finite and non-negative"));
             }
             let (t, d) = (previous.t[k], previous.delta[k]);
             if !t.is_finite() {
-                return Err(bad(format!("t[{k}]"), t, "must be finite"));
+                return Err(bad("t", t, "must be finite"));
             }
             if !(d.is_finite() && d >= F::zero()) {
-                return Err(bad(format!("delta[{k}]"), d, "must be finite and non-negative"));
+                return Err(bad("delta", d, "must be finite and non-negative"));
             }
         }
     }

@@ -144,7 +144,7 @@ fn bad_inputs_are_errors() {
         bad(arr1(&[1.0, -0.5])),
         OpsError::Domain {
             op: Op::Sample,
-            at: At::Ray(0),
+            at: At::Sample { ray: 0, sample: 1 },
             value: -0.5,
             ..
         }
@@ -153,7 +153,7 @@ fn bad_inputs_are_errors() {
         bad(arr1(&[f64::NAN, 1.0])),
         OpsError::Domain {
             op: Op::Sample,
-            at: At::Ray(0),
+            at: At::Sample { ray: 0, sample: 0 },
             ..
         }
     ));

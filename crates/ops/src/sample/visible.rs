@@ -56,13 +56,17 @@ impl<F: Float> PackedSamples<F> {
         for (r, range) in self.offsets.ranges().enumerate() {
             let before = kept.len();
             let mut depth = 0.0f64;
+            let start = range.start;
             for k in range {
                 let s = sigma[k].as_f64();
                 if !(s.is_finite() && s >= 0.0) {
                     return Err(OpsError::domain(
                         Op::Sample,
-                        At::Ray(r),
-                        format!("sigma[{k}]"),
+                        At::Sample {
+                            ray: r,
+                            sample: k - start,
+                        },
+                        "sigma",
                         s,
                         "must be finite and non-negative",
                     ));

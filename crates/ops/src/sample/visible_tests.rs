@@ -113,11 +113,11 @@ fn bad_input_is_refused() {
         match s.visible(sigma.view(), 0.1) {
             Err(OpsError::Domain {
                 op: Op::Sample,
-                at: At::Ray(ray),
+                at: At::Sample { ray, sample },
                 value,
                 ..
             }) => {
-                assert_eq!(ray, 1);
+                assert_eq!((ray, sample), (1, 0));
                 assert!(value == bad || (value.is_nan() && bad.is_nan()));
             }
             other => panic!("{bad}: {other:?}"),
