@@ -225,7 +225,8 @@ mod tests {
             RayBatch::new(ok.clone(), zero),
             Err(OpsError::Domain {
                 op: Op::Rays,
-                at: At::Value,
+                at: At::Ray(0),
+                value: 0.0,
                 ..
             })
         ));

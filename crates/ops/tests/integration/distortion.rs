@@ -667,7 +667,7 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
     assert_eq!(
         e.to_string(),
         format!(
-            "ray {ray}, sample 2: t is {below} (midpoints must not decrease along a ray (below the previous sample's))"
+            "distortion_loss: ray {ray}, sample 2: t is {below} (midpoints must not decrease along a ray (below the previous sample's))"
         )
     );
     let mut tied = t.clone();

@@ -460,5 +460,6 @@ fn bad_input_is_a_typed_error_naming_the_row() {
     }
     assert_eq!(tape.len(), before);
     let e = ShColor::new(7).map_err(TapeError::from).unwrap_err();
-    assert!(e.to_string().contains("degree 7"), "{e}");
+    assert_eq!(e.to_string(), "sh_color: degree is 7 (must be 0, 1, 2 or 3)");
+    assert_eq!(e.downcast_ref::<OpsError>().map(OpsError::op), Some(Op::ShColor));
 }
