@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use fogray_ops::{CompositeError, GridError};
+use fogray_ops::OpsError;
 use fogray_tape::TapeError;
 use thiserror::Error;
 
@@ -89,12 +89,9 @@ pub enum CliError {
     /// The JSON input was refused.
     #[error("{0}")]
     Input(#[from] InputError),
-    /// The composite refused its input (its message names the ray and sample).
+    /// An op refused its input (its message names the op, and the ray and sample).
     #[error("{0}")]
-    Composite(#[from] CompositeError),
-    /// The grid field refused its input.
-    #[error("{0}")]
-    Grid(#[from] GridError),
+    Ops(#[from] OpsError),
     /// A tape operation failed.
     #[error("{0}")]
     Tape(#[from] TapeError),

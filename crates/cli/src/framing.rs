@@ -174,7 +174,7 @@ pub fn orbit_of(
     Ok((orbit, k))
 }
 
-fn option_error(flag: &str, e: fogray_ops::GeometryError) -> CliError {
+fn option_error(flag: &str, e: fogray_ops::OpsError) -> CliError {
     CliError::Option(format!("{flag}: {e}"))
 }
 

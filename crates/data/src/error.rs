@@ -4,7 +4,7 @@
 use std::fmt;
 use std::path::PathBuf;
 
-use fogray_ops::GeometryError;
+use fogray_ops::OpsError;
 use thiserror::Error;
 
 /// What is wrong with a `transform_matrix`.
@@ -203,8 +203,9 @@ pub enum DataError {
         path: PathBuf,
         /// The frame (`frames[3]`).
         key: String,
-        /// The camera's reason.
-        source: GeometryError,
+        /// The camera's reason (boxed: it is several times the size of the other variants,
+        /// and every result of the crate would carry its size).
+        source: Box<OpsError>,
     },
     /// Something given to a writer that cannot be written (an image whose shape differs from
     /// its camera's, a non-finite value, no frames...).

@@ -123,7 +123,7 @@ impl FrameSpec {
         let wrap = |source| DataError::Camera {
             path: self.transforms.clone(),
             key: self.key.clone(),
-            source,
+            source: Box::new(source),
         };
         PinholeCamera::from_opengl(k, self.pose)
             .and_then(|c| c.with_distortion(self.distortion))

@@ -1,7 +1,7 @@
 //! Why a fit, a render or a model could not run: one error for the pipeline, which keeps the
 //! error of the op or library underneath it.
 
-use fogray_ops::{ActivationError, GeometryError, GridError, SampleError};
+use fogray_ops::OpsError;
 use fogray_tape::params::ParamError;
 use fogray_tape::TapeError;
 use thiserror::Error;
@@ -19,18 +19,10 @@ pub enum FitError {
     /// From the tape or an op on it.
     #[error(transparent)]
     Tape(#[from] TapeError),
-    /// From a sampler or the occupancy grid.
+    /// From an op called outside the tape, a sampler, the occupancy grid or the rays and
+    /// cameras (the error names which).
     #[error(transparent)]
-    Sample(#[from] SampleError),
-    /// From the rays or cameras.
-    #[error(transparent)]
-    Geometry(#[from] GeometryError),
-    /// From the grid field.
-    #[error(transparent)]
-    Grid(#[from] GridError),
-    /// From the density/colour activation.
-    #[error(transparent)]
-    Activation(#[from] ActivationError),
+    Ops(#[from] OpsError),
     /// From the parameter store or the optimiser.
     #[error(transparent)]
     Param(#[from] ParamError),

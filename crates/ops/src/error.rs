@@ -1,137 +1,163 @@
-//! Errors of the volume-rendering ops: each names the ray and sample at fault.
+//! The ops' one error type: [`OpsError`] names the op it came from, and the ray and sample
+//! (or row, or cell) at fault where there is one.
+
+use std::fmt;
 
 use fogray_tape::{OffsetsError, OpError, TapeError};
 use thiserror::Error;
 
-/// Why a composite's input was rejected. Nothing is computed when one is returned.
-///
-/// Through a tape it arrives inside [`TapeError::Op`], whole:
-/// `err.downcast_ref::<CompositeError>()` gives back the ray and the sample. It converts into
-/// a [`TapeError`] (and an [`OpError`]), so `?` works in a function that mixes tape calls and
-/// composite calls.
-#[derive(Debug, Clone, PartialEq, Error)]
+/// The op (or family of constructors) an [`OpsError`] came from. Its [`name`](Op::name) is
+/// the one the tape reports, so an error reads the same whether it came through a tape or not.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[non_exhaustive]
-pub enum CompositeError {
-    /// The offsets are not a valid packing (must start at 0 and never decrease).
-    #[error("offsets: {0}")]
-    Offsets(#[from] OffsetsError),
-    /// An array's length or shape does not fit the packing.
-    #[error("{what}: expected {expected}, got {got}")]
-    Shape {
-        /// Which input.
-        what: &'static str,
-        /// What the packing requires.
-        expected: String,
-        /// What was given.
-        got: String,
-    },
-    /// A value outside its domain (NaN, infinite, negative density or step...).
-    #[error("ray {ray}, sample {sample}: {what} is {value} ({rule})")]
-    InvalidSample {
+pub enum Op {
+    /// The emission-absorption composite ([`Composite`](crate::Composite)).
+    Composite,
+    /// The composite fused with its MSE against target colours.
+    CompositeMse,
+    /// The hard "first hit" renderer ([`hard::first_hit`](crate::hard::first_hit)).
+    FirstHit,
+    /// The distortion loss ([`DistortionLoss`](crate::DistortionLoss)) and its twin.
+    DistortionLoss,
+    /// A dense grid field ([`GridField`](crate::GridField)) and its box ([`GridBox`](crate::GridBox)).
+    GridField,
+    /// A sparse grid field ([`SparseGridField`](crate::SparseGridField)) and its
+    /// [`NodeIndex`](crate::NodeIndex).
+    SparseGridField,
+    /// The density/colour activation ([`DensityColor`](crate::DensityColor)).
+    DensityColor,
+    /// The spherical-harmonics colour ([`ShColor`](crate::ShColor)).
+    ShColor,
+    /// The total-variation prior on a dense grid.
+    TotalVariation,
+    /// The total-variation prior on a sparse grid.
+    SparseTotalVariation,
+    /// Cameras, boxes, orbits and batches of rays ([`rays`](crate::rays)).
+    Rays,
+    /// The samplers and their packed samples ([`sample`](crate::sample)).
+    Sample,
+    /// The occupancy grid ([`OccupancyGrid`](crate::sample::OccupancyGrid)).
+    Occupancy,
+}
+
+impl Op {
+    /// The op's name, as the tape and the messages write it (`"composite"`, `"grid_field"`...).
+    pub fn name(self) -> &'static str {
+        match self {
+            Op::Composite => "composite",
+            Op::CompositeMse => "composite_mse",
+            Op::FirstHit => "first_hit",
+            Op::DistortionLoss => "distortion_loss",
+            Op::GridField => "grid_field",
+            Op::SparseGridField => "sparse_grid_field",
+            Op::DensityColor => "density_color",
+            Op::ShColor => "sh_color",
+            Op::TotalVariation => "total_variation",
+            Op::SparseTotalVariation => "sparse_total_variation",
+            Op::Rays => "rays",
+            Op::Sample => "sample",
+            Op::Occupancy => "occupancy",
+        }
+    }
+}
+
+impl fmt::Display for Op {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Where in the input a value outside its domain sits.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[non_exhaustive]
+pub enum At {
+    /// A single value, not one of many (a focal length, a box's near bound...).
+    Value,
+    /// A per-ray value (its interval, its weights, a background).
+    Ray(usize),
+    /// A sample of a ray (the sample's index within its ray).
+    Sample {
         /// Ray index.
         ray: usize,
         /// Sample index within the ray.
         sample: usize,
-        /// Which input (`sigma`, `delta`, `color[1]`, `t`).
-        what: String,
-        /// The offending value.
-        value: f64,
-        /// The rule it breaks.
-        rule: &'static str,
     },
-    /// A background value that is not finite.
-    #[error("ray {ray}: background[{channel}] is {value} (must be finite)")]
-    InvalidBackground {
-        /// Ray index (0 for a shared background).
-        ray: usize,
-        /// Channel.
-        channel: usize,
-        /// The offending value.
-        value: f64,
-    },
-    /// A configuration value outside its domain.
-    #[error("{0}")]
-    Config(String),
-    /// An optional input, upstream gradient, buffer or wanted gradient that the op's
-    /// configuration requires and was not given, or that it has no use for and was given (a
-    /// background with [`Background::None`](crate::Background::None), `t` without depth...).
-    #[error("{what}: {problem}")]
-    Mismatch {
-        /// Which argument (`"background"`, `"t"`, `"depth buffer"`, ...).
-        what: &'static str,
-        /// What is wrong with it, given the configuration.
-        problem: &'static str,
+    /// A cell of the occupancy grid (its flat index).
+    Cell(usize),
+    /// An entry of a matrix input (a row is a sample or a position).
+    Entry {
+        /// Row.
+        row: usize,
+        /// Column (a channel, a coefficient, a coordinate).
+        column: usize,
     },
 }
 
-/// Why a camera, a box or a batch of rays was rejected. Nothing is built when one is returned.
+/// The prefix of a message: empty for a single value, `"ray 0, sample 3: "` otherwise.
+impl fmt::Display for At {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            At::Value => Ok(()),
+            At::Ray(ray) => write!(f, "ray {ray}: "),
+            At::Sample { ray, sample } => write!(f, "ray {ray}, sample {sample}: "),
+            At::Cell(cell) => write!(f, "cell {cell}: "),
+            At::Entry { row, column } => write!(f, "row {row}, column {column}: "),
+        }
+    }
+}
+
+/// Why an op, a sampler or a constructor of this crate rejected its input or its
+/// configuration. Nothing is computed, and nothing of the caller's is changed, when one is
+/// returned.
+///
+/// Every case names its [`Op`], and the message begins with the op's name. Through a tape it
+/// arrives inside [`TapeError::Op`], whole: `err.downcast_ref::<OpsError>()` gives back the op,
+/// the ray and the sample. It converts into a [`TapeError`] (and an [`OpError`]), so `?` works
+/// in a function that mixes tape calls and op calls.
 #[derive(Debug, Clone, PartialEq, Error)]
 #[non_exhaustive]
-pub enum GeometryError {
-    /// An image with no pixel (`width` or `height` is 0).
-    #[error("image size {width}x{height}: both must be at least 1")]
-    EmptyImage {
-        /// Pixels per row.
-        width: usize,
-        /// Rows.
-        height: usize,
+pub enum OpsError {
+    /// The offsets are not a valid packing (must start at 0 and never decrease).
+    #[error("{op}: offsets: {source}")]
+    Offsets {
+        /// The op.
+        op: Op,
+        /// What is wrong with them.
+        source: OffsetsError,
     },
-    /// A number outside its domain (NaN, infinite, a zero focal length...).
-    #[error("{what} is {value} ({rule})")]
-    InvalidValue {
-        /// Which value.
-        what: String,
-        /// The offending value.
-        value: f64,
-        /// The rule it breaks.
-        rule: &'static str,
-    },
-    /// A camera-to-world transform that cannot place a camera.
-    #[error("camera-to-world transform: {0}")]
-    Transform(String),
-    /// A box whose bounds are not finite or not increasing on some axis.
-    #[error("box axis {axis}: min {min}, max {max} (must be finite with min < max)")]
-    InvalidBox {
-        /// Axis (0 = x, 1 = y, 2 = z).
-        axis: usize,
-        /// Lower bound given.
-        min: f64,
-        /// Upper bound given.
-        max: f64,
-    },
-    /// An array whose shape does not fit.
-    #[error("{what}: expected {expected}, got {got}")]
+    /// An array's (or a grid's) length or shape does not fit the op's, or another input's.
+    #[error("{op}: {what}: expected {expected}, got {got}")]
     Shape {
-        /// Which input.
+        /// The op.
+        op: Op,
+        /// Which input, output or setting.
         what: &'static str,
-        /// What was required.
+        /// What is required.
         expected: String,
         /// What was given.
         got: String,
     },
-    /// A pixel or camera index out of range.
-    #[error("{what} {index} is out of range (must be below {len})")]
-    OutOfRange {
-        /// `"pixel"` or `"camera"`.
-        what: &'static str,
-        /// The index given.
-        index: usize,
-        /// The number of valid indices.
-        len: usize,
+    /// A value outside its domain (NaN, infinite, a negative density or step, a zero focal
+    /// length...).
+    #[error("{op}: {at}{what} is {value} ({rule})")]
+    Domain {
+        /// The op.
+        op: Op,
+        /// Where it sits: the ray and sample, the row and column, the cell.
+        at: At,
+        /// Which input (`sigma`, `color[1]`, `background[0]`, `t_near`...).
+        what: String,
+        /// The offending value.
+        value: f64,
+        /// The rule it breaks.
+        rule: &'static str,
     },
-    /// A `look_at` whose eye, target and up do not define a frame.
-    #[error("look_at: {0}")]
-    Degenerate(String),
-}
-
-/// Why a sampler or the occupancy grid rejected its input. Nothing is returned or changed
-/// when one is returned.
-#[derive(Debug, Clone, PartialEq, Error)]
-#[non_exhaustive]
-pub enum SampleError {
-    /// A configuration value outside its domain (a step that is not positive, no samples...).
-    #[error("{what} is {value} ({rule})")]
+    /// A configuration value outside its domain (a step that is not positive, a degree
+    /// above 3, a negative weight...).
+    #[error("{op}: {what} is {value} ({rule})")]
     Config {
+        /// The op.
+        op: Op,
         /// Which setting.
         what: &'static str,
         /// The offending value.
@@ -139,245 +165,160 @@ pub enum SampleError {
         /// The rule it breaks.
         rule: &'static str,
     },
-    /// Arrays that do not fit each other.
-    #[error("{what}: expected {expected}, got {got}")]
-    Shape {
-        /// Which input.
+    /// An optional input, upstream gradient, buffer or wanted gradient that the op's
+    /// configuration requires and was not given, or that it has no use for and was given (a
+    /// background with [`Background::None`](crate::Background::None), `t` without depth...).
+    #[error("{op}: {what}: {problem}")]
+    Mismatch {
+        /// The op.
+        op: Op,
+        /// Which argument (`"background"`, `"t"`, `"depth buffer"`, ...).
         what: &'static str,
-        /// What was required.
-        expected: String,
-        /// What was given.
-        got: String,
+        /// What is wrong with it, given the configuration.
+        problem: &'static str,
     },
-    /// A per-ray or per-sample value outside its domain.
-    #[error("ray {ray}: {what} is {value} ({rule})")]
-    InvalidValue {
-        /// Ray index (or cell index for densities).
-        ray: usize,
-        /// Which value.
-        what: String,
-        /// The offending value.
-        value: f64,
-        /// The rule it breaks.
-        rule: &'static str,
-    },
-    /// The caller's density function failed or returned something unusable.
-    #[error("density function: {0}")]
-    Density(String),
-}
-
-/// Why a grid field's configuration or input was rejected. Nothing is computed (and nothing
-/// of the caller's is changed) when one is returned.
-#[derive(Debug, Clone, PartialEq, Error)]
-#[non_exhaustive]
-pub enum GridError {
-    /// A box axis with a non-finite bound or `min >= max`.
-    #[error("box axis {axis}: [{min}, {max}] must be finite with min < max")]
-    InvalidBox {
-        /// The axis (0 = x, 1 = y, 2 = z).
+    /// A box whose bounds are not finite or not increasing on some axis.
+    #[error("{op}: box axis {axis}: [{min}, {max}] (must be finite with min < max)")]
+    Box {
+        /// The op.
+        op: Op,
+        /// Axis (0 = x, 1 = y, 2 = z).
         axis: usize,
-        /// Its lower bound.
+        /// Lower bound given.
         min: f64,
-        /// Its upper bound.
+        /// Upper bound given.
         max: f64,
     },
-    /// A shape that does not fit: the grid's (fewer than 2 nodes on an axis, no channel, the
-    /// wrong number of axes), or an input's against the op's.
-    #[error("{what}: expected {expected}, got {got}")]
-    Shape {
-        /// Which input or setting.
+    /// An image with no pixel (`width` or `height` is 0).
+    #[error("{op}: image size {width}x{height}: both must be at least 1")]
+    EmptyImage {
+        /// The op.
+        op: Op,
+        /// Pixels per row.
+        width: usize,
+        /// Rows.
+        height: usize,
+    },
+    /// A pixel or camera index out of range.
+    #[error("{op}: {what} {index} is out of range (must be below {len})")]
+    OutOfRange {
+        /// The op.
+        op: Op,
+        /// `"pixel"` or `"camera"`.
         what: &'static str,
-        /// What is required.
-        expected: String,
-        /// What was given.
-        got: String,
+        /// The index given.
+        index: usize,
+        /// The number of valid indices.
+        len: usize,
     },
-    /// A position with a NaN coordinate (a position outside the box, infinite or not, is
-    /// valid: it reads zero).
-    #[error("position {sample}: coordinate {axis} is NaN")]
-    NanPosition {
-        /// Index of the position (row of `positions`).
-        sample: usize,
-        /// Which coordinate.
-        axis: usize,
-    },
-}
-
-/// Why the density/colour activation rejected its input or its configuration. Nothing is
-/// computed (and nothing of the caller's is changed) when one is returned.
-#[derive(Debug, Clone, PartialEq, Error)]
-#[non_exhaustive]
-pub enum ActivationError {
-    /// A shift that is not finite.
-    #[error("shift is {value} (must be finite)")]
-    InvalidShift {
-        /// The offending value.
-        value: f64,
-    },
-    /// An array whose shape does not fit: raw values not `[n, k]` with `k >= 2`, or an
-    /// output or gradient not of the shape the raw values give.
-    #[error("{what}: expected {expected}, got {got}")]
-    Shape {
-        /// Which input or output.
+    /// A camera-to-world transform that cannot place a camera, or a `look_at` whose eye,
+    /// target and up do not define a frame.
+    #[error("{op}: {what}: {problem}")]
+    Frame {
+        /// The op.
+        op: Op,
+        /// `"camera-to-world transform"` or `"look_at"`.
         what: &'static str,
-        /// What is required.
-        expected: String,
-        /// What was given.
-        got: String,
-    },
-    /// A NaN raw value (infinities are valid: they saturate).
-    #[error("raw value at row {row}, channel {channel} is NaN")]
-    NanRaw {
-        /// Row of the raw values.
-        row: usize,
-        /// Channel (0 is the density).
-        channel: usize,
-    },
-}
-
-/// Why the spherical-harmonics colour op ([`ShColor`](crate::ShColor)) rejected its
-/// configuration or its input. Nothing is computed (and nothing of the caller's is changed)
-/// when one is returned.
-#[derive(Debug, Clone, PartialEq, Error)]
-#[non_exhaustive]
-pub enum ShError {
-    /// A degree above 3 (the basis is written out to degree 3).
-    #[error("degree {degree} is not supported (must be 0, 1, 2 or 3)")]
-    Degree {
-        /// The degree given.
-        degree: usize,
-    },
-    /// An array whose shape does not fit: coefficients not `[n, 3 (degree + 1)^2]`,
-    /// directions not `[n, 3]` (with the coefficients' `n`), or an upstream gradient not
-    /// `[n, 3]`.
-    #[error("{what}: expected {expected}, got {got}")]
-    Shape {
-        /// Which input.
-        what: &'static str,
-        /// What is required.
-        expected: String,
-        /// What was given.
-        got: String,
-    },
-    /// A coefficient or a direction component that is NaN or infinite.
-    #[error("{what} at row {row}, column {column} is {value} (must be finite)")]
-    NonFinite {
-        /// `"coefficient"` or `"direction"`.
-        what: &'static str,
-        /// Row (sample).
-        row: usize,
-        /// Column.
-        column: usize,
-        /// The offending value.
-        value: f64,
+        /// What is wrong with it (the entry, the last row, the determinant, the vectors).
+        problem: String,
     },
     /// A direction whose length is not 1 within `1e-3`.
-    #[error("direction at row {row} has length {norm} (must be 1 within 1e-3)")]
+    #[error("{op}: direction at row {row} has length {norm} (must be 1 within 1e-3)")]
     NotUnit {
+        /// The op.
+        op: Op,
         /// Row (sample).
         row: usize,
         /// Its Euclidean length.
         norm: f64,
     },
-}
-
-/// Why a prior's configuration or input was rejected. Nothing is computed (and nothing of the
-/// caller's is changed) when one is returned.
-#[derive(Debug, Clone, PartialEq, Error)]
-#[non_exhaustive]
-pub enum PriorError {
-    /// A weight that is negative or not finite.
-    #[error("weight is {value} (must be finite and non-negative)")]
-    InvalidWeight {
-        /// The offending value.
-        value: f64,
-    },
-    /// An array whose shape does not fit.
-    #[error("{what}: expected {expected}, got {got}")]
-    Shape {
-        /// Which input or output.
-        what: &'static str,
-        /// What is required.
-        expected: String,
-        /// What was given.
-        got: String,
+    /// The caller's density function failed or returned something unusable.
+    #[error("{op}: density function: {problem}")]
+    Density {
+        /// The op.
+        op: Op,
+        /// The function's own error, or what is wrong with what it returned.
+        problem: String,
     },
 }
 
-/// Each op's error as the tape's, naming the op it came from.
-macro_rules! tape_error_from {
-    ($($error:ty => $op:literal),* $(,)?) => {
-        $(impl From<$error> for TapeError {
-            fn from(e: $error) -> Self {
-                TapeError::from_op($op, OpError::typed(e))
-            }
-        })*
-    };
+impl OpsError {
+    /// The op the error came from.
+    pub fn op(&self) -> Op {
+        match self {
+            OpsError::Offsets { op, .. }
+            | OpsError::Shape { op, .. }
+            | OpsError::Domain { op, .. }
+            | OpsError::Config { op, .. }
+            | OpsError::Mismatch { op, .. }
+            | OpsError::Box { op, .. }
+            | OpsError::EmptyImage { op, .. }
+            | OpsError::OutOfRange { op, .. }
+            | OpsError::Frame { op, .. }
+            | OpsError::NotUnit { op, .. }
+            | OpsError::Density { op, .. } => *op,
+        }
+    }
+
+    /// The same error, naming `to` instead: a check shared by two ops (the composite's, run by
+    /// the fused composite + MSE) reports the op that ran it.
+    pub(crate) fn in_op(mut self, to: Op) -> Self {
+        match &mut self {
+            OpsError::Offsets { op, .. }
+            | OpsError::Shape { op, .. }
+            | OpsError::Domain { op, .. }
+            | OpsError::Config { op, .. }
+            | OpsError::Mismatch { op, .. }
+            | OpsError::Box { op, .. }
+            | OpsError::EmptyImage { op, .. }
+            | OpsError::OutOfRange { op, .. }
+            | OpsError::Frame { op, .. }
+            | OpsError::NotUnit { op, .. }
+            | OpsError::Density { op, .. } => *op = to,
+        }
+        self
+    }
+
+    /// A shape error (the shorthand every check uses).
+    pub(crate) fn shape(op: Op, what: &'static str, expected: impl Into<String>, got: impl Into<String>) -> Self {
+        OpsError::Shape {
+            op,
+            what,
+            expected: expected.into(),
+            got: got.into(),
+        }
+    }
+
+    /// A configuration error.
+    pub(crate) fn config(op: Op, what: &'static str, value: f64, rule: &'static str) -> Self {
+        OpsError::Config { op, what, value, rule }
+    }
+
+    /// A value outside its domain.
+    pub(crate) fn domain(op: Op, at: At, what: impl Into<String>, value: f64, rule: &'static str) -> Self {
+        OpsError::Domain {
+            op,
+            at,
+            what: what.into(),
+            value,
+            rule,
+        }
+    }
 }
 
-tape_error_from! {
-    PriorError => "total_variation",
-    ActivationError => "density_color",
-    ShError => "sh_color",
-    GridError => "grid_field",
-    GeometryError => "rays",
-    SampleError => "sample",
-    CompositeError => "composite",
-}
-
-impl From<CompositeError> for OpError {
-    fn from(e: CompositeError) -> Self {
+/// The error whole, for a custom op's forward or backward to report.
+impl From<OpsError> for OpError {
+    fn from(e: OpsError) -> Self {
         OpError::typed(e)
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use fogray_tape::{Tape, TapeError};
-    use ndarray::{arr1, arr2};
-
-    use super::CompositeError;
-    use crate::{Composite, CompositeInputs};
-
-    /// A pipeline mixing composite construction, tape ops and the composite's forward.
-    fn pipeline(offsets: &[usize], sigma0: f64) -> Result<f64, TapeError> {
-        let op = Composite::new(offsets)?;
-        let mut tape = Tape::<f64>::new();
-        let raw = tape.param(arr1(&[sigma0, 1.0]));
-        let sigma = tape.mul_scalar(raw, 2.0)?;
-        let delta = tape.constant(arr1(&[0.5, 0.5]));
-        let color = tape.constant(arr2(&[[1.0], [0.0]]));
-        let background = Some(tape.constant(arr1(&[0.0])));
-        let out = op.apply(
-            &mut tape,
-            &CompositeInputs {
-                sigma,
-                delta,
-                color,
-                background,
-                t: None,
-            },
-        )?;
-        Ok(tape.value(out.color)?[[0, 0]])
-    }
-
-    #[test]
-    fn question_mark_carries_the_composite_error_whole_through_a_pipeline() {
-        // 1 - exp(-2 * 0.5 * 1) of the front sample's colour 1.
-        let c = pipeline(&[0, 2], 1.0).unwrap();
-        assert!((c - (1.0 - (-1.0f64).exp())).abs() < 1e-15);
-        let bad_offsets = pipeline(&[0, 3, 2], 1.0).unwrap_err();
-        assert!(matches!(
-            bad_offsets.downcast_ref::<CompositeError>(),
-            Some(CompositeError::Offsets(_))
-        ));
-        let bad_value = pipeline(&[0, 1, 2], -1.0).unwrap_err();
-        match bad_value.downcast_ref::<CompositeError>() {
-            Some(CompositeError::InvalidSample { ray, sample, .. }) => assert_eq!((*ray, *sample), (0, 0)),
-            other => panic!("{other:?}"),
-        }
-        assert!(bad_value
-            .to_string()
-            .starts_with("composite: ray 0, sample 0: sigma is -2"));
+/// The error whole inside [`TapeError::Op`], under its op's name.
+impl From<OpsError> for TapeError {
+    fn from(e: OpsError) -> Self {
+        TapeError::from_op(e.op().name(), OpError::typed(e))
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -7,16 +7,20 @@
 
 use fogray_tape::{Float, Offsets};
 
-use crate::error::CompositeError;
+use crate::error::{At, Op, OpsError};
 
 /// For each ray of the packing, the index (within the ray) of the first sample with
 /// `sigma > threshold`, or `None`.
 ///
 /// Errors if the offsets are not a valid packing of `sigma`, or a density is NaN.
-pub fn first_hit<F: Float>(sigma: &[F], offsets: &[usize], threshold: F) -> Result<Vec<Option<usize>>, CompositeError> {
-    let offsets = Offsets::new(offsets)?;
+pub fn first_hit<F: Float>(sigma: &[F], offsets: &[usize], threshold: F) -> Result<Vec<Option<usize>>, OpsError> {
+    let offsets = Offsets::new(offsets).map_err(|source| OpsError::Offsets {
+        op: Op::FirstHit,
+        source,
+    })?;
     if offsets.rows() != sigma.len() {
-        return Err(CompositeError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::FirstHit,
             what: "sigma",
             expected: format!("{} samples (the offsets' end)", offsets.rows()),
             got: format!("{}", sigma.len()),
@@ -24,13 +28,13 @@ pub fn first_hit<F: Float>(sigma: &[F], offsets: &[usize], threshold: F) -> Resu
     }
     if let Some(i) = sigma.iter().position(|s| s.is_nan()) {
         let (ray, sample) = offsets.locate(i).unwrap_or((0, i));
-        return Err(CompositeError::InvalidSample {
-            ray,
-            sample,
-            what: "sigma".into(),
-            value: f64::NAN,
-            rule: "density must not be NaN",
-        });
+        return Err(OpsError::domain(
+            Op::FirstHit,
+            At::Sample { ray, sample },
+            "sigma",
+            f64::NAN,
+            "density must not be NaN",
+        ));
     }
     Ok(offsets
         .ranges()

@@ -71,7 +71,7 @@ pub use composite::{
     CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeVars, CompositeWanted,
 };
 pub use distortion::DistortionLoss;
-pub use error::{ActivationError, CompositeError, GeometryError, GridError, PriorError, SampleError, ShError};
+pub use error::{At, Op, OpsError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted, NodeIndex, SparseGridField};
 pub use rays::{
     rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, Orbit, PinholeCamera, RayBatch, RayIntervals,

@@ -148,8 +148,9 @@ pub enum TapeError {
         got: Vec<usize>,
     },
     /// An op failed for another reason: it is not differentiable, or it reported an error of
-    /// its own type (read it back with [`TapeError::downcast_ref`]).
-    #[error("{op}: {source}")]
+    /// its own type (read it back with [`TapeError::downcast_ref`]). The message begins with
+    /// the op's name once: an op's own error whose message already does is written as it is.
+    #[error("{}", OpMessage(.op, .source))]
     Op {
         /// The op's name.
         op: &'static str,
@@ -199,5 +200,42 @@ impl TapeError {
     }
 }
 
+/// `op: source`, unless the source's message already begins with `op: ` (an op's own error
+/// type that names its op, so that it reads the same alone and through the tape).
+struct OpMessage<'a>(&'a str, &'a OpError);
+
+impl fmt::Display for OpMessage<'_> {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let OpMessage(op, source) = *self;
+        let message = source.to_string();
+        let named = message.strip_prefix(op).is_some_and(|rest| rest.starts_with(": "));
+        if named {
+            f.write_str(&message)
+        } else {
+            write!(f, "{op}: {message}")
+        }
+    }
+}
+
 /// Shorthand for results of tape calls.
 pub type Result<T, E = TapeError> = std::result::Result<T, E>;
+
+#[cfg(test)]
+mod tests {
+    use super::{OpError, TapeError};
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("{0}")]
+    struct Said(&'static str);
+
+    #[test]
+    fn the_op_name_is_written_once() {
+        let said = |m| TapeError::from_op("render", OpError::typed(Said(m))).to_string();
+        assert_eq!(said("ray 3: no samples"), "render: ray 3: no samples");
+        // An error that names its op already reads the same through the tape.
+        assert_eq!(said("render: ray 3: no samples"), "render: ray 3: no samples");
+        // Only the whole name followed by ": " counts.
+        assert_eq!(said("renderer: ray 3"), "render: renderer: ray 3");
+        assert_eq!(said("render"), "render: render");
+    }
+}

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use fogray::ops::CompositeError;
+use fogray::ops::OpsError;
 use fogray::tape::TapeError;
 use thiserror::Error;
 
@@ -57,9 +57,9 @@ pub enum DiscError {
     /// A tape operation failed (a renderer, a fit).
     #[error("{0}")]
     Tape(#[from] TapeError),
-    /// The composite refused its input.
+    /// An op refused its input (the composite, naming the ray and sample).
     #[error("{0}")]
-    Composite(#[from] CompositeError),
+    Ops(#[from] OpsError),
     /// Arrays that do not fit the shapes built from them.
     #[error("{0}")]
     Shape(#[from] ndarray::ShapeError),

@@ -24,7 +24,7 @@
 //! # Ok::<(), fogray_grid::ring::RingError>(())
 //! ```
 
-use fogray::ops::{GeometryError, Intrinsics, PinholeCamera};
+use fogray::ops::{Intrinsics, OpsError, PinholeCamera};
 use thiserror::Error;
 
 use crate::exact::Ray;
@@ -46,7 +46,7 @@ pub enum RingError {
     },
     /// The library camera refused a view (not expected for the ring's eyes).
     #[error(transparent)]
-    Camera(#[from] GeometryError),
+    Camera(#[from] OpsError),
 }
 
 /// `V` training and `T` test views of `W x W` pixels (see the [module docs](self)).

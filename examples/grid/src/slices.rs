@@ -21,7 +21,7 @@ use fogray::fit::images::ImageError;
 use fogray::fit::settings::SceneBox;
 use fogray::fit::{FitError, RadianceField};
 use fogray::ops::sample::{GridAxis, OccupancyGrid};
-use fogray::ops::SampleError;
+use fogray::ops::OpsError;
 use fogray::tape::Float;
 use ndarray::Array2;
 use plotters::prelude::*;
@@ -113,8 +113,8 @@ pub fn model_density_planes<F: Float>(model: &DenseGrid<F>, n: usize) -> Result<
 /// The occupancy grid's middle plane of cells across each axis (index `resolution / 2`), as
 /// images of one pixel per cell: 1 occupied, 0 empty.
 ///
-/// Errors: none for a grid from [`OccupancyGrid::new`]; [`SampleError`] passed on.
-pub fn occupancy_planes(grid: &OccupancyGrid) -> Result<Vec<PlaneImage>, SampleError> {
+/// Errors: none for a grid from [`OccupancyGrid::new`]; [`OpsError`] passed on.
+pub fn occupancy_planes(grid: &OccupancyGrid) -> Result<Vec<PlaneImage>, OpsError> {
     let r = grid.resolution();
     AXES.iter()
         .map(|&axis| {

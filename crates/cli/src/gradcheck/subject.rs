@@ -15,7 +15,7 @@ pub struct Subject<S> {
     precision: PhantomData<fn() -> S>,
 }
 
-fn op_error(e: fogray_ops::CompositeError) -> OpError {
+fn op_error(e: fogray_ops::OpsError) -> OpError {
     OpError::InvalidArgument(e.to_string())
 }
 

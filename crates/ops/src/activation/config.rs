@@ -4,7 +4,7 @@
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut1, ArrayViewMut2};
 
-use crate::error::ActivationError;
+use crate::error::{Op, OpsError};
 
 /// The activations of a grid renderer's raw values (see the [module docs](super)): raw
 /// `[n, k]` (`k >= 2`, density first) to a density `softplus(raw_0 + shift)` `[n]` and a
@@ -55,10 +55,10 @@ impl DensityColor {
     /// The activation with the density's shift: a raw density of 0 gives `softplus(shift)`
     /// (a negative shift starts a fresh grid as a thin fog).
     ///
-    /// Errors: a shift that is not finite ([`ActivationError::InvalidShift`]).
-    pub fn new(shift: f64) -> Result<Self, ActivationError> {
+    /// Errors: a shift that is not finite ([`OpsError::Config`]).
+    pub fn new(shift: f64) -> Result<Self, OpsError> {
         if !shift.is_finite() {
-            return Err(ActivationError::InvalidShift { value: shift });
+            return Err(OpsError::config(Op::DensityColor, "shift", shift, "must be finite"));
         }
         Ok(DensityColor { shift })
     }
@@ -83,7 +83,7 @@ impl DensityColor {
     /// [`Tape::no_grad`], nor on a value that needs no gradient.
     ///
     /// Errors (the tape is unchanged): `raw` not `[n, k]` with `k >= 2`, or a NaN raw value
-    /// (the [`ActivationError`] itself inside [`TapeError::Op`], read back with
+    /// (the [`OpsError`] itself inside [`TapeError::Op`], read back with
     /// [`TapeError::downcast_ref`]), or a stale handle.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, raw: Var) -> Result<ActivatedVars, TapeError> {
         let out = tape.apply(*self, &[raw])?;

@@ -11,7 +11,7 @@ use rayon::prelude::*;
 use super::config::{Activated, ActivatedGrads, ActivatedMut, DensityColor};
 use super::kept::KeptDecays;
 use super::kernel::{self, CHUNK};
-use crate::error::ActivationError;
+use crate::error::{At, Op, OpsError};
 
 /// The values of `x` in row-major order: borrowed when contiguous, copied otherwise.
 fn flat<'a, F: Float, D: ndarray::Dimension>(x: &'a ndarray::ArrayView<'_, F, D>) -> Cow<'a, [F]> {
@@ -21,17 +21,30 @@ fn flat<'a, F: Float, D: ndarray::Dimension>(x: &'a ndarray::ArrayView<'_, F, D>
     }
 }
 
-fn shape_error(what: &'static str, expected: String, got: &[usize]) -> ActivationError {
-    ActivationError::Shape {
+fn shape_error(what: &'static str, expected: String, got: &[usize]) -> OpsError {
+    OpsError::Shape {
+        op: Op::DensityColor,
         what,
         expected,
         got: format!("{got:?}"),
     }
 }
 
+/// A NaN raw value (infinities are valid: they saturate).
+fn nan_raw(row: usize, channel: usize) -> OpsError {
+    OpsError::domain(
+        Op::DensityColor,
+        At::Entry { row, column: channel },
+        "raw value",
+        f64::NAN,
+        "must not be NaN",
+    )
+}
+
 /// `data` as a `[rows, cols]` array.
-fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) -> Result<Array2<F>, ActivationError> {
-    Array2::from_shape_vec((rows, cols), data).map_err(|e| ActivationError::Shape {
+fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) -> Result<Array2<F>, OpsError> {
+    Array2::from_shape_vec((rows, cols), data).map_err(|e| OpsError::Shape {
+        op: Op::DensityColor,
         what,
         expected: format!("[{rows}, {cols}]"),
         got: e.to_string(),
@@ -39,7 +52,7 @@ fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) 
 }
 
 /// Checks that `raw` is `[n, k]` with `k >= 2` and holds no NaN; returns `(n, k)`.
-fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), ActivationError> {
+fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), OpsError> {
     let (n, k) = raw.dim();
     if k < 2 {
         return Err(shape_error("raw values", "[n, k] with k >= 2".into(), raw.shape()));
@@ -52,16 +65,13 @@ fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), Activa
         .any(|c| c.iter().fold(false, |acc, x| acc | x.is_nan()));
     if has_nan {
         let i = values.iter().position(|x| x.is_nan()).unwrap_or(0);
-        return Err(ActivationError::NanRaw {
-            row: i / k,
-            channel: i % k,
-        });
+        return Err(nan_raw(i / k, i % k));
     }
     Ok((n, k))
 }
 
 /// Checks the upstream gradients' shapes against `n` rows of `k` raw values.
-fn check_upstream<F: Float>(upstream: &ActivatedGrads<'_, F>, n: usize, k: usize) -> Result<(), ActivationError> {
+fn check_upstream<F: Float>(upstream: &ActivatedGrads<'_, F>, n: usize, k: usize) -> Result<(), OpsError> {
     if let Some(g) = &upstream.sigma {
         if g.len() != n {
             return Err(shape_error("sigma gradient", format!("[{n}]"), g.shape()));
@@ -79,9 +89,9 @@ impl DensityColor {
     /// The density and colour of every row of `raw` (`[n, k]`, `k >= 2`): `sigma` `[n]` and
     /// `color` `[n, k - 1]` (see the [module docs](super) for the forms and their accuracy).
     ///
-    /// Errors: `raw` not `[n, k]` with `k >= 2` ([`ActivationError::Shape`]), a NaN raw value
-    /// ([`ActivationError::NanRaw`], the first one).
-    pub fn evaluate<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Activated<F>, ActivationError> {
+    /// Errors: `raw` not `[n, k]` with `k >= 2` ([`OpsError::Shape`]), a NaN raw value
+    /// ([`OpsError::Domain`], the first one).
+    pub fn evaluate<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Activated<F>, OpsError> {
         let (n, k) = check_raw(&raw)?;
         let (sigma, color) = self.forward_flat(&flat(&raw), n, k, None);
         Ok(Activated {
@@ -95,11 +105,7 @@ impl DensityColor {
     ///
     /// Errors: as [`DensityColor::evaluate`], and buffers of the wrong shape; the buffers are
     /// unchanged then.
-    pub fn evaluate_into<F: Float>(
-        &self,
-        raw: ArrayView2<'_, F>,
-        out: ActivatedMut<'_, F>,
-    ) -> Result<(), ActivationError> {
+    pub fn evaluate_into<F: Float>(&self, raw: ArrayView2<'_, F>, out: ActivatedMut<'_, F>) -> Result<(), OpsError> {
         let (n, k) = check_raw(&raw)?;
         let ActivatedMut { mut sigma, mut color } = out;
         if sigma.len() != n {
@@ -125,15 +131,15 @@ impl DensityColor {
     /// The density alone, `softplus(raw_0 + shift)` `[n]`, of `raw` `[n, k]` (`k >= 1`
     /// here: the colour channels are not read), bitwise as [`DensityColor::evaluate`] gives it.
     ///
-    /// Errors: `raw` with no column ([`ActivationError::Shape`]), a NaN density
-    /// ([`ActivationError::NanRaw`]).
-    pub fn density<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Array1<F>, ActivationError> {
+    /// Errors: `raw` with no column ([`OpsError::Shape`]), a NaN density
+    /// ([`OpsError::Domain`]).
+    pub fn density<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Array1<F>, OpsError> {
         let (n, k) = raw.dim();
         if k == 0 {
             return Err(shape_error("raw values", "[n, k] with k >= 1".into(), raw.shape()));
         }
         if let Some(row) = raw.column(0).iter().position(|x| x.is_nan()) {
-            return Err(ActivationError::NanRaw { row, channel: 0 });
+            return Err(nan_raw(row, 0));
         }
         let mut sigma = scratch(n);
         kernel::density(self.shift(), k, &flat(&raw), &mut sigma);
@@ -150,7 +156,7 @@ impl DensityColor {
         &self,
         raw: ArrayView2<'_, F>,
         upstream: &ActivatedGrads<'_, F>,
-    ) -> Result<Array2<F>, ActivationError> {
+    ) -> Result<Array2<F>, OpsError> {
         let (n, k) = check_raw(&raw)?;
         check_upstream(upstream, n, k)?;
         let g = self.backward_flat(&flat(&raw), k, upstream, None);
@@ -166,7 +172,7 @@ impl DensityColor {
         raw: ArrayView2<'_, F>,
         upstream: &ActivatedGrads<'_, F>,
         mut g_raw: ArrayViewMut2<'_, F>,
-    ) -> Result<(), ActivationError> {
+    ) -> Result<(), OpsError> {
         let (n, k) = check_raw(&raw)?;
         check_upstream(upstream, n, k)?;
         if g_raw.dim() != (n, k) {
@@ -221,16 +227,11 @@ impl DensityColor {
     }
 }
 
-/// The activation's own error, kept whole through the tape (`TapeError::downcast_ref`).
-fn op_error(e: ActivationError) -> OpError {
-    OpError::typed(e)
-}
-
 /// `x` as a 2-D view, or the shape error.
 fn two_d<'a, F: Float>(x: &ArrayViewD<'a, F>) -> Result<ArrayView2<'a, F>, OpError> {
     x.clone()
         .into_dimensionality::<Ix2>()
-        .map_err(|_| op_error(shape_error("raw values", "[n, k] with k >= 2".into(), x.shape())))
+        .map_err(|_| OpError::from(shape_error("raw values", "[n, k] with k >= 2".into(), x.shape())))
 }
 
 /// The op's one input as `[n, k]` raw values, checked, with `n` and `k`.
@@ -239,7 +240,7 @@ fn checked_input<'a, F: Float>(inputs: &[ArrayViewD<'a, F>]) -> Result<(ArrayVie
         return Err(OpError::InvalidArgument(format!("takes 1 input, got {}", inputs.len())));
     };
     let raw = two_d(raw)?;
-    let (n, k) = check_raw(&raw).map_err(op_error)?;
+    let (n, k) = check_raw(&raw)?;
     Ok((raw, n, k))
 }
 
@@ -305,7 +306,7 @@ impl<F: Float> CustomOp<F> for DensityColor {
             None => None,
         };
         let upstream = ActivatedGrads { sigma, color };
-        check_upstream(&upstream, n, k).map_err(op_error)?;
+        check_upstream(&upstream, n, k)?;
         let g = self.backward_flat(&flat(&raw), k, &upstream, Some(ctx.saved().values()));
         Ok(vec![Some(array(&[n, k], g)?)])
     }

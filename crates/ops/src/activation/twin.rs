@@ -5,11 +5,11 @@
 use fogray_tape::{Float, Tape, TapeError, Var};
 
 use super::config::{ActivatedVars, DensityColor};
-use crate::error::ActivationError;
+use crate::error::{Op, OpsError};
 
 /// Records `op`'s activation of `raw` (`[n, k]`, `k >= 2`) with the tape's own ops.
 ///
-/// Errors (the tape is unchanged): `raw` not `[n, k]` with `k >= 2` ([`ActivationError::Shape`]
+/// Errors (the tape is unchanged): `raw` not `[n, k]` with `k >= 2` ([`OpsError::Shape`]
 /// inside [`TapeError::Op`]), a stale handle. A NaN raw value is not an error here: it
 /// propagates, as through any tape primitive.
 pub fn density_color<F: Float>(tape: &mut Tape<F>, op: &DensityColor, raw: Var) -> Result<ActivatedVars, TapeError> {
@@ -29,8 +29,9 @@ pub fn density_color<F: Float>(tape: &mut Tape<F>, op: &DensityColor, raw: Var) 
     Ok(ActivatedVars { sigma, color })
 }
 
-fn shape_error(shape: &[usize]) -> ActivationError {
-    ActivationError::Shape {
+fn shape_error(shape: &[usize]) -> OpsError {
+    OpsError::Shape {
+        op: Op::DensityColor,
         what: "raw values",
         expected: "[n, k] with k >= 2".into(),
         got: format!("{shape:?}"),

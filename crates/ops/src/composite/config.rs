@@ -4,7 +4,7 @@
 use fogray_tape::{Float, Offsets, Tape, TapeError, Var};
 
 use super::tape_order::{ByInput, ByOutput};
-use crate::error::CompositeError;
+use crate::error::{Op, OpsError};
 
 /// Where the background colour comes from.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -69,8 +69,13 @@ impl Composite {
     /// A composite over rays packed by `offsets` (`R + 1` entries, starting at 0, never
     /// decreasing; ray `r` owns samples `offsets[r]..offsets[r+1]`; empty rays are allowed).
     /// Defaults: shared background, exact (no early termination), outputs colour and opacity.
-    pub fn new(offsets: &[usize]) -> Result<Self, CompositeError> {
-        Ok(Self::packed(Offsets::new(offsets)?))
+    pub fn new(offsets: &[usize]) -> Result<Self, OpsError> {
+        Ok(Self::packed(Offsets::new(offsets).map_err(|source| {
+            OpsError::Offsets {
+                op: Op::Composite,
+                source,
+            }
+        })?))
     }
 
     /// [`Composite::new`] over an already validated packing (for example a sampler's), which
@@ -96,11 +101,14 @@ impl Composite {
 
     /// Early termination: samples from the first one whose transmittance is below `threshold`
     /// are treated as empty. `threshold` must be in `[0, 1]`; 0 (the default) is exact.
-    pub fn min_transmittance(mut self, threshold: f64) -> Result<Self, CompositeError> {
+    pub fn min_transmittance(mut self, threshold: f64) -> Result<Self, OpsError> {
         if !(0.0..=1.0).contains(&threshold) {
-            return Err(CompositeError::Config(format!(
-                "min_transmittance must be in [0, 1], got {threshold}"
-            )));
+            return Err(OpsError::config(
+                Op::Composite,
+                "min_transmittance",
+                threshold,
+                "must be in [0, 1]",
+            ));
         }
         self.min_transmittance = threshold;
         Ok(self)

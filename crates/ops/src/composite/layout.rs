@@ -6,7 +6,7 @@ use std::ops::Range;
 
 use super::arrays::CompositeArrays;
 use super::config::{Background, Composite};
-use crate::error::CompositeError;
+use crate::error::{At, Op, OpsError};
 use crate::prefetch::prefetch_span;
 use fogray_tape::buffer::flat;
 use fogray_tape::Float;
@@ -49,27 +49,24 @@ impl<F: Float> Flat<'_, F> {
     }
 }
 
-fn shape_err(what: &'static str, expected: String, got: &[usize]) -> CompositeError {
-    CompositeError::Shape {
-        what,
-        expected,
-        got: format!("shape {got:?}"),
-    }
+fn shape_err(what: &'static str, expected: String, got: &[usize]) -> OpsError {
+    OpsError::shape(Op::Composite, what, expected, format!("shape {got:?}"))
 }
 
 /// Checks shapes and values of the inputs and returns them flat.
 pub(crate) fn validate<'a, F: Float>(
     op: &Composite,
     inputs: &'a CompositeArrays<'_, F>,
-) -> Result<Flat<'a, F>, CompositeError> {
+) -> Result<Flat<'a, F>, OpsError> {
     let flat = flatten(op, inputs)?;
     check_values(op, &flat)?;
     Ok(flat)
 }
 
 /// An optional argument `given` (or not) against the op's configuration.
-pub(crate) fn mismatch(what: &'static str, given: bool) -> CompositeError {
-    CompositeError::Mismatch {
+pub(crate) fn mismatch(what: &'static str, given: bool) -> OpsError {
+    OpsError::Mismatch {
+        op: Op::Composite,
         what,
         problem: if given {
             "given, but the op is configured without it"
@@ -84,7 +81,7 @@ pub(crate) fn mismatch(what: &'static str, given: bool) -> CompositeError {
 pub(crate) fn flatten<'a, F: Float>(
     op: &Composite,
     inputs: &'a CompositeArrays<'_, F>,
-) -> Result<Flat<'a, F>, CompositeError> {
+) -> Result<Flat<'a, F>, OpsError> {
     let (n, rays) = (op.samples(), op.rays());
     for (what, x) in [("sigma", &inputs.sigma), ("delta", &inputs.delta)] {
         if x.shape() != [n] {
@@ -129,16 +126,10 @@ pub(crate) fn flatten<'a, F: Float>(
     })
 }
 
-pub(crate) fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), CompositeError> {
+pub(crate) fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<(), OpsError> {
     let bad = |i: usize, what: String, value: F, rule: &'static str| {
         let (ray, sample) = op.offsets.locate(i).unwrap_or((0, i));
-        CompositeError::InvalidSample {
-            ray,
-            sample,
-            what,
-            value: value.as_f64(),
-            rule,
-        }
+        OpsError::domain(Op::Composite, At::Sample { ray, sample }, what, value.as_f64(), rule)
     };
     let non_negative = |x: F| x.is_finite() && x >= F::zero();
     if let Some(i) = f.sigma.iter().position(|&x| !non_negative(x)) {
@@ -164,14 +155,16 @@ pub(crate) fn check_values<F: Float>(op: &Composite, f: &Flat<'_, F>) -> Result<
 }
 
 /// The background's values must be finite (checked before compositing: it is small).
-pub(crate) fn check_background<F: Float>(f: &Flat<'_, F>) -> Result<(), CompositeError> {
+pub(crate) fn check_background<F: Float>(f: &Flat<'_, F>) -> Result<(), OpsError> {
     if let Some(j) = f.background.iter().position(|x| !x.is_finite()) {
         let ray = if f.background.len() == f.ch { 0 } else { j / f.ch };
-        return Err(CompositeError::InvalidBackground {
-            ray,
-            channel: j % f.ch,
-            value: f.background[j].as_f64(),
-        });
+        return Err(OpsError::domain(
+            Op::Composite,
+            At::Ray(ray),
+            format!("background[{}]", j % f.ch),
+            f.background[j].as_f64(),
+            "must be finite",
+        ));
     }
     Ok(())
 }

@@ -21,7 +21,7 @@ use super::arrays::{CompositeArrays, CompositeOutputBuffers};
 use super::config::{Composite, CompositeInputs};
 use super::gradients::{CompositeGradients, CompositeUpstream, CompositeWanted};
 use super::tape_order::{self, ByInput};
-use crate::error::CompositeError;
+use crate::error::{Op, OpsError};
 
 /// The op on the tape: the composite, and the gradients its forward computes.
 #[derive(Debug, Clone)]
@@ -36,6 +36,11 @@ struct CompositeMse {
 pub(crate) struct MseResiduals<F> {
     gradients: Mutex<Option<CompositeGradients<F>>>,
     residual: ArrayD<F>,
+}
+
+/// The composite's checks, run by this op, report this op: its name is the one the tape gives.
+fn in_mse(e: OpsError) -> OpError {
+    e.in_op(Op::CompositeMse).into()
 }
 
 fn config_error(reason: &str) -> TapeError {
@@ -159,11 +164,12 @@ impl CompositeMse {
         let Some((target, composite)) = inputs.split_last() else {
             return Err(OpError::InvalidArgument("no inputs".into()));
         };
-        let arrays = tape_order::arrays(&self.composite, composite)?;
+        let arrays = tape_order::arrays(&self.composite, composite).map_err(in_mse)?;
         let rays = self.composite.rays();
         let ch = arrays.color.shape().get(1).copied().unwrap_or(0);
         if target.shape() != [rays, ch] {
-            return Err(CompositeError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::CompositeMse,
                 what: "target",
                 expected: format!("[{rays}, {ch}] (one colour per ray)"),
                 got: format!("{:?}", target.shape()),
@@ -192,7 +198,7 @@ impl CompositeMse {
         &self,
         arrays: &CompositeArrays<'_, F>,
         d_color: &ArrayD<F>,
-    ) -> Result<CompositeGradients<F>, CompositeError> {
+    ) -> Result<CompositeGradients<F>, OpsError> {
         let (_, res) = self.composite.evaluate(arrays)?;
         self.composite
             .vjp(arrays, &res, &CompositeUpstream::color(d_color.view()), self.wanted)
@@ -234,12 +240,14 @@ impl<F: Float> CustomOp<F> for CompositeMse {
             background: like(w.background, arrays.background.as_ref())?,
             t: None,
         };
-        self.composite.evaluate_vjp_into(
-            &arrays,
-            upstream,
-            &mut CompositeOutputBuffers::new(color.view_mut(), opacity.view_mut()),
-            &mut gradients.buffers(),
-        )?;
+        self.composite
+            .evaluate_vjp_into(
+                &arrays,
+                upstream,
+                &mut CompositeOutputBuffers::new(color.view_mut(), opacity.view_mut()),
+                &mut gradients.buffers(),
+            )
+            .map_err(in_mse)?;
         let (residual, loss) = Self::loss(&color, &target);
         let saved = MseResiduals {
             gradients: Mutex::new(Some(gradients)),
@@ -251,7 +259,7 @@ impl<F: Float> CustomOp<F> for CompositeMse {
     /// The loss alone: the composite's forward, no gradients.
     fn forward_only(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<Vec<ArrayD<F>>, OpError> {
         let (arrays, target) = self.split(inputs)?;
-        let (outputs, _) = self.composite.evaluate(&arrays)?;
+        let (outputs, _) = self.composite.evaluate(&arrays).map_err(in_mse)?;
         Ok(vec![Self::loss(&outputs.color, &target).1])
     }
 
@@ -279,7 +287,7 @@ impl<F: Float> CustomOp<F> for CompositeMse {
                 let d = d_color.insert(color_upstream(&saved.residual, g));
                 let inputs: Vec<ArrayViewD<'_, F>> = (0..n).map(|i| ctx.input(i)).collect();
                 let (arrays, _) = self.split(&inputs)?;
-                self.recompute(&arrays, d)?
+                self.recompute(&arrays, d).map_err(in_mse)?
             }
         };
         let mut out = tape_order::gradients_in_order(&self.composite, gradients);

@@ -16,10 +16,11 @@ use super::gradients::{CompositeGradientBuffers, CompositeGradients, CompositeUp
 use super::layout::{check_background, check_values, flatten, mismatch, Flat};
 use super::one_pass::one_pass;
 use super::tape_order;
-use crate::error::CompositeError;
+use crate::error::{Op, OpsError};
 
-fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, CompositeError> {
-    ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| CompositeError::Shape {
+fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, OpsError> {
+    ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| OpsError::Shape {
+        op: Op::Composite,
         what: "output",
         expected: format!("{shape:?}"),
         got: e.to_string(),
@@ -35,15 +36,17 @@ fn buffer<'a, F: Float>(
     what: &'static str,
     b: &'a mut ArrayViewMutD<'_, F>,
     shape: &[usize],
-) -> Result<&'a mut [F], CompositeError> {
+) -> Result<&'a mut [F], OpsError> {
     if b.shape() != shape {
-        return Err(CompositeError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::Composite,
             what,
             expected: format!("shape {shape:?}"),
             got: format!("shape {:?}", b.shape()),
         });
     }
-    b.as_slice_mut().ok_or_else(|| CompositeError::Shape {
+    b.as_slice_mut().ok_or_else(|| OpsError::Shape {
+        op: Op::Composite,
         what,
         expected: "a contiguous array in standard (row-major) order".into(),
         got: "a strided view".into(),
@@ -90,7 +93,7 @@ fn wanted(asked: CompositeWanted, color_upstream: bool, depth_upstream: bool) ->
 }
 
 /// A background gradient only for an op with a background, a t gradient only with depth.
-fn check_wanted(op: &Composite, asked: CompositeWanted) -> Result<(), CompositeError> {
+fn check_wanted(op: &Composite, asked: CompositeWanted) -> Result<(), OpsError> {
     if asked.background && op.background == Background::None {
         return Err(mismatch("background gradient", true));
     }
@@ -102,7 +105,7 @@ fn check_wanted(op: &Composite, asked: CompositeWanted) -> Result<(), CompositeE
 
 impl Composite {
     /// The forward into checked output slices.
-    fn forward_into<F: Float>(&self, x: &Flat<'_, F>, outs: Outputs<'_, F>) -> Result<Residuals<F>, CompositeError> {
+    fn forward_into<F: Float>(&self, x: &Flat<'_, F>, outs: Outputs<'_, F>) -> Result<Residuals<F>, OpsError> {
         let (residuals, valid) = forward(self, x, outs);
         if !valid {
             // Find and name the first offending value.
@@ -117,7 +120,7 @@ impl Composite {
         &self,
         buffers: &'a mut CompositeOutputBuffers<'_, F>,
         ch: usize,
-    ) -> Result<Outputs<'a, F>, CompositeError> {
+    ) -> Result<Outputs<'a, F>, OpsError> {
         let (n, rays) = (self.samples(), self.rays());
         let CompositeOutputBuffers {
             color,
@@ -144,7 +147,7 @@ impl Composite {
     pub fn evaluate<F: Float>(
         &self,
         inputs: &CompositeArrays<'_, F>,
-    ) -> Result<(CompositeOutputs<F>, Residuals<F>), CompositeError> {
+    ) -> Result<(CompositeOutputs<F>, Residuals<F>), OpsError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
@@ -219,13 +222,13 @@ impl Composite {
     /// let g = op.vjp(&inputs, &res, &upstream, wanted)?;
     /// assert_eq!(g.sigma.as_ref(), Some(&g_sigma));
     /// assert_eq!(g.delta, None);
-    /// # Ok::<(), fogray_ops::CompositeError>(())
+    /// # Ok::<(), fogray_ops::OpsError>(())
     /// ```
     pub fn evaluate_into<F: Float>(
         &self,
         inputs: &CompositeArrays<'_, F>,
         outputs: &mut CompositeOutputBuffers<'_, F>,
-    ) -> Result<Residuals<F>, CompositeError> {
+    ) -> Result<Residuals<F>, OpsError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
         let slices = self.output_slices(outputs, x.ch)?;
@@ -238,10 +241,11 @@ impl Composite {
         x: &Flat<'_, F>,
         residuals: &Residuals<F>,
         upstream: &'g CompositeUpstream<'_, F>,
-    ) -> Result<Prepared<'g, F>, CompositeError> {
+    ) -> Result<Prepared<'g, F>, OpsError> {
         let (n, rays, ch) = (self.samples(), self.rays(), x.ch);
         if residuals.stop.len() != rays {
-            return Err(CompositeError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Composite,
                 what: "residuals",
                 expected: format!("residuals of {rays} rays"),
                 got: format!("residuals of {} rays", residuals.stop.len()),
@@ -274,7 +278,8 @@ impl Composite {
             (p.gt.as_deref(), n),
         ];
         if let Some((g, len)) = expect.iter().find(|(g, len)| g.is_some_and(|g| g.len() != *len)) {
-            return Err(CompositeError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Composite,
                 what: "upstream gradient",
                 expected: format!("{len} values"),
                 got: format!("{}", g.map_or(0, <[F]>::len)),
@@ -298,7 +303,7 @@ impl Composite {
         residuals: &Residuals<F>,
         upstream: &CompositeUpstream<'_, F>,
         wanted: CompositeWanted,
-    ) -> Result<CompositeGradients<F>, CompositeError> {
+    ) -> Result<CompositeGradients<F>, OpsError> {
         let x = flatten(self, inputs)?;
         check_wanted(self, wanted)?;
         let p = self.prepare(&x, residuals, upstream)?;
@@ -341,7 +346,7 @@ impl Composite {
         residuals: &Residuals<F>,
         upstream: &CompositeUpstream<'_, F>,
         out: &mut CompositeGradientBuffers<'_, F>,
-    ) -> Result<(), CompositeError> {
+    ) -> Result<(), OpsError> {
         let x = flatten(self, inputs)?;
         let asked = out.wanted();
         check_wanted(self, asked)?;
@@ -463,7 +468,7 @@ impl Composite {
     /// let wanted = CompositeWanted { sigma: true, color: true, ..Default::default() };
     /// let g = op.vjp(&inputs, &res, &CompositeUpstream::color(dl_dc.view()), wanted)?;
     /// assert_eq!(g.sigma.as_ref(), Some(&g_sigma));
-    /// # Ok::<(), fogray_ops::CompositeError>(())
+    /// # Ok::<(), fogray_ops::OpsError>(())
     /// ```
     pub fn evaluate_vjp_into<F: Float>(
         &self,
@@ -471,7 +476,7 @@ impl Composite {
         upstream: impl Fn(usize, &[F], &mut [F]) + Sync,
         outputs: &mut CompositeOutputBuffers<'_, F>,
         grads: &mut CompositeGradientBuffers<'_, F>,
-    ) -> Result<(), CompositeError> {
+    ) -> Result<(), OpsError> {
         let x = flatten(self, inputs)?;
         check_background(&x)?;
         let asked = grads.wanted();
@@ -497,7 +502,7 @@ fn optional_buffer<'a, F: Float>(
     on: bool,
     b: &'a mut Option<ArrayViewMutD<'_, F>>,
     shape: &[usize],
-) -> Result<&'a mut [F], CompositeError> {
+) -> Result<&'a mut [F], OpsError> {
     match (on, b) {
         (true, Some(b)) => buffer(what, b, shape),
         (false, None) => Ok(Default::default()),
@@ -511,7 +516,7 @@ fn gradient_slice<'a, F: Float>(
     what: &'static str,
     b: &'a mut Option<ArrayViewMutD<'_, F>>,
     input: Option<&ArrayViewD<'_, F>>,
-) -> Result<&'a mut [F], CompositeError> {
+) -> Result<&'a mut [F], OpsError> {
     match (b, input) {
         (None, _) => Ok(Default::default()),
         (Some(b), Some(input)) => buffer(what, b, input.shape()),
@@ -524,7 +529,7 @@ fn gradient_slice<'a, F: Float>(
 fn gradient_slices<'a, F: Float>(
     out: &'a mut CompositeGradientBuffers<'_, F>,
     inputs: &CompositeArrays<'_, F>,
-) -> Result<InputGrads<'a, F>, CompositeError> {
+) -> Result<InputGrads<'a, F>, OpsError> {
     let CompositeGradientBuffers {
         sigma,
         delta,
@@ -553,10 +558,6 @@ fn sum_rows<F: Float>(rows: &[F], ch: usize) -> Vec<F> {
     total.into_iter().map(F::lit).collect()
 }
 
-fn op_error(e: CompositeError) -> OpError {
-    e.into()
-}
-
 impl<F: Float> CustomOp<F> for Composite {
     /// The stop index of each ray; the backward recomputes `T_k` and `alpha_k` from the
     /// inputs the tape keeps anyway.
@@ -567,8 +568,8 @@ impl<F: Float> CustomOp<F> for Composite {
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, Residuals<F>), OpError> {
-        let inputs = tape_order::arrays(self, inputs).map_err(op_error)?;
-        let (outputs, residuals) = self.evaluate(&inputs).map_err(op_error)?;
+        let inputs = tape_order::arrays(self, inputs)?;
+        let (outputs, residuals) = self.evaluate(&inputs)?;
         Ok((tape_order::outputs_in_order(outputs), residuals))
     }
 
@@ -579,10 +580,10 @@ impl<F: Float> CustomOp<F> for Composite {
     ) -> Result<Vec<Option<ArrayD<F>>>, OpError> {
         let inputs: Vec<ArrayViewD<'_, F>> = (0..ctx.num_inputs()).map(|i| ctx.input(i)).collect();
         let needs: Vec<bool> = (0..inputs.len()).map(|i| ctx.needs_input_grad(i)).collect();
-        let arrays = tape_order::arrays(self, &inputs).map_err(op_error)?;
-        let wanted = tape_order::wanted(self, needs).map_err(op_error)?;
-        let upstream = tape_order::upstream(self, grads).map_err(op_error)?;
-        let g = self.vjp(&arrays, ctx.saved(), &upstream, wanted).map_err(op_error)?;
+        let arrays = tape_order::arrays(self, &inputs)?;
+        let wanted = tape_order::wanted(self, needs)?;
+        let upstream = tape_order::upstream(self, grads)?;
+        let g = self.vjp(&arrays, ctx.saved(), &upstream, wanted)?;
         Ok(tape_order::gradients_in_order(self, g))
     }
 

@@ -9,7 +9,7 @@ use ndarray::{ArrayD, ArrayViewD};
 use super::arrays::{CompositeArrays, CompositeOutputs};
 use super::config::{Background, Composite};
 use super::gradients::{CompositeGradients, CompositeUpstream, CompositeWanted};
-use crate::error::CompositeError;
+use crate::error::{Op, OpsError};
 
 /// One value per input of the op, by name (`background` and `t` present exactly when the op
 /// has them).
@@ -31,8 +31,9 @@ pub(super) struct ByOutput<T> {
     pub transmittance: Option<T>,
 }
 
-fn count_error(what: &'static str, expected: usize, got: usize) -> CompositeError {
-    CompositeError::Shape {
+fn count_error(what: &'static str, expected: usize, got: usize) -> OpsError {
+    OpsError::Shape {
+        op: Op::Composite,
         what,
         expected: format!("{expected} {what}"),
         got: format!("{got}"),
@@ -43,8 +44,8 @@ fn count_error(what: &'static str, expected: usize, got: usize) -> CompositeErro
 fn next_if<T>(
     items: &mut impl Iterator<Item = T>,
     on: bool,
-    out_of_items: impl Fn() -> CompositeError,
-) -> Result<Option<T>, CompositeError> {
+    out_of_items: impl Fn() -> OpsError,
+) -> Result<Option<T>, OpsError> {
     if on {
         items.next().map(Some).ok_or_else(out_of_items)
     } else {
@@ -55,7 +56,7 @@ fn next_if<T>(
 impl<T> ByInput<T> {
     /// Names `items`, given in the tape's order for `op`; an error if there are not exactly as
     /// many as the op has inputs.
-    pub(super) fn from_tape(op: &Composite, items: Vec<T>) -> Result<Self, CompositeError> {
+    pub(super) fn from_tape(op: &Composite, items: Vec<T>) -> Result<Self, OpsError> {
         let has_background = op.background != Background::None;
         let expected = [true, true, true, has_background, op.depth]
             .iter()
@@ -99,7 +100,7 @@ impl<T> ByInput<T> {
 impl<T> ByOutput<T> {
     /// Names `items`, given in the tape's order for `op`; an error if there are not exactly as
     /// many as the op has outputs.
-    pub(super) fn from_tape(op: &Composite, items: Vec<T>) -> Result<Self, CompositeError> {
+    pub(super) fn from_tape(op: &Composite, items: Vec<T>) -> Result<Self, OpsError> {
         let optional = [op.depth, op.weights, op.transmittance];
         let expected = 2 + optional.iter().filter(|&&on| on).count();
         let got = items.len();
@@ -142,7 +143,7 @@ impl<T> ByOutput<T> {
 pub(super) fn arrays<'a, F: Float>(
     op: &Composite,
     inputs: &[ArrayViewD<'a, F>],
-) -> Result<CompositeArrays<'a, F>, CompositeError> {
+) -> Result<CompositeArrays<'a, F>, OpsError> {
     let x = ByInput::from_tape(op, inputs.to_vec())?;
     Ok(CompositeArrays {
         sigma: x.sigma,
@@ -154,7 +155,7 @@ pub(super) fn arrays<'a, F: Float>(
 }
 
 /// The tape's "needs this input's gradient" flags, by name.
-pub(super) fn wanted(op: &Composite, needs: Vec<bool>) -> Result<CompositeWanted, CompositeError> {
+pub(super) fn wanted(op: &Composite, needs: Vec<bool>) -> Result<CompositeWanted, OpsError> {
     let n = ByInput::from_tape(op, needs)?;
     Ok(CompositeWanted {
         sigma: n.sigma,
@@ -169,7 +170,7 @@ pub(super) fn wanted(op: &Composite, needs: Vec<bool>) -> Result<CompositeWanted
 pub(super) fn upstream<'a, F: Float>(
     op: &Composite,
     grads: &[Option<ArrayViewD<'a, F>>],
-) -> Result<CompositeUpstream<'a, F>, CompositeError> {
+) -> Result<CompositeUpstream<'a, F>, OpsError> {
     let g = ByOutput::from_tape(op, grads.to_vec())?;
     Ok(CompositeUpstream {
         color: g.color,
@@ -252,8 +253,11 @@ mod tests {
             for wrong in [short, long] {
                 let len = wrong.len();
                 match ByInput::from_tape(&op, wrong) {
-                    Err(CompositeError::Shape {
-                        what: "inputs", got, ..
+                    Err(OpsError::Shape {
+                        op: Op::Composite,
+                        what: "inputs",
+                        got,
+                        ..
                     }) => assert_eq!(got, len.to_string()),
                     other => panic!("{:?}", other.map(|_| ())),
                 }

@@ -7,11 +7,12 @@ use fogray_tape::{Float, Offsets};
 use rayon::prelude::*;
 
 use super::kernel::RAYS_PER_CHUNK;
-use crate::error::CompositeError;
+use crate::error::{At, Op, OpsError};
 
 /// The error for an array whose shape does not fit.
-pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -> CompositeError {
-    CompositeError::Shape {
+pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -> OpsError {
+    OpsError::Shape {
+        op: Op::DistortionLoss,
         what,
         expected,
         got: format!("shape {got:?}"),
@@ -20,7 +21,7 @@ pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -
 
 /// Checks that `sigma`, `delta` and `t` (given by their shapes) are each `[n]`, `n` the
 /// packing's number of samples.
-pub(crate) fn check_shapes(offsets: &Offsets, shapes: [(&'static str, &[usize]); 3]) -> Result<(), CompositeError> {
+pub(crate) fn check_shapes(offsets: &Offsets, shapes: [(&'static str, &[usize]); 3]) -> Result<(), OpsError> {
     let n = offsets.rows();
     for (what, shape) in shapes {
         if shape != [n] {
@@ -32,20 +33,18 @@ pub(crate) fn check_shapes(offsets: &Offsets, shapes: [(&'static str, &[usize]);
 
 /// The first fault of ray `r` (samples `range`), by sample: its density, then its step, then
 /// its midpoint (not finite, or below the previous one).
-fn ray_fault<F: Float>(
-    r: usize,
-    start: usize,
-    end: usize,
-    sigma: &[F],
-    delta: &[F],
-    t: &[F],
-) -> Option<CompositeError> {
-    let bad = |k: usize, what: &str, value: F, rule: &'static str| CompositeError::InvalidSample {
-        ray: r,
-        sample: k - start,
-        what: what.into(),
-        value: value.as_f64(),
-        rule,
+fn ray_fault<F: Float>(r: usize, start: usize, end: usize, sigma: &[F], delta: &[F], t: &[F]) -> Option<OpsError> {
+    let bad = |k: usize, what: &str, value: F, rule: &'static str| {
+        OpsError::domain(
+            Op::DistortionLoss,
+            At::Sample {
+                ray: r,
+                sample: k - start,
+            },
+            what,
+            value.as_f64(),
+            rule,
+        )
     };
     for k in start..end {
         let (s, d, tk) = (sigma[k], delta[k], t[k]);
@@ -72,12 +71,7 @@ fn ray_fault<F: Float>(
 
 /// Checks the values of the (shape-checked) flat inputs; the error names the first ray and
 /// sample at fault.
-pub(crate) fn check_values<F: Float>(
-    offsets: &Offsets,
-    sigma: &[F],
-    delta: &[F],
-    t: &[F],
-) -> Result<(), CompositeError> {
+pub(crate) fn check_values<F: Float>(offsets: &Offsets, sigma: &[F], delta: &[F], t: &[F]) -> Result<(), OpsError> {
     let rays = offsets.segments();
     let starts: Vec<usize> = (0..rays).step_by(RAYS_PER_CHUNK).collect();
     let fault = starts.par_iter().find_map_first(|&r0| {

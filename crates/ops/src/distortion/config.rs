@@ -2,7 +2,7 @@
 
 use fogray_tape::{Float, Offsets, Tape, TapeError, Var};
 
-use crate::error::CompositeError;
+use crate::error::{Op, OpsError};
 
 /// The mip-NeRF 360 distortion loss over packed rays (see the [module docs](super)): densities
 /// `sigma [n]`, interval lengths `delta [n]` and midpoints `t [n]` to the mean over the rays of
@@ -19,9 +19,14 @@ impl DistortionLoss {
     /// The loss over rays packed by `offsets` (`R + 1` entries, starting at 0, never
     /// decreasing; ray `r` owns samples `offsets[r]..offsets[r+1]`; empty rays are allowed).
     ///
-    /// Errors: offsets that are not a packing ([`CompositeError::Offsets`]).
-    pub fn new(offsets: &[usize]) -> Result<Self, CompositeError> {
-        Ok(Self::packed(Offsets::new(offsets)?))
+    /// Errors: offsets that are not a packing ([`OpsError::Offsets`]).
+    pub fn new(offsets: &[usize]) -> Result<Self, OpsError> {
+        Ok(Self::packed(Offsets::new(offsets).map_err(|source| {
+            OpsError::Offsets {
+                op: Op::DistortionLoss,
+                source,
+            }
+        })?))
     }
 
     /// [`DistortionLoss::new`] over an already validated packing (a sampler's, for example:
@@ -58,7 +63,7 @@ impl DistortionLoss {
     ///
     /// Errors (the tape is unchanged): an input not `[n]`, a density that is negative or not
     /// finite, a step that is not finite and positive, a midpoint that is not finite or
-    /// decreases along its ray (the [`CompositeError`] itself inside [`TapeError::Op`], read
+    /// decreases along its ray (the [`OpsError`] itself inside [`TapeError::Op`], read
     /// back with [`TapeError::downcast_ref`], naming the ray and the sample), or a stale
     /// handle.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, sigma: Var, delta: Var, t: Var) -> Result<Var, TapeError> {

@@ -94,7 +94,7 @@
 //! Input is checked: offsets that are a packing, `sigma`, `delta` and `t` each `[n]`,
 //! densities finite and non-negative, steps finite and positive, midpoints finite and
 //! non-decreasing along each ray; the errors are the composite's
-//! ([`CompositeError`](crate::CompositeError)), naming the first ray and sample at fault.
+//! ([`OpsError`](crate::OpsError)), naming the first ray and sample at fault.
 //!
 //! ```
 //! use fogray_ops::DistortionLoss;

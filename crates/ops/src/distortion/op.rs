@@ -11,7 +11,7 @@ use ndarray::{Array1, ArrayD, ArrayView1, ArrayViewD, IxDyn};
 use super::check::{check_shapes, check_values, shape_error};
 use super::config::DistortionLoss;
 use super::kernel;
-use crate::error::CompositeError;
+use crate::error::OpsError;
 
 /// The three inputs, flat and checked.
 struct Checked<'a, F: Float> {
@@ -28,7 +28,7 @@ impl DistortionLoss {
         sigma: &'a ArrayViewD<'_, F>,
         delta: &'a ArrayViewD<'_, F>,
         t: &'a ArrayViewD<'_, F>,
-    ) -> Result<Checked<'a, F>, CompositeError> {
+    ) -> Result<Checked<'a, F>, OpsError> {
         check_shapes(
             &self.offsets,
             [("sigma", sigma.shape()), ("delta", delta.shape()), ("t", t.shape())],
@@ -46,7 +46,7 @@ impl DistortionLoss {
         sigma: &'a ArrayViewD<'_, F>,
         delta: &'a ArrayViewD<'_, F>,
         t: &'a ArrayViewD<'_, F>,
-    ) -> Result<Checked<'a, F>, CompositeError> {
+    ) -> Result<Checked<'a, F>, OpsError> {
         let x = self.flatten(sigma, delta, t)?;
         check_values(&self.offsets, &x.sigma, &x.delta, &x.t)?;
         Ok(x)
@@ -55,16 +55,16 @@ impl DistortionLoss {
     /// The loss of `sigma`, `delta` and `t` (each `[n]`): the mean over the rays of `L_r`
     /// (see the [module docs](super)), computed in f64 and rounded once; 0 for no ray.
     ///
-    /// Errors: an input not `[n]` ([`CompositeError::Shape`]); a density that is negative,
+    /// Errors: an input not `[n]` ([`OpsError::Shape`]); a density that is negative,
     /// NaN or infinite, a step that is not finite and positive, a midpoint that is not finite
-    /// or is below the previous one of its ray ([`CompositeError::InvalidSample`], naming the
+    /// or is below the previous one of its ray ([`OpsError::Domain`], naming the
     /// first ray and sample at fault).
     pub fn evaluate<F: Float>(
         &self,
         sigma: ArrayView1<'_, F>,
         delta: ArrayView1<'_, F>,
         t: ArrayView1<'_, F>,
-    ) -> Result<F, CompositeError> {
+    ) -> Result<F, OpsError> {
         let (sigma, delta, t) = (sigma.into_dyn(), delta.into_dyn(), t.into_dyn());
         let x = self.check(&sigma, &delta, &t)?;
         Ok(F::lit(kernel::mean_loss(&self.offsets, &x.sigma, &x.delta, &x.t)))
@@ -79,7 +79,7 @@ impl DistortionLoss {
         sigma: ArrayView1<'_, F>,
         delta: ArrayView1<'_, F>,
         t: ArrayView1<'_, F>,
-    ) -> Result<Array1<F>, CompositeError> {
+    ) -> Result<Array1<F>, OpsError> {
         let (sigma, delta, t) = (sigma.into_dyn(), delta.into_dyn(), t.into_dyn());
         let x = self.check(&sigma, &delta, &t)?;
         let mut losses = vec![0.0; self.rays()];
@@ -98,7 +98,7 @@ impl DistortionLoss {
         delta: ArrayView1<'_, F>,
         t: ArrayView1<'_, F>,
         upstream: F,
-    ) -> Result<Array1<F>, CompositeError> {
+    ) -> Result<Array1<F>, OpsError> {
         let (sigma, delta, t) = (sigma.into_dyn(), delta.into_dyn(), t.into_dyn());
         let x = self.check(&sigma, &delta, &t)?;
         Ok(Array1::from_vec(self.backward_flat(&x, upstream.as_f64())))
@@ -111,11 +111,6 @@ impl DistortionLoss {
         kernel::backward(&self.offsets, &x.sigma, &x.delta, &x.t, upstream, &mut g);
         g
     }
-}
-
-/// The op's own error, kept whole through the tape (`TapeError::downcast_ref`).
-fn op_error(e: CompositeError) -> OpError {
-    OpError::typed(e)
 }
 
 /// The op's three inputs, `[sigma, delta, t]`.
@@ -136,7 +131,7 @@ impl<F: Float> CustomOp<F> for DistortionLoss {
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
         let [sigma, delta, t] = three(inputs)?;
-        let x = self.check(sigma, delta, t).map_err(op_error)?;
+        let x = self.check(sigma, delta, t)?;
         let loss = F::lit(kernel::mean_loss(&self.offsets, &x.sigma, &x.delta, &x.t));
         Ok((vec![ArrayD::from_elem(IxDyn(&[]), loss)], ()))
     }
@@ -156,7 +151,7 @@ impl<F: Float> CustomOp<F> for DistortionLoss {
         let upstream = match g.ndim() {
             0 => g.iter().next().map_or(0.0, |v| v.as_f64()),
             _ => {
-                return Err(op_error(shape_error(
+                return Err(OpError::from(shape_error(
                     "loss gradient",
                     "[] (a 0-d value)".into(),
                     g.shape(),
@@ -165,7 +160,7 @@ impl<F: Float> CustomOp<F> for DistortionLoss {
         };
         let (sigma, delta, t) = (ctx.input(0), ctx.input(1), ctx.input(2));
         // The inputs were checked by the forward: only flattened again here.
-        let x = self.flatten(&sigma, &delta, &t).map_err(op_error)?;
+        let x = self.flatten(&sigma, &delta, &t)?;
         let g = self.backward_flat(&x, upstream);
         let g = ArrayD::from_shape_vec(IxDyn(sigma.shape()), g).map_err(|e| OpError::InvalidArgument(e.to_string()))?;
         Ok(vec![Some(g), None, None])

@@ -6,23 +6,17 @@
 //! instead of one record. It shares nothing with the fused op but the input checks, so the
 //! fused op is checked against it.
 
-use fogray_tape::{Float, OpError, Tape, TapeError, Var};
+use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::Array1;
 
 use super::check::{check_shapes, check_values, shape_error};
 use super::config::DistortionLoss;
-use crate::error::CompositeError;
-
-/// `e` as the tape's error, naming this op.
-fn tape_error(e: CompositeError) -> TapeError {
-    TapeError::from_op("distortion_loss", OpError::typed(e))
-}
 
 /// `v`'s value as a flat `[n]` vector.
 fn values<F: Float>(tape: &Tape<F>, what: &'static str, v: Var, n: usize) -> Result<Vec<F>, TapeError> {
     let x = tape.value(v)?;
     if x.shape() != [n] {
-        return Err(tape_error(shape_error(
+        return Err(TapeError::from(shape_error(
             what,
             format!("[{n}] (the offsets end at {n})"),
             x.shape(),
@@ -37,7 +31,7 @@ fn values<F: Float>(tape: &Tape<F>, what: &'static str, v: Var, n: usize) -> Res
 /// flows to them.
 ///
 /// Errors (the tape is unchanged): those of [`DistortionLoss::evaluate`] (the
-/// [`CompositeError`] inside [`TapeError::Op`]), a stale handle.
+/// [`OpsError`](crate::OpsError) inside [`TapeError::Op`]), a stale handle.
 pub fn distortion_loss<F: Float>(
     tape: &mut Tape<F>,
     op: &DistortionLoss,
@@ -52,15 +46,14 @@ pub fn distortion_loss<F: Float>(
         ("delta", tape.shape(delta)?.to_vec()),
         ("t", tape.shape(t)?.to_vec()),
     ];
-    check_shapes(op.packing(), shapes.each_ref().map(|(w, s)| (*w, s.as_slice()))).map_err(tape_error)?;
+    check_shapes(op.packing(), shapes.each_ref().map(|(w, s)| (*w, s.as_slice())))?;
     let t_values = values(tape, "t", t, n)?;
     check_values(
         op.packing(),
         &values(tape, "sigma", sigma, n)?,
         &values(tape, "delta", delta, n)?,
         &t_values,
-    )
-    .map_err(tape_error)?;
+    )?;
     if rays == 0 {
         // The mean over no ray is 0, as for the fused op.
         return Ok(tape.scalar(F::zero()));

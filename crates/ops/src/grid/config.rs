@@ -5,7 +5,7 @@ use fogray_tape::{Float, Tape, TapeError, Var};
 
 use super::geometry::GridBox;
 use super::scratch::Scratch;
-use crate::error::GridError;
+use crate::error::{Op, OpsError};
 
 /// A dense grid of `C` channels over a [`GridBox`], looked up at packed positions: bilinear in
 /// 2-D, trilinear in 3-D (see the [module docs](super) for the conventions).
@@ -57,12 +57,13 @@ impl GridField {
     /// A field over `bbox` whose grid values have shape `shape`: `[n0, n1, n2, C]` for a 3-D
     /// box, `[n0, n1, C]` for a 2-D one (channels last; axis 0 along x).
     ///
-    /// Errors ([`GridError::Shape`]): `shape` without exactly one entry more than the box has
+    /// Errors ([`OpsError::Shape`]): `shape` without exactly one entry more than the box has
     /// axes, an axis with fewer than 2 nodes (zero included), no channel, or more values than
     /// memory can address.
-    pub fn new(bbox: GridBox, shape: &[usize]) -> Result<Self, GridError> {
+    pub fn new(bbox: GridBox, shape: &[usize]) -> Result<Self, OpsError> {
         let dims = bbox.dims();
-        let fail = |expected: String| GridError::Shape {
+        let fail = |expected: String| OpsError::Shape {
+            op: Op::GridField,
             what: "grid shape",
             expected,
             got: format!("{shape:?}"),
@@ -127,7 +128,7 @@ impl GridField {
     /// tape needs it.
     ///
     /// Errors (the tape is unchanged): the shapes do not fit the op, or a position has a NaN
-    /// coordinate (the [`GridError`] itself inside [`TapeError::Op`], read back with
+    /// coordinate (the [`OpsError`] itself inside [`TapeError::Op`], read back with
     /// [`TapeError::downcast_ref`]), or a
     /// handle is stale.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, grid: Var, positions: Var) -> Result<Var, TapeError> {

@@ -8,7 +8,7 @@
 //! it with `t = 0`, one on the max face to the last cell with `t = 1`. Outside `[min, max]`
 //! (infinities included) there is no cell.
 
-use crate::error::{GeometryError, GridError};
+use crate::error::{Op, OpsError};
 use crate::rays::Aabb;
 
 /// An axis-aligned box in 2 or 3 dimensions, finite with `min < max` on every axis.
@@ -24,11 +24,12 @@ pub struct GridBox {
 impl GridBox {
     /// The box `[min[a], max[a]]` along each axis `a`.
     ///
-    /// Errors: [`GridError::Shape`] unless `min` and `max` both have 2 or 3 entries (the same
-    /// number); [`GridError::InvalidBox`] on an axis with a non-finite bound or `min >= max`.
-    pub fn new(min: &[f64], max: &[f64]) -> Result<Self, GridError> {
+    /// Errors: [`OpsError::Shape`] unless `min` and `max` both have 2 or 3 entries (the same
+    /// number); [`OpsError::Box`] on an axis with a non-finite bound or `min >= max`.
+    pub fn new(min: &[f64], max: &[f64]) -> Result<Self, OpsError> {
         if min.len() != max.len() || !(2..=3).contains(&min.len()) {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::GridField,
                 what: "box",
                 expected: "min and max with 2 or 3 coordinates each".into(),
                 got: format!("{} and {}", min.len(), max.len()),
@@ -41,7 +42,12 @@ impl GridBox {
         };
         for (axis, (&lo, &hi)) in min.iter().zip(max).enumerate() {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(GridError::InvalidBox { axis, min: lo, max: hi });
+                return Err(OpsError::Box {
+                    op: Op::GridField,
+                    axis,
+                    min: lo,
+                    max: hi,
+                });
             }
             b.min[axis] = lo;
             b.max[axis] = hi;
@@ -87,13 +93,14 @@ impl From<Aabb> for GridBox {
 }
 
 /// The 3-D grid box as a box to clip rays to.
-/// Errors: [`GeometryError::Shape`] for a 2-D box.
+/// Errors: [`OpsError::Shape`] for a 2-D box.
 impl TryFrom<GridBox> for Aabb {
-    type Error = GeometryError;
+    type Error = OpsError;
 
-    fn try_from(b: GridBox) -> Result<Self, GeometryError> {
+    fn try_from(b: GridBox) -> Result<Self, OpsError> {
         if b.dims != 3 {
-            return Err(GeometryError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Rays,
                 what: "box",
                 expected: "3 axes to clip rays to".into(),
                 got: format!("{} axes", b.dims),
@@ -289,7 +296,10 @@ mod tests {
         assert_eq!(Aabb::try_from(grid).unwrap(), aabb);
         assert_eq!(grid, GridBox::new(&[-1.0, -2.0, 0.5], &[1.0, 2.0, 3.0]).unwrap());
         let flat = GridBox::new(&[0.0, 0.0], &[1.0, 1.0]).unwrap();
-        assert!(matches!(Aabb::try_from(flat), Err(GeometryError::Shape { .. })));
+        assert!(matches!(
+            Aabb::try_from(flat),
+            Err(OpsError::Shape { op: Op::Rays, .. })
+        ));
     }
 
     #[test]
@@ -318,24 +328,39 @@ mod tests {
     fn bad_boxes_are_errors() {
         assert!(matches!(
             GridBox::new(&[0.0, 1.0], &[1.0, 1.0]),
-            Err(GridError::InvalidBox { axis: 1, .. })
+            Err(OpsError::Box {
+                op: Op::GridField,
+                axis: 1,
+                ..
+            })
         ));
         assert!(matches!(
             GridBox::new(&[0.0, 2.0], &[1.0, 1.0]),
-            Err(GridError::InvalidBox { axis: 1, .. })
+            Err(OpsError::Box {
+                op: Op::GridField,
+                axis: 1,
+                ..
+            })
         ));
         assert!(matches!(
             GridBox::new(&[f64::NAN, 0.0], &[1.0, 1.0]),
-            Err(GridError::InvalidBox { axis: 0, .. })
+            Err(OpsError::Box {
+                op: Op::GridField,
+                axis: 0,
+                ..
+            })
         ));
         assert!(matches!(
             GridBox::new(&[0.0, 0.0], &[1.0, f64::INFINITY]),
-            Err(GridError::InvalidBox { .. })
+            Err(OpsError::Box { op: Op::GridField, .. })
         ));
-        assert!(matches!(GridBox::new(&[0.0], &[1.0]), Err(GridError::Shape { .. })));
+        assert!(matches!(
+            GridBox::new(&[0.0], &[1.0]),
+            Err(OpsError::Shape { op: Op::GridField, .. })
+        ));
         assert!(matches!(
             GridBox::new(&[0.0; 3], &[1.0; 2]),
-            Err(GridError::Shape { .. })
+            Err(OpsError::Shape { op: Op::GridField, .. })
         ));
     }
 }

@@ -13,7 +13,7 @@ use super::config::{GridField, GridGradientBuffers, GridGradients, GridWanted};
 use super::forward::{forward, CHUNK};
 use super::geometry::Layout;
 use super::scatter::grid_gradient;
-use crate::error::GridError;
+use crate::error::{At, Op, OpsError};
 
 /// The values of `x` in row-major order: borrowed when contiguous, copied otherwise.
 pub(crate) fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
@@ -23,8 +23,9 @@ pub(crate) fn flat<'a, F: Float>(x: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
     }
 }
 
-pub(crate) fn array<F: Float>(shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, GridError> {
-    ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| GridError::Shape {
+pub(crate) fn array<F: Float>(op: Op, shape: &[usize], data: Vec<F>) -> Result<ArrayD<F>, OpsError> {
+    ArrayD::from_shape_vec(IxDyn(shape), data).map_err(|e| OpsError::Shape {
+        op,
         what: "output",
         expected: format!("{shape:?}"),
         got: e.to_string(),
@@ -36,15 +37,17 @@ pub(crate) fn buffer<'a, F: Float>(
     what: &'static str,
     b: &'a mut ArrayViewMutD<'_, F>,
     shape: &[usize],
-) -> Result<&'a mut [F], GridError> {
+) -> Result<&'a mut [F], OpsError> {
     if b.shape() != shape {
-        return Err(GridError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::GridField,
             what,
             expected: format!("{shape:?}"),
             got: format!("{:?}", b.shape()),
         });
     }
-    b.as_slice_mut().ok_or_else(|| GridError::Shape {
+    b.as_slice_mut().ok_or_else(|| OpsError::Shape {
+        op: Op::GridField,
         what,
         expected: "a contiguous array in standard (row-major) order".into(),
         got: "a strided view".into(),
@@ -53,14 +56,16 @@ pub(crate) fn buffer<'a, F: Float>(
 
 /// Positions `[n, d]`, flat, and `n`.
 ///
-/// Errors: another shape ([`GridError::Shape`]), a NaN coordinate ([`GridError::NanPosition`],
-/// the first one).
+/// Errors, naming `op`: another shape ([`OpsError::Shape`]), a NaN coordinate
+/// ([`OpsError::Domain`], the first one).
 pub(crate) fn check_positions<'a, F: Float>(
+    op: Op,
     positions: &'a ArrayViewD<'_, F>,
     d: usize,
-) -> Result<(Cow<'a, [F]>, usize), GridError> {
+) -> Result<(Cow<'a, [F]>, usize), OpsError> {
     if positions.ndim() != 2 || positions.shape()[1] != d {
-        return Err(GridError::Shape {
+        return Err(OpsError::Shape {
+            op,
             what: "positions",
             expected: format!("[n, {d}]"),
             got: format!("{:?}", positions.shape()),
@@ -74,10 +79,16 @@ pub(crate) fn check_positions<'a, F: Float>(
         .position_first(|c| c.iter().any(|x| x.is_nan()))
     {
         let i = c * chunk + positions[c * chunk..].iter().position(|x| x.is_nan()).unwrap_or(0);
-        return Err(GridError::NanPosition {
-            sample: i / d,
-            axis: i % d,
-        });
+        return Err(OpsError::domain(
+            op,
+            At::Entry {
+                row: i / d,
+                column: i % d,
+            },
+            "position",
+            f64::NAN,
+            "must not be NaN; outside the box, even infinite, reads zero",
+        ));
     }
     let n = positions.len() / d;
     Ok((positions, n))
@@ -97,15 +108,16 @@ impl GridField {
         &self,
         grid: &'a ArrayViewD<'_, F>,
         positions: &'a ArrayViewD<'_, F>,
-    ) -> Result<Checked<'a, F>, GridError> {
+    ) -> Result<Checked<'a, F>, OpsError> {
         if grid.shape() != self.shape.as_slice() {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::GridField,
                 what: "grid",
                 expected: format!("{:?}", self.shape),
                 got: format!("{:?}", grid.shape()),
             });
         }
-        let (positions, n) = check_positions(positions, self.dims())?;
+        let (positions, n) = check_positions(Op::GridField, positions, self.dims())?;
         Ok(Checked {
             grid: flat(grid),
             n,
@@ -117,31 +129,31 @@ impl GridField {
     /// `[n, D]` (D the box's axes), the result `[n, C]`. A position outside the box reads 0
     /// in every channel.
     ///
-    /// Errors: the shapes do not fit ([`GridError::Shape`]), a NaN coordinate
-    /// ([`GridError::NanPosition`], the first one).
+    /// Errors: the shapes do not fit ([`OpsError::Shape`]), a NaN coordinate
+    /// ([`OpsError::Domain`], the first one).
     pub fn evaluate<F: Float>(
         &self,
         grid: &ArrayViewD<'_, F>,
         positions: &ArrayViewD<'_, F>,
-    ) -> Result<ArrayD<F>, GridError> {
+    ) -> Result<ArrayD<F>, OpsError> {
         let x = self.check(grid, positions)?;
         // The forward writes every value, so no zeros first.
         let mut out = scratch(x.n * self.channels());
         self.forward_flat(&x, &mut out);
-        array(&[x.n, self.channels()], out)
+        array(Op::GridField, &[x.n, self.channels()], out)
     }
 
     /// [`GridField::evaluate`] into `out`, a buffer the caller keeps (`[n, C]`, contiguous in
     /// standard order; every value overwritten): a training loop then allocates nothing.
     ///
     /// Errors: as [`GridField::evaluate`], and an `out` of another shape or strided
-    /// ([`GridError::Shape`]); `out` is unchanged on error.
+    /// ([`OpsError::Shape`]); `out` is unchanged on error.
     pub fn evaluate_into<F: Float>(
         &self,
         grid: &ArrayViewD<'_, F>,
         positions: &ArrayViewD<'_, F>,
         out: &mut ArrayViewMutD<'_, F>,
-    ) -> Result<(), GridError> {
+    ) -> Result<(), OpsError> {
         let x = self.check(grid, positions)?;
         let out = buffer("output buffer", out, &[x.n, self.channels()])?;
         self.forward_flat(&x, out);
@@ -183,15 +195,17 @@ impl GridField {
         positions: &ArrayViewD<'_, F>,
         upstream: &ArrayViewD<'_, F>,
         wanted: GridWanted,
-    ) -> Result<GridGradients<F>, GridError> {
+    ) -> Result<GridGradients<F>, OpsError> {
         let (x, g) = self.check_vjp(grid, positions, upstream)?;
         // Both gradients are written whole, so no zeros first.
         let mut grid_out = wanted.grid.then(|| scratch(x.grid.len()));
         let mut positions_out = wanted.positions.then(|| scratch(x.positions.len()));
         self.gradients_flat(&x, &g, grid_out.as_deref_mut(), positions_out.as_deref_mut());
         Ok(GridGradients {
-            grid: grid_out.map(|v| array(&self.shape, v)).transpose()?,
-            positions: positions_out.map(|v| array(&[x.n, self.dims()], v)).transpose()?,
+            grid: grid_out.map(|v| array(Op::GridField, &self.shape, v)).transpose()?,
+            positions: positions_out
+                .map(|v| array(Op::GridField, &[x.n, self.dims()], v))
+                .transpose()?,
         })
     }
 
@@ -200,14 +214,14 @@ impl GridField {
     /// same bits as [`GridField::vjp`].
     ///
     /// Errors: as [`GridField::vjp`], and a buffer of another shape or strided
-    /// ([`GridError::Shape`]); no buffer is changed on error.
+    /// ([`OpsError::Shape`]); no buffer is changed on error.
     pub fn vjp_into<F: Float>(
         &self,
         grid: &ArrayViewD<'_, F>,
         positions: &ArrayViewD<'_, F>,
         upstream: &ArrayViewD<'_, F>,
         out: &mut GridGradientBuffers<'_, F>,
-    ) -> Result<(), GridError> {
+    ) -> Result<(), OpsError> {
         let (x, g) = self.check_vjp(grid, positions, upstream)?;
         let GridGradientBuffers {
             grid: grid_out,
@@ -232,11 +246,12 @@ impl GridField {
         grid: &'a ArrayViewD<'_, F>,
         positions: &'a ArrayViewD<'_, F>,
         upstream: &'a ArrayViewD<'_, F>,
-    ) -> Result<(Checked<'a, F>, Cow<'a, [F]>), GridError> {
+    ) -> Result<(Checked<'a, F>, Cow<'a, [F]>), OpsError> {
         let x = self.check(grid, positions)?;
         let ch = self.channels();
         if upstream.shape() != [x.n, ch] {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::GridField,
                 what: "upstream gradient",
                 expected: format!("[{}, {ch}]", x.n),
                 got: format!("{:?}", upstream.shape()),
@@ -288,11 +303,6 @@ impl GridField {
     }
 }
 
-/// The grid's own error, kept whole through the tape (`TapeError::downcast_ref`).
-pub(crate) fn op_error(e: GridError) -> OpError {
-    OpError::typed(e)
-}
-
 impl<F: Float> CustomOp<F> for GridField {
     /// Nothing: the backward recomputes each position's cell and weights from the inputs the
     /// tape keeps anyway.
@@ -309,7 +319,7 @@ impl<F: Float> CustomOp<F> for GridField {
                 inputs.len()
             )));
         };
-        Ok((vec![self.evaluate(grid, positions).map_err(op_error)?], ()))
+        Ok((vec![self.evaluate(grid, positions)?], ()))
     }
 
     fn backward(
@@ -324,7 +334,7 @@ impl<F: Float> CustomOp<F> for GridField {
             grid: ctx.needs_input_grad(0),
             positions: ctx.needs_input_grad(1),
         };
-        let out = self.vjp(&ctx.input(0), &ctx.input(1), g, wanted).map_err(op_error)?;
+        let out = self.vjp(&ctx.input(0), &ctx.input(1), g, wanted)?;
         Ok(vec![out.grid, out.positions])
     }
 }

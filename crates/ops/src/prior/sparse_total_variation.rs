@@ -8,7 +8,7 @@ use ndarray::{ArrayD, ArrayViewD, IxDyn};
 use rayon::prelude::*;
 
 use super::TotalVariation;
-use crate::error::PriorError;
+use crate::error::{Op, OpsError};
 use crate::grid::{NodeIndex, SparseGridField};
 
 /// [`TotalVariation`] on the packed values `[kept, C]` of a [`SparseGridField`]:
@@ -99,10 +99,11 @@ impl SparseTotalVariation {
         self.weight
     }
 
-    fn check<'a, F: Float>(&self, data: &'a ArrayViewD<'_, F>) -> Result<std::borrow::Cow<'a, [F]>, PriorError> {
+    fn check<'a, F: Float>(&self, data: &'a ArrayViewD<'_, F>) -> Result<std::borrow::Cow<'a, [F]>, OpsError> {
         let want = [self.neighbours.len(), self.channels];
         if data.shape() != want {
-            return Err(PriorError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::SparseTotalVariation,
                 what: "sparse grid values",
                 expected: format!("{want:?}"),
                 got: format!("{:?}", data.shape()),
@@ -116,8 +117,8 @@ impl SparseTotalVariation {
 
     /// The prior of `data` (`[kept, C]`), without a tape.
     ///
-    /// Errors: values of another shape ([`PriorError::Shape`]).
-    pub fn value<F: Float>(&self, data: &ArrayViewD<'_, F>) -> Result<f64, PriorError> {
+    /// Errors: values of another shape ([`OpsError::Shape`]).
+    pub fn value<F: Float>(&self, data: &ArrayViewD<'_, F>) -> Result<f64, OpsError> {
         let v = self.check(data)?;
         let terms = self.terms;
         if terms == 0 {
@@ -148,8 +149,8 @@ impl SparseTotalVariation {
 
     /// `scale` times the gradient of the prior at `data`.
     ///
-    /// Errors: values of another shape ([`PriorError::Shape`]).
-    pub fn gradient<F: Float>(&self, data: &ArrayViewD<'_, F>, scale: f64) -> Result<ArrayD<F>, PriorError> {
+    /// Errors: values of another shape ([`OpsError::Shape`]).
+    pub fn gradient<F: Float>(&self, data: &ArrayViewD<'_, F>, scale: f64) -> Result<ArrayD<F>, OpsError> {
         let v = self.check(data)?;
         let terms = self.terms;
         let ch = self.channels;
@@ -173,7 +174,8 @@ impl SparseTotalVariation {
                 }
             });
         }
-        ArrayD::from_shape_vec(IxDyn(&[self.neighbours.len(), ch]), out).map_err(|e| PriorError::Shape {
+        ArrayD::from_shape_vec(IxDyn(&[self.neighbours.len(), ch]), out).map_err(|e| OpsError::Shape {
+            op: Op::SparseTotalVariation,
             what: "gradient",
             expected: format!("[{}, {ch}]", self.neighbours.len()),
             got: e.to_string(),

@@ -6,7 +6,7 @@ use fogray_tape::{BackwardCtx, CustomOp, Float, OpError, Tape, TapeError, Var};
 use ndarray::{ArrayD, ArrayViewD, ArrayViewMutD, IxDyn};
 use rayon::prelude::*;
 
-use crate::error::PriorError;
+use crate::error::{Op, OpsError};
 
 /// The total-variation prior of a grid `[X, Y, C]` or `[X, Y, Z, C]` (spatial axes, then
 /// channels, as a [`GridField`](crate::GridField) holds it):
@@ -53,12 +53,13 @@ struct Dims {
 }
 
 impl Dims {
-    fn of(shape: &[usize]) -> Result<Self, PriorError> {
+    fn of(shape: &[usize]) -> Result<Self, OpsError> {
         let n = match *shape {
             [x, y, c] => [x, y, 1, c],
             [x, y, z, c] => [x, y, z, c],
             _ => {
-                return Err(PriorError::Shape {
+                return Err(OpsError::Shape {
+                    op: Op::TotalVariation,
                     what: "grid",
                     expected: "[X, Y, C] or [X, Y, Z, C]".into(),
                     got: format!("{shape:?}"),
@@ -87,10 +88,15 @@ fn flat<'a, F: Float>(grid: &'a ArrayViewD<'_, F>) -> Cow<'a, [F]> {
 impl TotalVariation {
     /// A prior of weight `weight` (finite and non-negative).
     ///
-    /// Errors: [`PriorError::InvalidWeight`].
-    pub fn new(weight: f64) -> Result<Self, PriorError> {
+    /// Errors: [`OpsError::Config`].
+    pub fn new(weight: f64) -> Result<Self, OpsError> {
         if !(weight.is_finite() && weight >= 0.0) {
-            return Err(PriorError::InvalidWeight { value: weight });
+            return Err(OpsError::config(
+                Op::TotalVariation,
+                "weight",
+                weight,
+                "must be finite and non-negative",
+            ));
         }
         Ok(TotalVariation { weight })
     }
@@ -102,8 +108,8 @@ impl TotalVariation {
 
     /// The prior of `grid` (`[X, Y, C]` or `[X, Y, Z, C]`), without a tape.
     ///
-    /// Errors: a grid of another rank ([`PriorError::Shape`]).
-    pub fn value<F: Float>(&self, grid: &ArrayViewD<'_, F>) -> Result<f64, PriorError> {
+    /// Errors: a grid of another rank ([`OpsError::Shape`]).
+    pub fn value<F: Float>(&self, grid: &ArrayViewD<'_, F>) -> Result<f64, OpsError> {
         let dims = Dims::of(grid.shape())?;
         Ok(self.value_flat(&flat(grid), dims))
     }
@@ -144,16 +150,17 @@ impl TotalVariation {
     /// `d TV / d g[i, c] = 2 weight / terms * sum over i's neighbours n of (g[i, c] - g[n, c])`.
     ///
     /// Errors: a grid of another rank, or `out` not of the grid's shape
-    /// ([`PriorError::Shape`]); `out` is unchanged then.
+    /// ([`OpsError::Shape`]); `out` is unchanged then.
     pub fn gradient_into<F: Float>(
         &self,
         grid: &ArrayViewD<'_, F>,
         scale: f64,
         mut out: ArrayViewMutD<'_, F>,
-    ) -> Result<(), PriorError> {
+    ) -> Result<(), OpsError> {
         let dims = Dims::of(grid.shape())?;
         if out.shape() != grid.shape() {
-            return Err(PriorError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::TotalVariation,
                 what: "gradient buffer",
                 expected: format!("{:?}", grid.shape()),
                 got: format!("{:?}", out.shape()),

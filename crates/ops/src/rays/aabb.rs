@@ -4,7 +4,7 @@ use fogray_tape::Float;
 use rayon::prelude::*;
 
 use super::batch::RayBatch;
-use crate::error::GeometryError;
+use crate::error::{At, Op, OpsError};
 
 /// An axis-aligned box `[min, max]` (finite, `min < max` on every axis).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -25,11 +25,16 @@ pub struct RayIntervals {
 
 impl Aabb {
     /// The box `[min, max]`. Errors: a non-finite bound or `min >= max` on some axis.
-    pub fn new(min: [f64; 3], max: [f64; 3]) -> Result<Self, GeometryError> {
+    pub fn new(min: [f64; 3], max: [f64; 3]) -> Result<Self, OpsError> {
         for axis in 0..3 {
             let (lo, hi) = (min[axis], max[axis]);
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(GeometryError::InvalidBox { axis, min: lo, max: hi });
+                return Err(OpsError::Box {
+                    op: Op::Rays,
+                    axis,
+                    min: lo,
+                    max: hi,
+                });
             }
         }
         Ok(Aabb { min, max })
@@ -97,17 +102,20 @@ impl Aabb {
 impl RayIntervals {
     /// Caller-chosen segments (near and far planes, say), every ray a hit.
     /// Errors: different lengths, a non-finite bound, `t_near < 0` or `t_near > t_far`.
-    pub fn new(t_near: Vec<f64>, t_far: Vec<f64>) -> Result<Self, GeometryError> {
+    pub fn new(t_near: Vec<f64>, t_far: Vec<f64>) -> Result<Self, OpsError> {
         if t_near.len() != t_far.len() {
-            return Err(GeometryError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Rays,
                 what: "t_far",
                 expected: format!("{} values like t_near", t_near.len()),
                 got: format!("{}", t_far.len()),
             });
         }
         for (r, (&n, &f)) in t_near.iter().zip(&t_far).enumerate() {
-            let bad = |what: &str, value: f64, rule| GeometryError::InvalidValue {
-                what: format!("{what}[{r}]"),
+            let bad = |what: &str, value: f64, rule| OpsError::Domain {
+                op: Op::Rays,
+                at: At::Ray(r),
+                what: what.into(),
                 value,
                 rule,
             };
@@ -226,7 +234,8 @@ mod tests {
     fn bad_boxes_and_intervals_are_errors() {
         assert_eq!(
             Aabb::new([0.0; 3], [1.0, -1.0, 1.0]),
-            Err(GeometryError::InvalidBox {
+            Err(OpsError::Box {
+                op: Op::Rays,
                 axis: 1,
                 min: 0.0,
                 max: -1.0

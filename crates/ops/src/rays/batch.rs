@@ -3,7 +3,7 @@
 use fogray_tape::Float;
 use ndarray::{Array2, ArrayView2, Axis};
 
-use crate::error::GeometryError;
+use crate::error::{At, Op, OpsError};
 
 /// `R` rays as origins `[R, 3]` and unit directions `[R, 3]` (world units; a point at
 /// distance `t` along ray `r` is `origins[r] + t * directions[r]`).
@@ -16,8 +16,9 @@ pub struct RayBatch<F: Float> {
     directions: Array2<F>,
 }
 
-fn shape_error(what: &'static str, got: &[usize]) -> GeometryError {
-    GeometryError::Shape {
+fn shape_error(what: &'static str, got: &[usize]) -> OpsError {
+    OpsError::Shape {
+        op: Op::Rays,
         what,
         expected: "[R, 3]".into(),
         got: format!("{got:?}"),
@@ -30,21 +31,27 @@ impl<F: Float> RayBatch<F> {
     ///
     /// Errors: shapes other than `[R, 3]` or different `R`, a non-finite value, a zero (or
     /// overflowing) direction.
-    pub fn new(origins: Array2<F>, directions: Array2<F>) -> Result<Self, GeometryError> {
+    pub fn new(origins: Array2<F>, directions: Array2<F>) -> Result<Self, OpsError> {
         for (what, a) in [("origins", &origins), ("directions", &directions)] {
             if a.ncols() != 3 {
                 return Err(shape_error(what, a.shape()));
             }
             if let Some((k, v)) = a.iter().enumerate().find(|(_, v)| !v.is_finite()) {
-                return Err(GeometryError::InvalidValue {
-                    what: format!("{what}[{}, {}]", k / 3, k % 3),
+                return Err(OpsError::Domain {
+                    op: Op::Rays,
+                    at: At::Entry {
+                        row: k / 3,
+                        column: k % 3,
+                    },
+                    what: what.into(),
                     value: v.as_f64(),
                     rule: "must be finite",
                 });
             }
         }
         if origins.nrows() != directions.nrows() {
-            return Err(GeometryError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Rays,
                 what: "directions",
                 expected: format!("[{}, 3] like the origins", origins.nrows()),
                 got: format!("{:?}", directions.shape()),
@@ -53,14 +60,17 @@ impl<F: Float> RayBatch<F> {
         let mut unit = Vec::with_capacity(directions.len());
         for (r, d) in directions.axis_iter(Axis(0)).enumerate() {
             let d = [d[0].as_f64(), d[1].as_f64(), d[2].as_f64()];
-            let n = normalise(d).ok_or_else(|| GeometryError::InvalidValue {
-                what: format!("length of directions[{r}]"),
+            let n = normalise(d).ok_or_else(|| OpsError::Domain {
+                op: Op::Rays,
+                at: At::Ray(r),
+                what: "direction's length".into(),
                 value: norm(d),
                 rule: "must be positive and finite",
             })?;
             unit.extend(n.map(F::lit));
         }
-        let directions = Array2::from_shape_vec((origins.nrows(), 3), unit).map_err(|e| GeometryError::Shape {
+        let directions = Array2::from_shape_vec((origins.nrows(), 3), unit).map_err(|e| OpsError::Shape {
+            op: Op::Rays,
             what: "directions",
             expected: "[R, 3]".into(),
             got: e.to_string(),
@@ -197,24 +207,37 @@ mod tests {
         let wide = ndarray::Array2::<f32>::zeros((1, 4));
         assert!(matches!(
             RayBatch::new(wide.clone(), ok.clone()),
-            Err(GeometryError::Shape { what: "origins", .. })
+            Err(OpsError::Shape {
+                op: Op::Rays,
+                what: "origins",
+                ..
+            })
         ));
         assert!(matches!(
             RayBatch::new(ok.clone(), wide),
-            Err(GeometryError::Shape { .. })
+            Err(OpsError::Shape { op: Op::Rays, .. })
         ));
         let nan = arr2(&[[0.0f32, f32::NAN, 1.0]]);
         let e = RayBatch::new(nan, ok.clone()).unwrap_err();
-        assert_eq!(e.to_string(), "origins[0, 1] is NaN (must be finite)");
+        assert_eq!(e.to_string(), "rays: row 0, column 1: origins is NaN (must be finite)");
         let zero = arr2(&[[0.0f32, 0.0, 0.0]]);
         assert!(matches!(
             RayBatch::new(ok.clone(), zero),
-            Err(GeometryError::InvalidValue { .. })
+            Err(OpsError::Domain {
+                op: Op::Rays,
+                at: At::Ray(0),
+                value: 0.0,
+                ..
+            })
         ));
         let two = arr2(&[[0.0f32, 0.0, 1.0], [0.0, 0.0, 1.0]]);
         assert!(matches!(
             RayBatch::new(ok, two),
-            Err(GeometryError::Shape { what: "directions", .. })
+            Err(OpsError::Shape {
+                op: Op::Rays,
+                what: "directions",
+                ..
+            })
         ));
     }
 }

@@ -11,7 +11,7 @@ use fogray_tape::Float;
 use super::batch::{normalise, RayBatch};
 use super::distortion::Distortion;
 use super::frame::{checked_transform, Frame};
-use crate::error::GeometryError;
+use crate::error::{At, Op, OpsError};
 
 /// Focal lengths and principal point in pixels, and the image size.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,9 +36,11 @@ impl Intrinsics {
     /// `cx = width / 2`, `cy = height / 2`.
     ///
     /// Errors: a zero size, a field of view outside (0, pi).
-    pub fn from_vertical_fov(width: usize, height: usize, fov_y: f64) -> Result<Self, GeometryError> {
+    pub fn from_vertical_fov(width: usize, height: usize, fov_y: f64) -> Result<Self, OpsError> {
         if !(fov_y > 0.0 && fov_y < std::f64::consts::PI) {
-            return Err(GeometryError::InvalidValue {
+            return Err(OpsError::Domain {
+                op: Op::Rays,
+                at: At::Value,
                 what: "vertical field of view".into(),
                 value: fov_y,
                 rule: "must be in (0, pi) radians",
@@ -58,9 +60,10 @@ impl Intrinsics {
     }
 
     /// Checks the domain of every field (see the field docs).
-    pub fn check(&self) -> Result<(), GeometryError> {
+    pub fn check(&self) -> Result<(), OpsError> {
         if self.width == 0 || self.height == 0 {
-            return Err(GeometryError::EmptyImage {
+            return Err(OpsError::EmptyImage {
+                op: Op::Rays,
                 width: self.width,
                 height: self.height,
             });
@@ -72,7 +75,9 @@ impl Intrinsics {
             ("cy", self.cy, false),
         ] {
             if !v.is_finite() || (nonzero && v == 0.0) {
-                return Err(GeometryError::InvalidValue {
+                return Err(OpsError::Domain {
+                    op: Op::Rays,
+                    at: At::Value,
                     what: what.into(),
                     value: v,
                     rule: if nonzero {
@@ -109,7 +114,7 @@ impl PinholeCamera {
     /// `R` may scale or shear (rays are normalised after it) but must be invertible.
     /// Errors: bad intrinsics, a non-finite entry, a last row other than `0 0 0 1`, or a
     /// singular `R` (its determinant below `1e-9` times the product of its column lengths).
-    pub fn new(intrinsics: Intrinsics, camera_to_world: [[f64; 4]; 4]) -> Result<Self, GeometryError> {
+    pub fn new(intrinsics: Intrinsics, camera_to_world: [[f64; 4]; 4]) -> Result<Self, OpsError> {
         intrinsics.check()?;
         Ok(PinholeCamera {
             intrinsics,
@@ -121,7 +126,7 @@ impl PinholeCamera {
     /// A camera from a camera-to-world transform in the OpenGL / NeRF-Blender convention
     /// (x right, y up, z backward): the same as [`PinholeCamera::new`] after negating the
     /// transform's y and z columns. Errors as [`PinholeCamera::new`].
-    pub fn from_opengl(intrinsics: Intrinsics, camera_to_world: [[f64; 4]; 4]) -> Result<Self, GeometryError> {
+    pub fn from_opengl(intrinsics: Intrinsics, camera_to_world: [[f64; 4]; 4]) -> Result<Self, OpsError> {
         let mut m = camera_to_world;
         for row in m.iter_mut().take(3) {
             row[1] = -row[1];
@@ -136,12 +141,7 @@ impl PinholeCamera {
     ///
     /// Errors: bad intrinsics, a non-finite input, `eye == target`, or `up` (nearly) parallel
     /// to the viewing direction (the sine of their angle below `1e-9`).
-    pub fn look_at(
-        intrinsics: Intrinsics,
-        eye: [f64; 3],
-        target: [f64; 3],
-        up: [f64; 3],
-    ) -> Result<Self, GeometryError> {
+    pub fn look_at(intrinsics: Intrinsics, eye: [f64; 3], target: [f64; 3], up: [f64; 3]) -> Result<Self, OpsError> {
         intrinsics.check()?;
         let frame = Frame::look_at(eye, target, up)?;
         Ok(PinholeCamera {
@@ -155,7 +155,7 @@ impl PinholeCamera {
     /// lens sent it (the pixel's normalised coordinates undistorted, then rotated).
     ///
     /// Errors: a coefficient that is not finite.
-    pub fn with_distortion(self, distortion: Distortion) -> Result<Self, GeometryError> {
+    pub fn with_distortion(self, distortion: Distortion) -> Result<Self, OpsError> {
         distortion.check()?;
         Ok(PinholeCamera { distortion, ..self })
     }
@@ -223,7 +223,7 @@ impl PinholeCamera {
 
     /// The rays through the chosen pixel indices (`row * width + col`), in the order given
     /// (repeats allowed). Errors: an index `>= width * height`.
-    pub fn rays_for_pixels<F: Float>(&self, pixels: &[usize]) -> Result<RayBatch<F>, GeometryError> {
+    pub fn rays_for_pixels<F: Float>(&self, pixels: &[usize]) -> Result<RayBatch<F>, OpsError> {
         rays_for_camera_pixels(
             std::slice::from_ref(self),
             &pixels
@@ -251,16 +251,18 @@ pub struct CameraPixel {
 pub fn rays_for_camera_pixels<F: Float>(
     cameras: &[PinholeCamera],
     pairs: &[CameraPixel],
-) -> Result<RayBatch<F>, GeometryError> {
+) -> Result<RayBatch<F>, OpsError> {
     for p in pairs {
-        let cam = cameras.get(p.camera).ok_or(GeometryError::OutOfRange {
+        let cam = cameras.get(p.camera).ok_or(OpsError::OutOfRange {
+            op: Op::Rays,
             what: "camera",
             index: p.camera,
             len: cameras.len(),
         })?;
         let len = cam.intrinsics.pixels();
         if p.pixel >= len {
-            return Err(GeometryError::OutOfRange {
+            return Err(OpsError::OutOfRange {
+                op: Op::Rays,
                 what: "pixel",
                 index: p.pixel,
                 len,

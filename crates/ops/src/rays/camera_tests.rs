@@ -1,7 +1,7 @@
 //! Value tests of the pinhole camera against directions derived by hand.
 
 use super::*;
-use crate::error::GeometryError;
+use crate::error::{At, Op, OpsError};
 
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
@@ -126,7 +126,8 @@ fn chosen_pixels_and_pairs_pick_rows_of_the_full_batch() {
     assert_eq!(mixed.origins().row(1), all_a.origins().row(20));
     assert_eq!(
         a.rays_for_pixels::<f32>(&[35]).unwrap_err(),
-        GeometryError::OutOfRange {
+        OpsError::OutOfRange {
+            op: Op::Rays,
             what: "pixel",
             index: 35,
             len: 35
@@ -134,7 +135,8 @@ fn chosen_pixels_and_pairs_pick_rows_of_the_full_batch() {
     );
     assert_eq!(
         rays_for_camera_pixels::<f32>(&[a, b], &[CameraPixel { camera: 2, pixel: 0 }]).unwrap_err(),
-        GeometryError::OutOfRange {
+        OpsError::OutOfRange {
+            op: Op::Rays,
             what: "camera",
             index: 2,
             len: 2
@@ -153,7 +155,11 @@ fn bad_cameras_are_errors() {
     ];
     assert_eq!(
         Intrinsics::from_vertical_fov(0, 4, 1.0),
-        Err(GeometryError::EmptyImage { width: 0, height: 4 })
+        Err(OpsError::EmptyImage {
+            op: Op::Rays,
+            width: 0,
+            height: 4
+        })
     );
     assert!(Intrinsics::from_vertical_fov(4, 4, 0.0).is_err());
     assert!(Intrinsics::from_vertical_fov(4, 4, 3.2).is_err());
@@ -162,31 +168,58 @@ fn bad_cameras_are_errors() {
     assert!(PinholeCamera::new(Intrinsics { height: 0, ..k }, id).is_err());
     let mut nan = id;
     nan[1][3] = f64::NAN;
-    assert!(matches!(PinholeCamera::new(k, nan), Err(GeometryError::Transform(_))));
+    assert!(matches!(
+        PinholeCamera::new(k, nan),
+        Err(OpsError::Frame {
+            op: Op::Rays,
+            what: "camera-to-world transform",
+            ..
+        })
+    ));
     let mut singular = id;
     singular[2] = [1.0, 0.0, 0.0, 0.0]; // third row = first: rank 2
     assert!(matches!(
         PinholeCamera::new(k, singular),
-        Err(GeometryError::Transform(_))
+        Err(OpsError::Frame {
+            op: Op::Rays,
+            what: "camera-to-world transform",
+            ..
+        })
     ));
     let mut projective = id;
     projective[3][0] = 0.5;
     assert!(matches!(
         PinholeCamera::new(k, projective),
-        Err(GeometryError::Transform(_))
+        Err(OpsError::Frame {
+            op: Op::Rays,
+            what: "camera-to-world transform",
+            ..
+        })
     ));
     let look = |eye, target, up| PinholeCamera::look_at(k, eye, target, up);
     assert!(matches!(
         look([1.0; 3], [1.0; 3], [0.0, 0.0, 1.0]),
-        Err(GeometryError::Degenerate(_))
+        Err(OpsError::Frame {
+            op: Op::Rays,
+            what: "look_at",
+            ..
+        })
     ));
     assert!(matches!(
         look([0.0, 0.0, 3.0], [0.0; 3], [0.0, 0.0, 1.0]),
-        Err(GeometryError::Degenerate(_))
+        Err(OpsError::Frame {
+            op: Op::Rays,
+            what: "look_at",
+            ..
+        })
     ));
     assert!(matches!(
         look([0.0, 0.0, 3.0], [0.0; 3], [0.0; 3]),
-        Err(GeometryError::Degenerate(_))
+        Err(OpsError::Frame {
+            op: Op::Rays,
+            what: "look_at",
+            ..
+        })
     ));
     assert!(look([f64::INFINITY, 0.0, 3.0], [0.0; 3], [0.0, 1.0, 0.0]).is_err());
 }
@@ -274,6 +307,10 @@ fn a_non_finite_distortion_is_refused() {
     };
     assert!(matches!(
         cam.with_distortion(lens),
-        Err(GeometryError::InvalidValue { .. })
+        Err(OpsError::Domain {
+            op: Op::Rays,
+            at: At::Value,
+            ..
+        })
     ));
 }

@@ -14,7 +14,7 @@
 //! 2x2 system, started at `p'` (the distortion of a real lens is a small perturbation of the
 //! identity, so the start is close and the iteration converges quadratically).
 
-use crate::error::GeometryError;
+use crate::error::{At, Op, OpsError};
 
 /// Newton steps at most; well-behaved lenses converge in under ten.
 const MAX_STEPS: usize = 40;
@@ -67,7 +67,7 @@ impl Distortion {
     }
 
     /// Errors: a coefficient that is not finite.
-    pub fn check(&self) -> Result<(), GeometryError> {
+    pub fn check(&self) -> Result<(), OpsError> {
         let named = [
             ("k1", self.k1),
             ("k2", self.k2),
@@ -77,7 +77,9 @@ impl Distortion {
             ("p2", self.p2),
         ];
         match named.iter().find(|(_, v)| !v.is_finite()) {
-            Some(&(what, value)) => Err(GeometryError::InvalidValue {
+            Some(&(what, value)) => Err(OpsError::Domain {
+                op: Op::Rays,
+                at: At::Value,
                 what: format!("distortion {what}"),
                 value,
                 rule: "must be finite",

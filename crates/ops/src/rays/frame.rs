@@ -2,7 +2,7 @@
 //! `x_world = R x_cam + c`, checked on construction.
 
 use super::batch::{norm, normalise};
-use crate::error::GeometryError;
+use crate::error::{Op, OpsError};
 
 /// `x_world = rotation x_cam + centre` (`rotation` row-major, invertible).
 #[derive(Debug, Clone, PartialEq)]
@@ -23,21 +23,31 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+fn transform(problem: String) -> OpsError {
+    OpsError::Frame {
+        op: Op::Rays,
+        what: "camera-to-world transform",
+        problem,
+    }
+}
+
+fn degenerate(problem: String) -> OpsError {
+    OpsError::Frame {
+        op: Op::Rays,
+        what: "look_at",
+        problem,
+    }
+}
+
 /// Checks a 4x4 camera-to-world matrix: finite, affine (last row `0 0 0 1` within 1e-9) and
 /// with an invertible linear part. Invertibility is judged scale-free: `|det R|` against the
 /// product of the column lengths (1 for a rotation, 0 for a singular matrix).
-pub(crate) fn checked_transform(m: [[f64; 4]; 4]) -> Result<Frame, GeometryError> {
+pub(crate) fn checked_transform(m: [[f64; 4]; 4]) -> Result<Frame, OpsError> {
     if let Some((i, j)) = (0..16).map(|k| (k / 4, k % 4)).find(|&(i, j)| !m[i][j].is_finite()) {
-        return Err(GeometryError::Transform(format!(
-            "entry [{i}][{j}] is {} (must be finite)",
-            m[i][j]
-        )));
+        return Err(transform(format!("entry [{i}][{j}] is {} (must be finite)", m[i][j])));
     }
     if (0..4).any(|j| (m[3][j] - if j == 3 { 1.0 } else { 0.0 }).abs() > 1e-9) {
-        return Err(GeometryError::Transform(format!(
-            "last row is {:?} (must be [0, 0, 0, 1])",
-            m[3]
-        )));
+        return Err(transform(format!("last row is {:?} (must be [0, 0, 0, 1])", m[3])));
     }
     let rotation = [
         [m[0][0], m[0][1], m[0][2]],
@@ -49,7 +59,7 @@ pub(crate) fn checked_transform(m: [[f64; 4]; 4]) -> Result<Frame, GeometryError
     let scale = norm(col(0)) * norm(col(1)) * norm(col(2));
     let invertible = det.abs() > 1e-9 * scale && scale > 0.0;
     if !invertible {
-        return Err(GeometryError::Transform(format!(
+        return Err(transform(format!(
             "the 3x3 part is singular (determinant {det:e}, column lengths' product {scale:e})"
         )));
     }
@@ -61,18 +71,16 @@ pub(crate) fn checked_transform(m: [[f64; 4]; 4]) -> Result<Frame, GeometryError
 
 impl Frame {
     /// OpenCV axes looking from `eye` at `target` with `up` up (see `PinholeCamera::look_at`).
-    pub(crate) fn look_at(eye: [f64; 3], target: [f64; 3], up: [f64; 3]) -> Result<Frame, GeometryError> {
+    pub(crate) fn look_at(eye: [f64; 3], target: [f64; 3], up: [f64; 3]) -> Result<Frame, OpsError> {
         if let Some(v) = eye.iter().chain(&target).chain(&up).find(|v| !v.is_finite()) {
-            return Err(GeometryError::Degenerate(format!(
-                "{v} in eye, target or up (must be finite)"
-            )));
+            return Err(degenerate(format!("{v} in eye, target or up (must be finite)")));
         }
         let forward = normalise([target[0] - eye[0], target[1] - eye[1], target[2] - eye[2]])
-            .ok_or_else(|| GeometryError::Degenerate("eye and target coincide".into()))?;
-        let up_unit = normalise(up).ok_or_else(|| GeometryError::Degenerate("up is zero".into()))?;
+            .ok_or_else(|| degenerate("eye and target coincide".into()))?;
+        let up_unit = normalise(up).ok_or_else(|| degenerate("up is zero".into()))?;
         let side = cross(forward, up_unit);
         if norm(side) < 1e-9 {
-            return Err(GeometryError::Degenerate(format!(
+            return Err(degenerate(format!(
                 "up {up:?} is parallel to the viewing direction {forward:?}"
             )));
         }

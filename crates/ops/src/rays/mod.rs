@@ -28,7 +28,7 @@
 //! assert!((near - 2.5).abs() < 1e-3 && (far - 3.5).abs() < 1e-3);
 //! assert!(clip.segment(1).is_some());
 //! assert_eq!(clip.segment(2), None);
-//! # Ok::<(), fogray_ops::GeometryError>(())
+//! # Ok::<(), fogray_ops::OpsError>(())
 //! ```
 
 mod aabb;

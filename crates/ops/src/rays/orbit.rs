@@ -17,13 +17,13 @@
 //! // Every frame sees the centre at its principal point.
 //! let [x, y] = cameras[3].project(orbit.centre).unwrap();
 //! assert!((x - 32.0).abs() < 1e-9 && (y - 24.0).abs() < 1e-9);
-//! # Ok::<(), fogray_ops::GeometryError>(())
+//! # Ok::<(), fogray_ops::OpsError>(())
 //! ```
 
 use std::f64::consts::{FRAC_PI_2, TAU};
 
 use super::camera::{Intrinsics, PinholeCamera};
-use crate::error::GeometryError;
+use crate::error::{At, Op, OpsError};
 
 /// World up for every orbit: `+z`.
 pub const UP: [f64; 3] = [0.0, 0.0, 1.0];
@@ -44,8 +44,10 @@ pub struct Orbit {
 
 impl Orbit {
     /// Checks the domain of every field (see the field docs).
-    pub fn check(&self) -> Result<(), GeometryError> {
-        let invalid = |what: &str, value: f64, rule| GeometryError::InvalidValue {
+    pub fn check(&self) -> Result<(), OpsError> {
+        let invalid = |what: &str, value: f64, rule| OpsError::Domain {
+            op: Op::Rays,
+            at: At::Value,
             what: format!("orbit {what}"),
             value,
             rule,
@@ -81,7 +83,7 @@ impl Orbit {
     /// `+z` up in its image.
     ///
     /// Errors: a field outside its domain ([`Orbit::check`]), bad intrinsics.
-    pub fn cameras(&self, intrinsics: Intrinsics) -> Result<Vec<PinholeCamera>, GeometryError> {
+    pub fn cameras(&self, intrinsics: Intrinsics) -> Result<Vec<PinholeCamera>, OpsError> {
         self.check()?;
         (0..self.frames)
             .map(|k| PinholeCamera::look_at(intrinsics, self.eye(k), self.centre, UP))
@@ -201,7 +203,14 @@ mod tests {
         ];
         for b in bad {
             assert!(
-                matches!(b.cameras(intrinsics()), Err(GeometryError::InvalidValue { .. })),
+                matches!(
+                    b.cameras(intrinsics()),
+                    Err(OpsError::Domain {
+                        op: Op::Rays,
+                        at: At::Value,
+                        ..
+                    })
+                ),
                 "{b:?}"
             );
         }

@@ -6,7 +6,7 @@ use ndarray::ArrayView1;
 
 use super::packed::{pack, PackedSamples, Piece};
 use super::stratified::{Jitter, RayJitter};
-use crate::error::SampleError;
+use crate::error::{At, Op, OpsError};
 use crate::rays::RayBatch;
 
 /// Inverse-transform resampling of each ray from the weights of a previous pass.
@@ -32,16 +32,18 @@ impl Importance {
     /// `samples_per_ray >= 1`; `uniform_floor` in `[0, 1]` (the share of every ray's
     /// probability spread uniformly over its previous pieces, so zero-weight regions keep
     /// being explored; 0.01 is a reasonable start).
-    pub fn new(samples_per_ray: usize, uniform_floor: f64, jitter: Jitter) -> Result<Self, SampleError> {
+    pub fn new(samples_per_ray: usize, uniform_floor: f64, jitter: Jitter) -> Result<Self, OpsError> {
         if samples_per_ray == 0 {
-            return Err(SampleError::Config {
+            return Err(OpsError::Config {
+                op: Op::Sample,
                 what: "samples per ray",
                 value: 0.0,
                 rule: "must be at least 1",
             });
         }
         if !(0.0..=1.0).contains(&uniform_floor) {
-            return Err(SampleError::Config {
+            return Err(OpsError::Config {
+                op: Op::Sample,
                 what: "uniform floor",
                 value: uniform_floor,
                 rule: "must be in [0, 1]",
@@ -65,7 +67,7 @@ impl Importance {
         rays: &RayBatch<F>,
         previous: &PackedSamples<F>,
         weights: ArrayView1<'_, F>,
-    ) -> Result<PackedSamples<F>, SampleError> {
+    ) -> Result<PackedSamples<F>, OpsError> {
         check_previous(rays, previous, weights)?;
         Ok(pack(rays, |r, out| {
             // check_previous made sure there is one range per ray.
@@ -88,12 +90,13 @@ fn check_previous<F: Float>(
     rays: &RayBatch<F>,
     previous: &PackedSamples<F>,
     weights: ArrayView1<'_, F>,
-) -> Result<(), SampleError> {
+) -> Result<(), OpsError> {
     let offsets = &previous.offsets;
     let n = previous.t.len();
     let packing_ok = offsets.rows() == n && previous.delta.len() == n;
     if !packing_ok {
-        return Err(SampleError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::Sample,
             what: "previous samples",
             expected: format!("offsets ending at {n}, and {n} deltas"),
             got: format!(
@@ -105,14 +108,16 @@ fn check_previous<F: Float>(
         });
     }
     if offsets.len() - 1 != rays.len() {
-        return Err(SampleError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::Sample,
             what: "previous samples",
             expected: format!("samples of {} rays", rays.len()),
             got: format!("samples of {} rays", offsets.len() - 1),
         });
     }
     if weights.len() != n {
-        return Err(SampleError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::Sample,
             what: "weights",
             expected: format!("one per previous sample ({n})"),
             got: format!("{}", weights.len()),
@@ -120,22 +125,21 @@ fn check_previous<F: Float>(
     }
     for r in 0..offsets.len() - 1 {
         for k in offsets[r]..offsets[r + 1] {
-            let bad = |what: String, value: F, rule| SampleError::InvalidValue {
+            let at = At::Sample {
                 ray: r,
-                what,
-                value: value.as_f64(),
-                rule,
+                sample: k - offsets[r],
             };
+            let bad = |what: &str, value: F, rule| OpsError::domain(Op::Sample, at, what, value.as_f64(), rule);
             let w = weights[k];
             if !(w.is_finite() && w >= F::zero()) {
-                return Err(bad(format!("weights[{k}]"), w, "must be finite and non-negative"));
+                return Err(bad("weights", w, "must be finite and non-negative"));
             }
             let (t, d) = (previous.t[k], previous.delta[k]);
             if !t.is_finite() {
-                return Err(bad(format!("t[{k}]"), t, "must be finite"));
+                return Err(bad("t", t, "must be finite"));
             }
             if !(d.is_finite() && d >= F::zero()) {
-                return Err(bad(format!("delta[{k}]"), d, "must be finite and non-negative"));
+                return Err(bad("delta", d, "must be finite and non-negative"));
             }
         }
     }

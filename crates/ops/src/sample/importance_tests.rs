@@ -4,7 +4,7 @@ use super::importance::resample;
 use super::stratified::{Jitter, RayJitter};
 use super::*;
 use crate::rays::RayBatch;
-use crate::SampleError;
+use crate::{At, Op, OpsError};
 use ndarray::{arr1, arr2, Array1};
 
 fn close(got: &[(f64, f64)], want: &[(f64, f64)]) {
@@ -132,16 +132,36 @@ fn bad_inputs_are_errors() {
     let coarse = Uniform::new(Spacing::Count(2)).unwrap().sample(&rays, &iv).unwrap();
     let imp = Importance::new(4, 0.01, Jitter::None).unwrap();
     let bad = |w: Array1<f64>| imp.sample(&rays, &coarse, w.view()).unwrap_err();
-    assert!(matches!(bad(arr1(&[1.0])), SampleError::Shape { what: "weights", .. }));
+    assert!(matches!(
+        bad(arr1(&[1.0])),
+        OpsError::Shape {
+            op: Op::Sample,
+            what: "weights",
+            ..
+        }
+    ));
     assert!(matches!(
         bad(arr1(&[1.0, -0.5])),
-        SampleError::InvalidValue { ray: 0, .. }
+        OpsError::Domain {
+            op: Op::Sample,
+            at: At::Sample { ray: 0, sample: 1 },
+            value: -0.5,
+            ..
+        }
     ));
-    assert!(matches!(bad(arr1(&[f64::NAN, 1.0])), SampleError::InvalidValue { .. }));
+    assert!(matches!(
+        bad(arr1(&[f64::NAN, 1.0])),
+        OpsError::Domain {
+            op: Op::Sample,
+            at: At::Sample { ray: 0, sample: 0 },
+            ..
+        }
+    ));
     let two = RayBatch::concat(&[rays.clone(), rays.clone()]);
     assert!(matches!(
         imp.sample(&two, &coarse, arr1(&[1.0, 1.0]).view()),
-        Err(SampleError::Shape {
+        Err(OpsError::Shape {
+            op: Op::Sample,
             what: "previous samples",
             ..
         })

@@ -6,7 +6,7 @@ use fogray_tape::Float;
 use super::occupancy::OccupancyGrid;
 use super::packed::{check_lengths, check_step, pack_chunks, PackedSamples, Piece};
 use super::stratified::{Jitter, RayJitter};
-use crate::error::SampleError;
+use crate::error::OpsError;
 use crate::rays::{RayBatch, RayIntervals};
 
 /// The axis whose exit comes first (the lowest axis on a tie), chosen without branches: the
@@ -237,7 +237,7 @@ impl OccupancyGrid {
         intervals: &RayIntervals,
         step: f64,
         jitter: Jitter,
-    ) -> Result<PackedSamples<F>, SampleError> {
+    ) -> Result<PackedSamples<F>, OpsError> {
         check_lengths(rays, intervals)?;
         check_step(step)?;
         // A ray's part of the grid's box within its interval.

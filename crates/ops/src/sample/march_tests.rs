@@ -4,7 +4,7 @@ use std::convert::Infallible;
 
 use super::*;
 use crate::rays::{Aabb, Intrinsics, PinholeCamera, RayBatch, RayIntervals};
-use crate::SampleError;
+use crate::{Op, OpsError};
 use ndarray::{arr2, Array1, ArrayView2};
 use rand::{Rng, SeedableRng};
 
@@ -222,12 +222,16 @@ fn bad_marches_are_errors() {
     let iv = cube().clip(&rays);
     assert!(matches!(
         grid.march(&rays, &iv, 0.0, Jitter::None),
-        Err(SampleError::Config { what: "step", .. })
+        Err(OpsError::Config {
+            op: Op::Sample,
+            what: "step",
+            ..
+        })
     ));
     let short = RayIntervals::new(vec![0.0], vec![1.0]).unwrap();
     assert!(matches!(
         grid.march(&rays, &short, 0.1, Jitter::None),
-        Err(SampleError::Shape { .. })
+        Err(OpsError::Shape { op: Op::Sample, .. })
     ));
 }
 

@@ -13,7 +13,7 @@ use multiversion::multiversion;
 use super::occupancy::OccupancyGrid;
 use super::packed::{check_lengths, check_step, pack_chunks, PackedSamples, Piece};
 use super::stratified::{Jitter, RayJitter};
-use crate::error::SampleError;
+use crate::error::OpsError;
 use crate::rays::{RayBatch, RayIntervals};
 
 /// A ray's cell coordinates as a function of depth: cell coordinate `a` at depth `t` is
@@ -109,7 +109,7 @@ impl OccupancyGrid {
         intervals: &RayIntervals,
         step: f64,
         jitter: Jitter,
-    ) -> Result<PackedSamples<F>, SampleError> {
+    ) -> Result<PackedSamples<F>, OpsError> {
         check_lengths(rays, intervals)?;
         check_step(step)?;
         let map = CellMap::new(self);

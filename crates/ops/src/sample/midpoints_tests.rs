@@ -6,7 +6,7 @@ use std::convert::Infallible;
 use super::march_tests::{balls_grid, camera_rays, cube, random_rays};
 use super::*;
 use crate::rays::RayBatch;
-use crate::SampleError;
+use crate::{Op, OpsError};
 use fogray_tape::Offsets;
 use ndarray::{arr2, ArrayView2};
 
@@ -164,9 +164,29 @@ fn bad_steps_and_intervals_are_errors() {
     let iv = cube().clip(&rays);
     for step in [0.0, -0.1, f64::NAN, f64::INFINITY] {
         let e = grid.march_midpoints(&rays, &iv, step, Jitter::None).unwrap_err();
-        assert!(matches!(e, SampleError::Config { what: "step", .. }), "{e}");
+        assert!(
+            matches!(
+                e,
+                OpsError::Config {
+                    op: Op::Sample,
+                    what: "step",
+                    ..
+                }
+            ),
+            "{e}"
+        );
     }
     let other = cube().clip(&random_rays(1, 300));
     let e = grid.march_midpoints(&rays, &other, 0.1, Jitter::None).unwrap_err();
-    assert!(matches!(e, SampleError::Shape { what: "intervals", .. }), "{e}");
+    assert!(
+        matches!(
+            e,
+            OpsError::Shape {
+                op: Op::Sample,
+                what: "intervals",
+                ..
+            }
+        ),
+        "{e}"
+    );
 }

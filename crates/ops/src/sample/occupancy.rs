@@ -11,8 +11,17 @@ use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 
 use super::occupancy_config::{config_error, CellPoints, OccupancyConfig};
-use crate::error::SampleError;
+use crate::error::{At, Op, OpsError};
 use crate::rays::Aabb;
+
+/// The caller's density function failed (`problem` is its error) or returned something
+/// unusable.
+fn density_error(problem: String) -> OpsError {
+    OpsError::Density {
+        op: Op::Occupancy,
+        problem,
+    }
+}
 
 /// An axis of the grid.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -79,7 +88,7 @@ const CHUNK: usize = 4096;
 
 impl OccupancyGrid {
     /// `resolution^3` cells over `bounds`. Errors: `resolution` outside `1..=1024`.
-    pub fn new(bounds: Aabb, resolution: usize, config: OccupancyConfig) -> Result<Self, SampleError> {
+    pub fn new(bounds: Aabb, resolution: usize, config: OccupancyConfig) -> Result<Self, OpsError> {
         if !(1..=1024).contains(&resolution) {
             return Err(config_error("resolution", resolution as f64, "must be in 1..=1024"));
         }
@@ -106,7 +115,7 @@ impl OccupancyGrid {
     ///
     /// Errors (nothing changed): a mask that is not one entry per cell, a density that is
     /// negative or not finite.
-    pub fn set_known_cells(&mut self, known: Option<KnownCells>) -> Result<(), SampleError> {
+    pub fn set_known_cells(&mut self, known: Option<KnownCells>) -> Result<(), OpsError> {
         if let Some(k) = &known {
             if k.cells.len() != self.estimate.len() {
                 return Err(config_error(
@@ -212,14 +221,15 @@ impl OccupancyGrid {
     ///
     /// Errors (the grid is unchanged then): either array not `[r, r, r]`, an estimate negative
     /// or not finite (named by linear cell index).
-    pub fn restore(&mut self, state: &OccupancyState) -> Result<(), SampleError> {
+    pub fn restore(&mut self, state: &OccupancyState) -> Result<(), OpsError> {
         let r = self.resolution;
         for (what, shape) in [
             ("occupancy estimate", state.estimate.shape()),
             ("occupied cells", state.occupied.shape()),
         ] {
             if shape != [r, r, r] {
-                return Err(SampleError::Shape {
+                return Err(OpsError::Shape {
+                    op: Op::Occupancy,
                     what,
                     expected: format!("[{r}, {r}, {r}]"),
                     got: format!("{shape:?}"),
@@ -232,12 +242,13 @@ impl OccupancyGrid {
             .enumerate()
             .find(|(_, e)| !(e.is_finite() && **e >= 0.0))
         {
-            return Err(SampleError::InvalidValue {
-                ray: i,
-                what: "occupancy estimate of this cell".into(),
-                value: f64::from(e),
-                rule: "must be finite and non-negative",
-            });
+            return Err(OpsError::domain(
+                Op::Occupancy,
+                At::Cell(i),
+                "occupancy estimate",
+                f64::from(e),
+                "must be finite and non-negative",
+            ));
         }
         // Standard layout iteration is the grid's own order, (ix * r + iy) * r + iz.
         self.estimate = state.estimate.iter().copied().collect();
@@ -249,10 +260,11 @@ impl OccupancyGrid {
     }
 
     /// The plane of cells with index `index` along `axis`. Errors: `index >= resolution`.
-    pub fn slice(&self, axis: GridAxis, index: usize) -> Result<OccupancySlice, SampleError> {
+    pub fn slice(&self, axis: GridAxis, index: usize) -> Result<OccupancySlice, OpsError> {
         let r = self.resolution;
         if index >= r {
-            return Err(SampleError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Occupancy,
                 what: "slice index",
                 expected: format!("below the resolution {r}"),
                 got: format!("{index}"),
@@ -288,7 +300,7 @@ impl OccupancyGrid {
         cells: std::ops::Range<usize>,
         density: &D,
         points: CellPoints,
-    ) -> Result<Vec<f64>, SampleError>
+    ) -> Result<Vec<f64>, OpsError>
     where
         F: Float,
         D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E>,
@@ -323,9 +335,9 @@ impl OccupancyGrid {
             Vec::new()
         } else {
             let xyz = Array2::from_shape_vec((m, 3), xyz).expect("three coordinates per point");
-            let sigma = density(xyz.view()).map_err(|e| SampleError::Density(e.to_string()))?;
+            let sigma = density(xyz.view()).map_err(|e| density_error(e.to_string()))?;
             if sigma.len() != m {
-                return Err(SampleError::Density(format!(
+                return Err(density_error(format!(
                     "returned {} densities for {m} points",
                     sigma.len()
                 )));
@@ -343,12 +355,13 @@ impl OccupancyGrid {
             next += per_cell;
             for &s in &sigma[next - per_cell..next] {
                 if !(s.is_finite() && s >= 0.0) {
-                    return Err(SampleError::InvalidValue {
-                        ray: i,
-                        what: "density at a point of this cell".into(),
-                        value: s,
-                        rule: "must be finite and non-negative",
-                    });
+                    return Err(OpsError::domain(
+                        Op::Occupancy,
+                        At::Cell(i),
+                        "density at a point",
+                        s,
+                        "must be finite and non-negative",
+                    ));
                 }
                 best = best.max(s);
             }
@@ -368,7 +381,7 @@ impl OccupancyGrid {
         step: usize,
         density: D,
         points: CellPoints,
-    ) -> Result<bool, SampleError>
+    ) -> Result<bool, OpsError>
     where
         F: Float,
         D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E> + Sync,
@@ -388,7 +401,7 @@ impl OccupancyGrid {
     ///
     /// Errors (the grid is unchanged then): `density` failing, returning the wrong number of
     /// values, or a value that is negative or not finite (named by cell index).
-    pub fn update<F, D, E>(&mut self, density: D, points: CellPoints) -> Result<(), SampleError>
+    pub fn update<F, D, E>(&mut self, density: D, points: CellPoints) -> Result<(), OpsError>
     where
         F: Float,
         D: Fn(ArrayView2<'_, F>) -> Result<Array1<F>, E> + Sync,

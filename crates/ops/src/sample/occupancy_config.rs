@@ -1,7 +1,7 @@
 //! How the occupancy grid turns densities into occupancy: the threshold, the decay, and
 //! where in each cell the density is evaluated.
 
-use crate::error::SampleError;
+use crate::error::{Op, OpsError};
 
 /// When a cell counts as occupied: its density estimate above a threshold.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -61,15 +61,20 @@ impl Refresh {
     }
 }
 
-pub(crate) fn config_error(what: &'static str, value: f64, rule: &'static str) -> SampleError {
-    SampleError::Config { what, value, rule }
+pub(crate) fn config_error(what: &'static str, value: f64, rule: &'static str) -> OpsError {
+    OpsError::Config {
+        op: Op::Occupancy,
+        what,
+        value,
+        rule,
+    }
 }
 
 impl OccupancyConfig {
     /// Occupied where one step of length `step` is more than `opacity` opaque
     /// ([`Threshold::Opacity`]; 0.01 is the usual choice), with decay 0.95.
     /// Errors: `step` not finite and positive, `opacity` outside (0, 1).
-    pub fn opacity(step: f64, opacity: f64) -> Result<Self, SampleError> {
+    pub fn opacity(step: f64, opacity: f64) -> Result<Self, OpsError> {
         if !(step.is_finite() && step > 0.0) {
             return Err(config_error("step", step, "must be finite and positive"));
         }
@@ -85,7 +90,7 @@ impl OccupancyConfig {
 
     /// Occupied where the estimate exceeds `density` ([`Threshold::Density`]), decay 0.95.
     /// Errors: `density` not finite and non-negative.
-    pub fn density(density: f64) -> Result<Self, SampleError> {
+    pub fn density(density: f64) -> Result<Self, OpsError> {
         if !(density.is_finite() && density >= 0.0) {
             return Err(config_error(
                 "density threshold",
@@ -102,7 +107,7 @@ impl OccupancyConfig {
 
     /// Sets the decay in `[0, 1]`: each update makes `estimate = max(estimate * decay, new)`,
     /// so a cell whose matter went away is forgotten gradually (0 forgets at once, 1 never).
-    pub fn with_decay(mut self, decay: f64) -> Result<Self, SampleError> {
+    pub fn with_decay(mut self, decay: f64) -> Result<Self, OpsError> {
         if !(0.0..=1.0).contains(&decay) {
             return Err(config_error("decay", decay, "must be in [0, 1]"));
         }
@@ -112,7 +117,7 @@ impl OccupancyConfig {
 
     /// Sets when a training loop refreshes the grid (default: [`Refresh::default`]).
     /// Errors: `every` is 0.
-    pub fn with_refresh(mut self, refresh: Refresh) -> Result<Self, SampleError> {
+    pub fn with_refresh(mut self, refresh: Refresh) -> Result<Self, OpsError> {
         if refresh.every == 0 {
             return Err(config_error("refresh interval", 0.0, "must be at least 1 step"));
         }

@@ -5,7 +5,7 @@ use std::convert::Infallible;
 use super::*;
 use crate::rays::Aabb;
 use crate::sample::Refresh;
-use crate::SampleError;
+use crate::{At, Op, OpsError};
 use ndarray::{Array1, ArrayView2};
 
 fn cube() -> Aabb {
@@ -132,18 +132,25 @@ fn bad_densities_are_errors_and_change_nothing() {
     };
     assert!(matches!(
         grid.update(nan_at_7, CellPoints::Centre),
-        Err(SampleError::InvalidValue { ray: 7, .. })
+        Err(OpsError::Domain {
+            op: Op::Occupancy,
+            at: At::Cell(7),
+            ..
+        })
     ));
     assert!(grid.update(constant(-1.0), CellPoints::Centre).is_err());
     let short = |p: ArrayView2<'_, f64>| Ok::<_, Infallible>(Array1::zeros(p.nrows() - 1));
     assert!(matches!(
         grid.update(short, CellPoints::Centre),
-        Err(SampleError::Density(_))
+        Err(OpsError::Density { op: Op::Occupancy, .. })
     ));
     let failing = |_: ArrayView2<'_, f64>| Err::<Array1<f64>, _>("no grid yet");
     assert_eq!(
         grid.update(failing, CellPoints::Centre),
-        Err(SampleError::Density("no grid yet".into()))
+        Err(OpsError::Density {
+            op: Op::Occupancy,
+            problem: "no grid yet".into()
+        })
     );
     assert_eq!(grid, before);
     assert!(OccupancyGrid::new(cube(), 0, OccupancyConfig::density(1.0).unwrap()).is_err());
@@ -211,7 +218,8 @@ fn restore_rejects_bad_states_and_leaves_the_grid_alone() {
     wrong_shape.occupied = ndarray::Array3::from_elem((4, 4, 3), true);
     assert!(matches!(
         grid.restore(&wrong_shape),
-        Err(SampleError::Shape {
+        Err(OpsError::Shape {
+            op: Op::Occupancy,
             what: "occupied cells",
             ..
         })
@@ -220,7 +228,11 @@ fn restore_rejects_bad_states_and_leaves_the_grid_alone() {
         let mut s = good.clone();
         s.estimate.as_slice_mut().unwrap()[cell] = bad;
         match grid.restore(&s) {
-            Err(SampleError::InvalidValue { ray, .. }) => assert_eq!(ray, cell),
+            Err(OpsError::Domain {
+                op: Op::Occupancy,
+                at: At::Cell(c),
+                ..
+            }) => assert_eq!(c, cell),
             other => panic!("{other:?}"),
         }
     }

@@ -5,7 +5,7 @@ use fogray_tape::{Float, Offsets, Tape, TapeError, Var};
 use ndarray::{Array1, Array2};
 use rayon::prelude::*;
 
-use crate::error::SampleError;
+use crate::error::{Op, OpsError};
 use crate::rays::{RayBatch, RayIntervals};
 
 /// The samples of `R` rays, packed: ray `r` owns samples `offsets[r]..offsets[r + 1]`, in
@@ -98,9 +98,10 @@ impl<F: Float> PackedSamples<F> {
 pub(crate) type Piece = (f64, f64);
 
 /// Checks that a sampler got one interval per ray.
-pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<(), SampleError> {
+pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<(), OpsError> {
     if rays.len() != intervals.len() {
-        return Err(SampleError::Shape {
+        return Err(OpsError::Shape {
+            op: Op::Sample,
             what: "intervals",
             expected: format!("one per ray ({})", rays.len()),
             got: format!("{}", intervals.len()),
@@ -110,11 +111,12 @@ pub(crate) fn check_lengths<F: Float>(rays: &RayBatch<F>, intervals: &RayInterva
 }
 
 /// A sampler's step must be finite and positive.
-pub(crate) fn check_step(step: f64) -> Result<(), SampleError> {
+pub(crate) fn check_step(step: f64) -> Result<(), OpsError> {
     if step.is_finite() && step > 0.0 {
         Ok(())
     } else {
-        Err(SampleError::Config {
+        Err(OpsError::Config {
+            op: Op::Sample,
             what: "step",
             value: step,
             rule: "must be finite and positive",

@@ -7,7 +7,7 @@ use rand::{Rng, SeedableRng};
 
 use super::packed::{cut, PackedSamples, Piece};
 use super::uniform::{sample_segments, Spacing};
-use crate::error::SampleError;
+use crate::error::OpsError;
 use crate::rays::{RayBatch, RayIntervals};
 
 /// How the edges of the pieces are randomised. Each ray draws from its own generator,
@@ -98,7 +98,7 @@ pub struct Stratified {
 
 impl Stratified {
     /// Errors: a step that is not finite and positive, a count of 0.
-    pub fn new(spacing: Spacing, jitter: Jitter) -> Result<Self, SampleError> {
+    pub fn new(spacing: Spacing, jitter: Jitter) -> Result<Self, OpsError> {
         Ok(Stratified {
             spacing: spacing.check()?,
             jitter,
@@ -107,11 +107,7 @@ impl Stratified {
 
     /// Samples every ray within its interval (parallel over rays; the same output whatever
     /// the thread count). Errors: `intervals` not one per ray.
-    pub fn sample<F: Float>(
-        &self,
-        rays: &RayBatch<F>,
-        intervals: &RayIntervals,
-    ) -> Result<PackedSamples<F>, SampleError> {
+    pub fn sample<F: Float>(&self, rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<PackedSamples<F>, OpsError> {
         sample_segments(rays, intervals, self.spacing, |r| RayJitter::for_ray(self.jitter, r))
     }
 }

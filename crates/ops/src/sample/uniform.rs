@@ -4,7 +4,7 @@ use fogray_tape::Float;
 
 use super::packed::{check_lengths, pack, PackedSamples};
 use super::stratified::RayJitter;
-use crate::error::SampleError;
+use crate::error::{Op, OpsError};
 use crate::rays::{RayBatch, RayIntervals};
 
 /// How finely a segment `[t_near, t_far]` is cut.
@@ -19,14 +19,16 @@ pub enum Spacing {
 }
 
 impl Spacing {
-    pub(crate) fn check(self) -> Result<Self, SampleError> {
+    pub(crate) fn check(self) -> Result<Self, OpsError> {
         match self {
-            Spacing::Step(h) if !(h.is_finite() && h > 0.0) => Err(SampleError::Config {
+            Spacing::Step(h) if !(h.is_finite() && h > 0.0) => Err(OpsError::Config {
+                op: Op::Sample,
                 what: "step",
                 value: h,
                 rule: "must be finite and positive",
             }),
-            Spacing::Count(0) => Err(SampleError::Config {
+            Spacing::Count(0) => Err(OpsError::Config {
+                op: Op::Sample,
                 what: "sample count",
                 value: 0.0,
                 rule: "must be at least 1",
@@ -54,7 +56,7 @@ pub struct Uniform {
 
 impl Uniform {
     /// Errors: a step that is not finite and positive, a count of 0.
-    pub fn new(spacing: Spacing) -> Result<Self, SampleError> {
+    pub fn new(spacing: Spacing) -> Result<Self, OpsError> {
         Ok(Uniform {
             spacing: spacing.check()?,
         })
@@ -62,11 +64,7 @@ impl Uniform {
 
     /// Samples every ray of `rays` within its interval (parallel over rays).
     /// Errors: `intervals` not one per ray.
-    pub fn sample<F: Float>(
-        &self,
-        rays: &RayBatch<F>,
-        intervals: &RayIntervals,
-    ) -> Result<PackedSamples<F>, SampleError> {
+    pub fn sample<F: Float>(&self, rays: &RayBatch<F>, intervals: &RayIntervals) -> Result<PackedSamples<F>, OpsError> {
         sample_segments(rays, intervals, self.spacing, |_| RayJitter::none())
     }
 }
@@ -77,7 +75,7 @@ pub(crate) fn sample_segments<F: Float>(
     intervals: &RayIntervals,
     spacing: Spacing,
     jitter_of: impl Fn(usize) -> RayJitter + Sync,
-) -> Result<PackedSamples<F>, SampleError> {
+) -> Result<PackedSamples<F>, OpsError> {
     check_lengths(rays, intervals)?;
     Ok(pack(rays, |r, pieces| {
         if let Some((near, far)) = intervals.segment(r) {
@@ -162,6 +160,13 @@ mod tests {
         let r = rays();
         let iv = RayIntervals::new(vec![0.0], vec![1.0]).unwrap();
         let e = Uniform::new(Spacing::Count(2)).unwrap().sample(&r, &iv).unwrap_err();
-        assert!(matches!(e, SampleError::Shape { what: "intervals", .. }));
+        assert!(matches!(
+            e,
+            OpsError::Shape {
+                op: Op::Sample,
+                what: "intervals",
+                ..
+            }
+        ));
     }
 }

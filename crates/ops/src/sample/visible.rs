@@ -10,7 +10,7 @@ use fogray_tape::{Float, Offsets};
 use ndarray::{Array1, Array2, ArrayView1};
 
 use super::packed::PackedSamples;
-use crate::error::SampleError;
+use crate::error::{At, Op, OpsError};
 
 impl<F: Float> PackedSamples<F> {
     /// The samples of each ray up to the last one whose transmittance on arrival,
@@ -29,16 +29,18 @@ impl<F: Float> PackedSamples<F> {
     ///
     /// Errors: `sigma` of the wrong length, a negative or non-finite density (naming its
     /// ray), `min_transmittance` outside `[0, 1)`. `self` is never changed.
-    pub fn visible(&self, sigma: ArrayView1<'_, F>, min_transmittance: f64) -> Result<Self, SampleError> {
+    pub fn visible(&self, sigma: ArrayView1<'_, F>, min_transmittance: f64) -> Result<Self, OpsError> {
         if !(0.0..1.0).contains(&min_transmittance) {
-            return Err(SampleError::Config {
+            return Err(OpsError::Config {
+                op: Op::Sample,
                 what: "min_transmittance",
                 value: min_transmittance,
                 rule: "must be in [0, 1)",
             });
         }
         if sigma.len() != self.len() {
-            return Err(SampleError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::Sample,
                 what: "sigma",
                 expected: format!("one density per sample ({})", self.len()),
                 got: format!("{}", sigma.len()),
@@ -54,15 +56,20 @@ impl<F: Float> PackedSamples<F> {
         for (r, range) in self.offsets.ranges().enumerate() {
             let before = kept.len();
             let mut depth = 0.0f64;
+            let start = range.start;
             for k in range {
                 let s = sigma[k].as_f64();
                 if !(s.is_finite() && s >= 0.0) {
-                    return Err(SampleError::InvalidValue {
-                        ray: r,
-                        what: format!("sigma[{k}]"),
-                        value: s,
-                        rule: "must be finite and non-negative",
-                    });
+                    return Err(OpsError::domain(
+                        Op::Sample,
+                        At::Sample {
+                            ray: r,
+                            sample: k - start,
+                        },
+                        "sigma",
+                        s,
+                        "must be finite and non-negative",
+                    ));
                 }
                 if depth > max_depth {
                     continue; // keep scanning: every density is still checked

@@ -2,7 +2,7 @@ use fogray_tape::Offsets;
 use ndarray::{arr1, Array1, Array2};
 
 use super::PackedSamples;
-use crate::error::SampleError;
+use crate::error::{At, Op, OpsError};
 
 /// Packed samples with the given per-ray `delta`s (positions and t are the sample index, so
 /// a test can see which samples were kept).
@@ -97,18 +97,29 @@ fn bad_input_is_refused() {
     let ok = arr1(&[0.0, 1.0, 2.0]);
     for min_t in [1.0, -0.1, f64::NAN, 2.0] {
         assert!(
-            matches!(s.visible(ok.view(), min_t), Err(SampleError::Config { .. })),
+            matches!(
+                s.visible(ok.view(), min_t),
+                Err(OpsError::Config { op: Op::Sample, .. })
+            ),
             "{min_t}"
         );
     }
     assert!(matches!(
         s.visible(arr1(&[0.0, 1.0]).view(), 0.1),
-        Err(SampleError::Shape { .. })
+        Err(OpsError::Shape { op: Op::Sample, .. })
     ));
     for bad in [f64::NAN, -1.0, f64::INFINITY] {
         let sigma = arr1(&[0.0, 1.0, bad]);
         match s.visible(sigma.view(), 0.1) {
-            Err(SampleError::InvalidValue { ray, .. }) => assert_eq!(ray, 1),
+            Err(OpsError::Domain {
+                op: Op::Sample,
+                at: At::Sample { ray, sample },
+                value,
+                ..
+            }) => {
+                assert_eq!((ray, sample), (1, 0));
+                assert!(value == bad || (value.is_nan() && bad.is_nan()));
+            }
             other => panic!("{bad}: {other:?}"),
         }
     }

@@ -7,17 +7,23 @@ use ndarray::ArrayView2;
 use rayon::prelude::*;
 
 use super::kernel::CHUNK;
-use crate::error::ShError;
+use crate::error::{At, Op, OpsError};
 
 /// How far from 1 a direction's length may be.
 pub(crate) const UNIT_TOLERANCE: f64 = 1e-3;
 
-pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -> ShError {
-    ShError::Shape {
+pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -> OpsError {
+    OpsError::Shape {
+        op: Op::ShColor,
         what,
         expected,
         got: format!("{got:?}"),
     }
+}
+
+/// A coefficient or a direction component (`what`) that is NaN or infinite.
+fn non_finite(what: &'static str, row: usize, column: usize, value: f64) -> OpsError {
+    OpsError::domain(Op::ShColor, At::Entry { row, column }, what, value, "must be finite")
 }
 
 /// Checks the shapes of `coeffs` (`[n, 3 b]`) and `directions` (`[n, 3]`); returns `n`.
@@ -26,7 +32,7 @@ pub(crate) fn check_shapes<F: Float>(
     b: usize,
     coeffs: &ArrayView2<'_, F>,
     directions: &ArrayView2<'_, F>,
-) -> Result<usize, ShError> {
+) -> Result<usize, OpsError> {
     let n = coeffs.nrows();
     if coeffs.ncols() != 3 * b {
         return Err(shape_error(
@@ -47,28 +53,24 @@ pub(crate) fn check_shapes<F: Float>(
 pub(crate) fn check_values<F: Float>(
     coeffs: &ArrayView2<'_, F>,
     directions: &ArrayView2<'_, F>,
-) -> Result<(), ShError> {
-    let row_fault = |i: usize| -> Option<ShError> {
+) -> Result<(), OpsError> {
+    let row_fault = |i: usize| -> Option<OpsError> {
         let d = directions.row(i);
         if let Some(column) = d.iter().position(|v| !v.is_finite()) {
-            return Some(ShError::NonFinite {
-                what: "direction",
-                row: i,
-                column,
-                value: d[column].as_f64(),
-            });
+            return Some(non_finite("direction", i, column, d[column].as_f64()));
         }
         let norm = d.iter().map(|v| v.as_f64() * v.as_f64()).sum::<f64>().sqrt();
         if (norm - 1.0).abs() > UNIT_TOLERANCE {
-            return Some(ShError::NotUnit { row: i, norm });
+            return Some(OpsError::NotUnit {
+                op: Op::ShColor,
+                row: i,
+                norm,
+            });
         }
         let c = coeffs.row(i);
-        c.iter().position(|v| !v.is_finite()).map(|column| ShError::NonFinite {
-            what: "coefficient",
-            row: i,
-            column,
-            value: c[column].as_f64(),
-        })
+        c.iter()
+            .position(|v| !v.is_finite())
+            .map(|column| non_finite("coefficient", i, column, c[column].as_f64()))
     };
     let n = coeffs.nrows();
     let starts: Vec<usize> = (0..n).step_by(CHUNK).collect();

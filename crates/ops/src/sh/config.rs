@@ -3,7 +3,7 @@
 use fogray_tape::{Float, Tape, TapeError, Var};
 
 use super::basis::{basis_count, MAX_DEGREE};
-use crate::error::ShError;
+use crate::error::{Op, OpsError};
 
 /// View-dependent colour from spherical-harmonics coefficients (see the [module docs](super)):
 /// coefficients `[n, 3 B]` and unit directions `[n, 3]` to a colour `[n, 3]`,
@@ -16,10 +16,15 @@ pub struct ShColor {
 impl ShColor {
     /// The op of `degree` (0 to 3: 1, 4, 9 or 16 basis functions a channel).
     ///
-    /// Errors: a degree above 3 ([`ShError::Degree`]).
-    pub fn new(degree: usize) -> Result<Self, ShError> {
+    /// Errors: a degree above 3 ([`OpsError::Config`]).
+    pub fn new(degree: usize) -> Result<Self, OpsError> {
         if degree > MAX_DEGREE {
-            return Err(ShError::Degree { degree });
+            return Err(OpsError::config(
+                Op::ShColor,
+                "degree",
+                degree as f64,
+                "must be 0, 1, 2 or 3",
+            ));
         }
         Ok(ShColor { degree })
     }
@@ -45,7 +50,7 @@ impl ShColor {
     /// to them, even where they are params.
     ///
     /// Errors (the tape is unchanged): shapes that do not fit, a non-finite value, a direction
-    /// that is not a unit vector (the [`ShError`] itself inside [`TapeError::Op`], read back
+    /// that is not a unit vector (the [`OpsError`] itself inside [`TapeError::Op`], read back
     /// with [`TapeError::downcast_ref`]), or a stale handle.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, coeffs: Var, directions: Var) -> Result<Var, TapeError> {
         tape.apply1(*self, &[coeffs, directions])

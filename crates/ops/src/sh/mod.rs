@@ -54,7 +54,7 @@
 //!
 //! Input is checked: the degree (at most 3), the shapes, finite values, and directions of
 //! length 1 within `1e-3` (they are used as given, not normalised); the first row at fault is
-//! named ([`ShError`](crate::ShError)).
+//! named ([`OpsError`](crate::OpsError)).
 //!
 //! ```
 //! use fogray_ops::sh::{basis::{C0, C1}, ShColor};

@@ -10,7 +10,7 @@ use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewD, Ix2, IxDyn};
 use super::check::{check_shapes, check_values, shape_error};
 use super::config::ShColor;
 use super::kernel;
-use crate::error::ShError;
+use crate::error::{Op, OpsError};
 
 /// The values of `x` in row-major order: borrowed when contiguous, copied otherwise.
 fn flat<'a, F: Float>(x: &'a ArrayView2<'_, F>) -> Cow<'a, [F]> {
@@ -21,8 +21,9 @@ fn flat<'a, F: Float>(x: &'a ArrayView2<'_, F>) -> Cow<'a, [F]> {
 }
 
 /// `data` as a `[rows, cols]` array.
-fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) -> Result<Array2<F>, ShError> {
-    Array2::from_shape_vec((rows, cols), data).map_err(|e| ShError::Shape {
+fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) -> Result<Array2<F>, OpsError> {
+    Array2::from_shape_vec((rows, cols), data).map_err(|e| OpsError::Shape {
+        op: Op::ShColor,
         what,
         expected: format!("[{rows}, {cols}]"),
         got: e.to_string(),
@@ -31,7 +32,7 @@ fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) 
 
 impl ShColor {
     /// Checks the inputs (shapes, then values); returns `n`.
-    fn check<F: Float>(&self, coeffs: &ArrayView2<'_, F>, directions: &ArrayView2<'_, F>) -> Result<usize, ShError> {
+    fn check<F: Float>(&self, coeffs: &ArrayView2<'_, F>, directions: &ArrayView2<'_, F>) -> Result<usize, OpsError> {
         let n = check_shapes(self.degree(), self.basis_count(), coeffs, directions)?;
         check_values(coeffs, directions)?;
         Ok(n)
@@ -41,13 +42,13 @@ impl ShColor {
     /// vectors): `sigmoid(sum_b coeffs[i, c B + b] Y_b(d_i))`.
     ///
     /// Errors: coefficients not `[n, 3 B]` or directions not `[n, 3]`
-    /// ([`ShError::Shape`]), a NaN or infinite value ([`ShError::NonFinite`]), a direction
-    /// whose length is not 1 within `1e-3` ([`ShError::NotUnit`]); the first fault by row.
+    /// ([`OpsError::Shape`]), a NaN or infinite value ([`OpsError::Domain`]), a direction
+    /// whose length is not 1 within `1e-3` ([`OpsError::NotUnit`]); the first fault by row.
     pub fn evaluate<F: Float>(
         &self,
         coeffs: ArrayView2<'_, F>,
         directions: ArrayView2<'_, F>,
-    ) -> Result<Array2<F>, ShError> {
+    ) -> Result<Array2<F>, OpsError> {
         let n = self.check(&coeffs, &directions)?;
         let color = self.forward_flat(&flat(&coeffs), &flat(&directions), n);
         matrix("color", n, 3, color)
@@ -64,7 +65,7 @@ impl ShColor {
         coeffs: ArrayView2<'_, F>,
         directions: ArrayView2<'_, F>,
         g_color: ArrayView2<'_, F>,
-    ) -> Result<Array2<F>, ShError> {
+    ) -> Result<Array2<F>, OpsError> {
         let n = self.check(&coeffs, &directions)?;
         if g_color.dim() != (n, 3) {
             return Err(shape_error("color gradient", format!("[{n}, 3]"), g_color.shape()));
@@ -89,11 +90,6 @@ impl ShColor {
     }
 }
 
-/// The op's own error, kept whole through the tape (`TapeError::downcast_ref`).
-fn op_error(e: ShError) -> OpError {
-    OpError::typed(e)
-}
-
 /// `x` as a 2-D view, or the shape error naming `what`.
 fn two_d<'a, F: Float>(
     what: &'static str,
@@ -102,7 +98,7 @@ fn two_d<'a, F: Float>(
 ) -> Result<ArrayView2<'a, F>, OpError> {
     x.clone()
         .into_dimensionality::<Ix2>()
-        .map_err(|_| op_error(shape_error(what, expected.into(), x.shape())))
+        .map_err(|_| OpError::from(shape_error(what, expected.into(), x.shape())))
 }
 
 /// The op's two inputs as 2-D views.
@@ -134,7 +130,7 @@ impl<F: Float> CustomOp<F> for ShColor {
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
         let (coeffs, directions) = inputs_2d(inputs)?;
-        let n = self.check(&coeffs, &directions).map_err(op_error)?;
+        let n = self.check(&coeffs, &directions)?;
         let color = self.forward_flat(&flat(&coeffs), &flat(&directions), n);
         Ok((vec![array(&[n, 3], color)?], ()))
     }
@@ -155,7 +151,7 @@ impl<F: Float> CustomOp<F> for ShColor {
         // The inputs were checked by the forward; the tape gives a gradient of the output's shape.
         let g_color = two_d("color gradient", "[n, 3]", g_color)?;
         if g_color.dim() != (coeffs.nrows(), 3) {
-            return Err(op_error(shape_error(
+            return Err(OpError::from(shape_error(
                 "color gradient",
                 format!("[{}, 3]", coeffs.nrows()),
                 g_color.shape(),

@@ -14,7 +14,7 @@ use super::config::ShColor;
 /// vectors, read as constants) with the tape's own ops.
 ///
 /// Errors (the tape is unchanged): those of [`ShColor::evaluate`] (the
-/// [`ShError`](crate::ShError) inside [`TapeError::Op`]), a stale handle.
+/// [`OpsError`](crate::OpsError) inside [`TapeError::Op`]), a stale handle.
 pub fn sh_color<F: Float>(tape: &mut Tape<F>, op: &ShColor, coeffs: Var, directions: Var) -> Result<Var, TapeError> {
     let b = op.basis_count();
     let y = {

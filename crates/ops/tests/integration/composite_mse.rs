@@ -4,7 +4,7 @@
 //! both precisions; for upstream gradients other than 1 and on a second sweep; against the
 //! lesson's table and finite differences; and its errors, which leave the tape unchanged.
 
-use fogray_ops::{Background, Composite, CompositeError, CompositeInputs};
+use fogray_ops::{At, Background, Composite, CompositeInputs, Op, OpsError};
 use fogray_tape::gradcheck::Domain;
 use fogray_tape::{gradcheck, Float, GradcheckOptions, Gradients, Tape, TapeError, Var};
 use ndarray::{arr1, arr2, ArrayD};
@@ -340,8 +340,12 @@ fn bad_input_is_a_typed_error_and_the_tape_is_unchanged() {
     let e = op.apply_mse(&mut tape, &inputs, wrong_target).unwrap_err();
     assert!(
         matches!(
-            e.downcast_ref::<CompositeError>(),
-            Some(CompositeError::Shape { what: "target", .. })
+            e.downcast_ref::<OpsError>(),
+            Some(OpsError::Shape {
+                op: Op::CompositeMse,
+                what: "target",
+                ..
+            })
         ),
         "{e}"
     );
@@ -350,8 +354,20 @@ fn bad_input_is_a_typed_error_and_the_tape_is_unchanged() {
         ..inputs
     };
     let e = op.apply_mse(&mut tape, &nan, target).unwrap_err();
-    let typed = e.downcast_ref::<CompositeError>();
-    assert!(typed.is_some_and(|c| c.to_string().contains("ray 0")), "{e}");
+    // The composite's check, run by the fused op, names the fused op.
+    let typed = e.downcast_ref::<OpsError>();
+    assert!(
+        matches!(
+            typed,
+            Some(OpsError::Domain {
+                op: Op::CompositeMse,
+                at: At::Sample { ray: 0, .. },
+                ..
+            })
+        ),
+        "{e}"
+    );
+    assert!(e.to_string().starts_with("composite_mse: ray 0"), "{e}");
     assert_eq!(tape.len(), len);
 
     // No colour values at all: the mean of nothing, as the tape's mean refuses it.

@@ -8,7 +8,7 @@
 #![allow(clippy::needless_range_loop)]
 
 use fogray_ops::distortion::twin;
-use fogray_ops::{CompositeError, DistortionLoss};
+use fogray_ops::{At, DistortionLoss, Op, OpsError};
 use fogray_tape::gradcheck::Domain;
 use fogray_tape::{gradcheck, Float, GradcheckOptions, OffsetsError, Tape, TapeError, Var};
 use ndarray::{arr1, Array1};
@@ -577,15 +577,21 @@ fn results_are_bitwise_the_same_on_1_2_and_3_threads() {
 fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
     assert_eq!(
         DistortionLoss::new(&[0, 3, 2]).unwrap_err(),
-        CompositeError::Offsets(OffsetsError::Decreasing {
-            segment: 1,
-            start: 3,
-            end: 2
-        })
+        OpsError::Offsets {
+            op: Op::DistortionLoss,
+            source: OffsetsError::Decreasing {
+                segment: 1,
+                start: 3,
+                end: 2
+            }
+        }
     );
     assert_eq!(
         DistortionLoss::new(&[1, 3]).unwrap_err(),
-        CompositeError::Offsets(OffsetsError::Start(1))
+        OpsError::Offsets {
+            op: Op::DistortionLoss,
+            source: OffsetsError::Start(1)
+        }
     );
     let r = random_rays(20, 700, 12);
     let op = r.op();
@@ -595,8 +601,12 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
 
     // Shapes: each input against the packing.
     let short = Array1::<f64>::zeros(n - 1);
-    let shape_of = |e: CompositeError| match e {
-        CompositeError::Shape { what, .. } => what,
+    let shape_of = |e: OpsError| match e {
+        OpsError::Shape {
+            op: Op::DistortionLoss,
+            what,
+            ..
+        } => what,
         other => panic!("{other:?}"),
     };
     assert_eq!(
@@ -613,14 +623,17 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
     );
     assert_eq!(
         op.evaluate(short.view(), d.view(), t.view()).unwrap_err().to_string(),
-        format!("sigma: expected [{n}] (the offsets end at {n}), got shape [{}]", n - 1)
+        format!(
+            "distortion_loss: sigma: expected [{n}] (the offsets end at {n}), got shape [{}]",
+            n - 1
+        )
     );
 
     // Values: the sample within its ray, the first fault in sample order.
     let ray = 400;
     let (start, len) = (r.offsets[ray], r.offsets[ray + 1] - r.offsets[ray]);
     assert!(len >= 3, "ray {ray} has {len} samples");
-    let at = |what: &str, k: usize, value: f64| -> CompositeError {
+    let at = |what: &str, k: usize, value: f64| -> OpsError {
         let (mut s, mut d, mut t) = (s.clone(), d.clone(), t.clone());
         match what {
             "sigma" => s[start + k] = value,
@@ -629,8 +642,13 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
         }
         op.evaluate(s.view(), d.view(), t.view()).unwrap_err()
     };
-    let named = |e: &CompositeError| match e {
-        CompositeError::InvalidSample { ray, sample, what, .. } => (*ray, *sample, what.clone()),
+    let named = |e: &OpsError| match e {
+        OpsError::Domain {
+            op: Op::DistortionLoss,
+            at: At::Sample { ray, sample },
+            what,
+            ..
+        } => (*ray, *sample, what.clone()),
         other => panic!("{other:?}"),
     };
     for value in [-1e-30, f64::NAN, f64::INFINITY] {
@@ -649,7 +667,7 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
     assert_eq!(
         e.to_string(),
         format!(
-            "ray {ray}, sample 2: t is {below} (midpoints must not decrease along a ray (below the previous sample's))"
+            "distortion_loss: ray {ray}, sample 2: t is {below} (midpoints must not decrease along a ray (below the previous sample's))"
         )
     );
     let mut tied = t.clone();
@@ -690,10 +708,10 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
         let e = apply(bad_s, good_d, good_t).unwrap_err();
         assert!(
             matches!(
-                e.downcast_ref::<CompositeError>(),
-                Some(CompositeError::InvalidSample {
-                    ray: 400,
-                    sample: 2,
+                e.downcast_ref::<OpsError>(),
+                Some(OpsError::Domain {
+                    op: Op::DistortionLoss,
+                    at: At::Sample { ray: 400, sample: 2 },
                     ..
                 })
             ),
@@ -706,14 +724,18 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
         );
         let e = apply(good_s, good_d, bad_t).unwrap_err();
         assert!(
-            matches!(e.downcast_ref::<CompositeError>(), Some(CompositeError::InvalidSample { ray: 400, sample: 2, what, .. }) if what == "t"),
+            matches!(e.downcast_ref::<OpsError>(), Some(OpsError::Domain { op: Op::DistortionLoss, at: At::Sample { ray: 400, sample: 2 }, what, .. }) if what == "t"),
             "fused {fused}: {e}"
         );
         let e = apply(two_d, good_d, good_t).unwrap_err();
         assert!(
             matches!(
-                e.downcast_ref::<CompositeError>(),
-                Some(CompositeError::Shape { what: "sigma", .. })
+                e.downcast_ref::<OpsError>(),
+                Some(OpsError::Shape {
+                    op: Op::DistortionLoss,
+                    what: "sigma",
+                    ..
+                })
             ),
             "fused {fused}: {e}"
         );

@@ -4,7 +4,7 @@
 
 use crate::grid_common;
 
-use fogray_ops::{GridError, GridField, GridGradientBuffers, GridWanted};
+use fogray_ops::{At, GridField, GridGradientBuffers, GridWanted, Op, OpsError};
 use grid_common::random_field;
 use ndarray::{Array2, ArrayD, ShapeBuilder};
 use rand::{Rng, SeedableRng};
@@ -82,8 +82,12 @@ fn into_buffers_give_the_same_bits_f64() {
 fn bad_buffers_are_errors_and_nothing_is_written() {
     let x = case::<f64>(4, &[6, 5, 4], 3, 100);
     let (g, p, u) = (x.grid.view(), x.pts.view(), x.up.view());
-    let shape_error = |r: Result<(), GridError>, what: &str| match r {
-        Err(GridError::Shape { what: w, .. }) => assert_eq!(w, what),
+    let shape_error = |r: Result<(), OpsError>, what: &str| match r {
+        Err(OpsError::Shape {
+            op: Op::GridField,
+            what: w,
+            ..
+        }) => assert_eq!(w, what),
         other => panic!("{what}: {other:?}"),
     };
     // The output: a wrong shape, then the right shape but strided (column-major).
@@ -115,13 +119,27 @@ fn bad_buffers_are_errors_and_nothing_is_written() {
     pts[[17, 1]] = f64::NAN;
     let mut out = ArrayD::from_elem(vec![100, 3], 7.0);
     let r = x.field.evaluate_into(&g, &pts.view(), &mut out.view_mut());
-    assert_eq!(r, Err(GridError::NanPosition { sample: 17, axis: 1 }));
+    assert!(matches!(
+        r,
+        Err(OpsError::Domain {
+            op: Op::GridField,
+            at: At::Entry { row: 17, column: 1 },
+            ..
+        })
+    ));
     let mut dgrid = ArrayD::from_elem(x.grid.shape(), 7.0);
     let mut buffers = GridGradientBuffers {
         grid: Some(dgrid.view_mut()),
         positions: None,
     };
     let r = x.field.vjp_into(&g, &pts.view(), &u, &mut buffers);
-    assert_eq!(r, Err(GridError::NanPosition { sample: 17, axis: 1 }));
+    assert!(matches!(
+        r,
+        Err(OpsError::Domain {
+            op: Op::GridField,
+            at: At::Entry { row: 17, column: 1 },
+            ..
+        })
+    ));
     assert!(out.iter().chain(dgrid.iter()).all(|&v| v == 7.0));
 }

@@ -4,7 +4,7 @@
 
 use crate::grid_common;
 
-use fogray_ops::{GridBox, GridError, GridField, GridWanted};
+use fogray_ops::{At, GridBox, GridField, GridWanted, Op, OpsError};
 use fogray_tape::{Tape, TapeError};
 use grid_common::{node_position, oracle, oracle_grid_gradient, positions_in_cells, random_field};
 use ndarray::{arr2, Array2, Array3, Array4, ArrayD, IxDyn};
@@ -294,28 +294,43 @@ fn bad_input_is_an_error_and_changes_nothing() {
     let bbox = GridBox::new(&[0.0; 3], &[1.0; 3]).unwrap();
     assert!(matches!(
         GridField::new(bbox, &[2, 0, 2, 1]),
-        Err(GridError::Shape { .. })
+        Err(OpsError::Shape { op: Op::GridField, .. })
     ));
     assert!(matches!(
         GridField::new(bbox, &[2, 1, 2, 1]),
-        Err(GridError::Shape { .. })
+        Err(OpsError::Shape { op: Op::GridField, .. })
     ));
     assert!(matches!(
         GridField::new(bbox, &[2, 2, 2, 0]),
-        Err(GridError::Shape { .. })
+        Err(OpsError::Shape { op: Op::GridField, .. })
     ));
-    assert!(matches!(GridField::new(bbox, &[2, 2, 1]), Err(GridError::Shape { .. })));
+    assert!(matches!(
+        GridField::new(bbox, &[2, 2, 1]),
+        Err(OpsError::Shape { op: Op::GridField, .. })
+    ));
     assert!(matches!(
         GridField::new(bbox, &[usize::MAX, 2, 2, 2]),
-        Err(GridError::Shape { .. })
+        Err(OpsError::Shape { op: Op::GridField, .. })
     ));
     assert!(matches!(
         GridBox::new(&[0.0; 3], &[1.0, -1.0, 1.0]),
-        Err(GridError::InvalidBox { axis: 1, .. })
+        Err(OpsError::Box {
+            op: Op::GridField,
+            axis: 1,
+            ..
+        })
     ));
     assert!(matches!(
         GridBox::new(&[0.0, f64::NEG_INFINITY], &[1.0; 2]),
-        Err(GridError::InvalidBox { axis: 0, .. }) | Err(GridError::InvalidBox { axis: 1, .. })
+        Err(OpsError::Box {
+            op: Op::GridField,
+            axis: 0,
+            ..
+        }) | Err(OpsError::Box {
+            op: Op::GridField,
+            axis: 1,
+            ..
+        })
     ));
 
     let field = GridField::new(bbox, &[2, 2, 2, 1]).unwrap();
@@ -323,30 +338,47 @@ fn bad_input_is_an_error_and_changes_nothing() {
     let wrong_width = Array2::<f64>::zeros((4, 2)).into_dyn();
     assert!(matches!(
         field.evaluate(&grid.view(), &wrong_width.view()),
-        Err(GridError::Shape { what: "positions", .. })
+        Err(OpsError::Shape {
+            op: Op::GridField,
+            what: "positions",
+            ..
+        })
     ));
     let flat = ndarray::Array1::<f64>::zeros(3).into_dyn();
     assert!(matches!(
         field.evaluate(&grid.view(), &flat.view()),
-        Err(GridError::Shape { what: "positions", .. })
+        Err(OpsError::Shape {
+            op: Op::GridField,
+            what: "positions",
+            ..
+        })
     ));
     let mut nan = Array2::<f64>::zeros((4, 3));
     nan[[2, 1]] = f64::NAN;
     nan[[3, 0]] = f64::NAN;
-    assert_eq!(
+    assert!(matches!(
         field.evaluate(&grid.view(), &nan.view().into_dyn()),
-        Err(GridError::NanPosition { sample: 2, axis: 1 })
-    );
+        Err(OpsError::Domain {
+            op: Op::GridField,
+            at: At::Entry { row: 2, column: 1 },
+            ..
+        })
+    ));
     let wrong_grid = Array4::<f64>::zeros((2, 2, 3, 1)).into_dyn();
     let ok = Array2::<f64>::zeros((4, 3)).into_dyn();
     assert!(matches!(
         field.evaluate(&wrong_grid.view(), &ok.view()),
-        Err(GridError::Shape { what: "grid", .. })
+        Err(OpsError::Shape {
+            op: Op::GridField,
+            what: "grid",
+            ..
+        })
     ));
     let bad_upstream = Array2::<f64>::zeros((3, 1)).into_dyn();
     assert!(matches!(
         field.vjp(&grid.view(), &ok.view(), &bad_upstream.view(), BOTH),
-        Err(GridError::Shape {
+        Err(OpsError::Shape {
+            op: Op::GridField,
             what: "upstream gradient",
             ..
         })
@@ -360,7 +392,14 @@ fn bad_input_is_an_error_and_changes_nothing() {
     let err = field.apply(&mut tape, g, p).unwrap_err();
     assert!(matches!(&err, TapeError::Op { op: "grid_field", .. }), "{err}");
     assert!(
-        matches!(err.downcast_ref::<GridError>(), Some(GridError::NanPosition { .. })),
+        matches!(
+            err.downcast_ref::<OpsError>(),
+            Some(OpsError::Domain {
+                op: Op::GridField,
+                at: At::Entry { .. },
+                ..
+            })
+        ),
         "{err}"
     );
     assert!(fogray_ops::grid::twin::lookup(&mut tape, &field, g, p).is_err());

@@ -4,7 +4,7 @@
 use crate::composite_common;
 
 use composite_common::{all_finite, assert_close_scaled, grad_scale, run, run_with, worst_scaled, Method, Rays};
-use fogray_ops::{Background, Composite, CompositeError, CompositeInputs};
+use fogray_ops::{At, Background, Composite, CompositeInputs, Op, OpsError};
 use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError};
 use ndarray::{arr1, arr2, Array1, Array2, ArrayD};
 use rand::{Rng, SeedableRng};
@@ -611,19 +611,37 @@ fn invalid_input_is_an_error_naming_ray_and_sample_and_changes_nothing() {
         assert!(matches!(err, TapeError::Op { op: "composite", .. }), "{name}: {msg}");
         assert!(msg.contains(needle), "{name}: {msg}");
         // The composite's own error comes back whole through the tape.
-        match err.downcast_ref::<CompositeError>() {
-            Some(CompositeError::InvalidSample { ray, sample, .. }) => {
+        match err.downcast_ref::<OpsError>() {
+            Some(OpsError::Domain {
+                op: Op::Composite,
+                at: At::Sample { ray, sample },
+                ..
+            }) => {
                 assert_eq!((*ray, *sample), (1, 0), "{name}")
             }
-            Some(CompositeError::InvalidBackground { channel, .. }) => assert_eq!(*channel, 0, "{name}"),
+            Some(OpsError::Domain {
+                op: Op::Composite,
+                at: At::Ray(_),
+                what,
+                ..
+            }) => assert_eq!(what, "background[0]", "{name}"),
             other => panic!("{name}: {other:?}"),
         }
         assert_eq!(t.stats(), before, "{name}: the tape is unchanged");
     }
     // Shapes and packing.
-    assert!(matches!(Composite::new(&[0, 3, 2]), Err(CompositeError::Offsets(_))));
-    assert!(matches!(Composite::new(&[1, 3]), Err(CompositeError::Offsets(_))));
-    assert!(matches!(Composite::new(&[]), Err(CompositeError::Offsets(_))));
+    assert!(matches!(
+        Composite::new(&[0, 3, 2]),
+        Err(OpsError::Offsets { op: Op::Composite, .. })
+    ));
+    assert!(matches!(
+        Composite::new(&[1, 3]),
+        Err(OpsError::Offsets { op: Op::Composite, .. })
+    ));
+    assert!(matches!(
+        Composite::new(&[]),
+        Err(OpsError::Offsets { op: Op::Composite, .. })
+    ));
     assert!(Composite::new(&[0, 1]).unwrap().min_transmittance(-0.1).is_err());
     assert!(Composite::new(&[0, 1]).unwrap().min_transmittance(f64::NAN).is_err());
     let mut t = Tape::<f32>::new();

@@ -3,8 +3,8 @@
 //! and the named wanted gradients: exactly those asked for, the bits of the full call.
 
 use fogray_ops::{
-    Background, Composite, CompositeArrays, CompositeError, CompositeGradientBuffers, CompositeGradients,
-    CompositeOutputBuffers, CompositeOutputs, CompositeUpstream, CompositeWanted,
+    At, Background, Composite, CompositeArrays, CompositeGradientBuffers, CompositeGradients, CompositeOutputBuffers,
+    CompositeOutputs, CompositeUpstream, CompositeWanted, Op, OpsError,
 };
 use ndarray::{Array1, Array2, ArrayD, IxDyn, ShapeBuilder};
 use rand::{Rng, SeedableRng};
@@ -323,7 +323,8 @@ fn buffers_of_the_wrong_shape_or_layout_are_refused_and_left_untouched() {
         assert!(
             matches!(
                 err,
-                CompositeError::Mismatch {
+                OpsError::Mismatch {
+                    op: Op::Composite,
                     what: "depth buffer",
                     ..
                 }
@@ -338,7 +339,7 @@ fn buffers_of_the_wrong_shape_or_layout_are_refused_and_left_untouched() {
         let mut b = bufs.buffers();
         b.color = bad.view_mut();
         let err = c.op.evaluate_into(&x, &mut b).unwrap_err();
-        assert!(matches!(err, CompositeError::Shape { .. }), "{err}");
+        assert!(matches!(err, OpsError::Shape { op: Op::Composite, .. }), "{err}");
     }
     assert!(output_list(&bufs)
         .into_iter()
@@ -356,16 +357,20 @@ fn buffers_of_the_wrong_shape_or_layout_are_refused_and_left_untouched() {
     };
     assert!(matches!(
         c.op.vjp_into(&x, &res, &up, &mut out),
-        Err(CompositeError::Shape { .. })
+        Err(OpsError::Shape { op: Op::Composite, .. })
     ));
     drop(out);
     assert!(short.iter().chain(color.iter()).all(|v| v.is_nan()));
 }
 
 /// The argument a `Mismatch` error names.
-fn mismatch<T>(r: Result<T, CompositeError>) -> &'static str {
+fn mismatch<T>(r: Result<T, OpsError>) -> &'static str {
     match r {
-        Err(CompositeError::Mismatch { what, .. }) => what,
+        Err(OpsError::Mismatch {
+            op: Op::Composite,
+            what,
+            ..
+        }) => what,
         Err(e) => panic!("{e}"),
         Ok(_) => panic!("accepted"),
     }
@@ -446,7 +451,14 @@ fn an_invalid_value_is_named_as_by_evaluate_and_the_inputs_stay_unchanged() {
     };
     assert_eq!(c.op.evaluate_into(&x, &mut bufs.buffers()).unwrap_err(), want);
     assert!(
-        matches!(want, CompositeError::InvalidSample { ray: 2, sample: 39, .. }),
+        matches!(
+            want,
+            OpsError::Domain {
+                op: Op::Composite,
+                at: At::Sample { ray: 2, sample: 39 },
+                ..
+            }
+        ),
         "{want}"
     );
     assert_eq!(c.sigma, before);
@@ -532,12 +544,12 @@ fn evaluate_vjp_into_refuses_bad_buffers_untouched_and_names_bad_values() {
             ..Default::default()
         };
         let err = c.op.evaluate_vjp_into(&x, never, &mut o, &mut gb).unwrap_err();
-        assert!(matches!(err, CompositeError::Shape { .. }), "{err}");
+        assert!(matches!(err, OpsError::Shape { op: Op::Composite, .. }), "{err}");
         o.transmittance = None;
         let err =
             c.op.evaluate_vjp_into(&x, never, &mut o, &mut CompositeGradientBuffers::default())
                 .unwrap_err();
-        assert!(matches!(err, CompositeError::Mismatch { .. }), "{err}");
+        assert!(matches!(err, OpsError::Mismatch { op: Op::Composite, .. }), "{err}");
     }
     assert!(output_list(&out_bufs)
         .into_iter()

@@ -16,6 +16,7 @@ mod grid_values;
 mod hard_cases;
 mod into_buffers;
 mod lesson_tables;
+mod op_names;
 mod prior;
 mod sh;
 mod sparse_grid;

@@ -2,7 +2,7 @@
 //! hand values, f32 accumulation and thread counts.
 
 use fogray_ops::prior::TotalVariation;
-use fogray_ops::PriorError;
+use fogray_ops::{Op, OpsError};
 use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{Array, ArrayD, Dimension, IxDyn};
 
@@ -204,7 +204,14 @@ fn a_grid_without_neighbours_has_no_prior() {
 fn bad_input_is_refused_and_nothing_changes() {
     for w in [-1.0, f64::NAN, f64::INFINITY] {
         assert!(
-            matches!(TotalVariation::new(w), Err(PriorError::InvalidWeight { .. })),
+            matches!(
+                TotalVariation::new(w),
+                Err(OpsError::Config {
+                    op: Op::TotalVariation,
+                    what: "weight",
+                    ..
+                })
+            ),
             "{w}"
         );
     }
@@ -212,7 +219,13 @@ fn bad_input_is_refused_and_nothing_changes() {
     for shape in [vec![4, 3], vec![2, 2, 2, 2, 2]] {
         let g = ArrayD::<f64>::zeros(IxDyn(&shape));
         assert!(
-            matches!(tv.value(&g.view()), Err(PriorError::Shape { .. })),
+            matches!(
+                tv.value(&g.view()),
+                Err(OpsError::Shape {
+                    op: Op::TotalVariation,
+                    ..
+                })
+            ),
             "{shape:?}"
         );
     }
@@ -220,7 +233,10 @@ fn bad_input_is_refused_and_nothing_changes() {
     let mut out = ArrayD::from_elem(IxDyn(&[3, 3, 3]), 7.0);
     assert!(matches!(
         tv.gradient_into(&g.view(), 1.0, out.view_mut()),
-        Err(PriorError::Shape { .. })
+        Err(OpsError::Shape {
+            op: Op::TotalVariation,
+            ..
+        })
     ));
     assert!(out.iter().all(|&v| v == 7.0));
     let mut tape = Tape::<f64>::new();
@@ -228,5 +244,9 @@ fn bad_input_is_refused_and_nothing_changes() {
     let before = tape.len();
     let err = tv.apply(&mut tape, bad).unwrap_err();
     assert_eq!(tape.len(), before);
-    assert!(err.downcast_ref::<PriorError>().is_some(), "{err}");
+    assert_eq!(
+        err.downcast_ref::<OpsError>().map(OpsError::op),
+        Some(Op::TotalVariation),
+        "{err}"
+    );
 }

@@ -4,7 +4,7 @@
 //! results on other thread counts, and each error.
 
 use fogray_ops::sh::{basis::basis, twin, ShColor};
-use fogray_ops::ShError;
+use fogray_ops::{At, Op, OpsError};
 use fogray_tape::{gradcheck, Float, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{Array2, Array3};
 use rand::{Rng, SeedableRng};
@@ -294,7 +294,15 @@ fn results_are_bitwise_the_same_on_1_2_and_3_threads() {
 
 #[test]
 fn bad_input_is_a_typed_error_naming_the_row() {
-    assert_eq!(ShColor::new(4).unwrap_err(), ShError::Degree { degree: 4 });
+    assert_eq!(
+        ShColor::new(4).unwrap_err(),
+        OpsError::Config {
+            op: Op::ShColor,
+            what: "degree",
+            value: 4.0,
+            rule: "must be 0, 1, 2 or 3"
+        }
+    );
     assert_eq!(ShColor::new(3).unwrap().coefficient_count(), 48);
     let op = ShColor::new(2).unwrap();
     let n = 2000;
@@ -302,15 +310,17 @@ fn bad_input_is_a_typed_error_naming_the_row() {
     let dirs = directions(61, n);
     assert!(op.evaluate(coeffs.view(), dirs.view()).is_ok());
 
-    let shape_of = |e: ShError| match e {
-        ShError::Shape { what, .. } => what,
+    let shape_of = |e: OpsError| match e {
+        OpsError::Shape {
+            op: Op::ShColor, what, ..
+        } => what,
         other => panic!("{other:?}"),
     };
     // Coefficients of another degree, directions not [n, 3], a differing n.
     let e = op.evaluate(uniform(62, n, 12, 1.0).view(), dirs.view()).unwrap_err();
     assert_eq!(
         e.to_string(),
-        "coefficients: expected [n, 27] (3 channels of 9 for degree 2), got [2000, 12]"
+        "sh_color: coefficients: expected [n, 27] (3 channels of 9 for degree 2), got [2000, 12]"
     );
     assert_eq!(
         shape_of(
@@ -342,15 +352,17 @@ fn bad_input_is_a_typed_error_naming_the_row() {
     d[[1700, 1]] = f64::NEG_INFINITY;
     assert!(matches!(
         op.evaluate(c.view(), dirs.view()).unwrap_err(),
-        ShError::NonFinite { what: "coefficient", row: 1500, column: 20, value } if value.is_nan()
+        OpsError::Domain { op: Op::ShColor, at: At::Entry { row: 1500, column: 20 }, what, value, .. }
+            if what == "coefficient" && value.is_nan()
     ));
     assert_eq!(
         op.evaluate(coeffs.view(), d.view()).unwrap_err(),
-        ShError::NonFinite {
-            what: "direction",
-            row: 1700,
-            column: 1,
-            value: f64::NEG_INFINITY
+        OpsError::Domain {
+            op: Op::ShColor,
+            at: At::Entry { row: 1700, column: 1 },
+            what: "direction".into(),
+            value: f64::NEG_INFINITY,
+            rule: "must be finite"
         }
     );
     // Not unit: 1.01 long is rejected, 1.0005 long accepted.
@@ -359,16 +371,26 @@ fn bad_input_is_a_typed_error_naming_the_row() {
     d.row_mut(77).mapv_inplace(|v| v * 1.0005);
     let e = op.evaluate(coeffs.view(), d.view()).unwrap_err();
     match e {
-        ShError::NotUnit { row, norm } => assert!(row == 1234 && (norm - 1.01).abs() < 1e-12, "{e}"),
+        OpsError::NotUnit {
+            op: Op::ShColor,
+            row,
+            norm,
+        } => assert!(row == 1234 && (norm - 1.01).abs() < 1e-12, "{e}"),
         other => panic!("{other:?}"),
     }
-    assert!(e.to_string().starts_with("direction at row 1234 has length 1.01"));
+    assert!(e
+        .to_string()
+        .starts_with("sh_color: direction at row 1234 has length 1.01"));
     let mut zero = dirs.clone();
     zero.row_mut(5).fill(0.0);
     assert_eq!(
         op.vjp(coeffs.view(), zero.view(), Array2::zeros((n, 3)).view())
             .unwrap_err(),
-        ShError::NotUnit { row: 5, norm: 0.0 }
+        OpsError::NotUnit {
+            op: Op::ShColor,
+            row: 5,
+            norm: 0.0
+        }
     );
 
     // Through a tape, fused or twin: the error arrives whole and nothing is recorded.
@@ -389,19 +411,34 @@ fn bad_input_is_a_typed_error_naming_the_row() {
         };
         let e = apply(bad_c, good_d).unwrap_err();
         assert!(
-            matches!(e.downcast_ref::<ShError>(), Some(ShError::NonFinite { row: 1500, .. })),
+            matches!(
+                e.downcast_ref::<OpsError>(),
+                Some(OpsError::Domain {
+                    op: Op::ShColor,
+                    at: At::Entry { row: 1500, .. },
+                    ..
+                })
+            ),
             "{e}"
         );
         let e = apply(good_c, bad_d).unwrap_err();
         assert!(
-            matches!(e.downcast_ref::<ShError>(), Some(ShError::NotUnit { row: 1234, .. })),
+            matches!(
+                e.downcast_ref::<OpsError>(),
+                Some(OpsError::NotUnit {
+                    op: Op::ShColor,
+                    row: 1234,
+                    ..
+                })
+            ),
             "{e}"
         );
         let e = apply(three_d, good_d).unwrap_err();
         assert!(
             matches!(
-                e.downcast_ref::<ShError>(),
-                Some(ShError::Shape {
+                e.downcast_ref::<OpsError>(),
+                Some(OpsError::Shape {
+                    op: Op::ShColor,
                     what: "coefficients",
                     ..
                 })
@@ -411,13 +448,18 @@ fn bad_input_is_a_typed_error_naming_the_row() {
         let e = apply(good_c, good_c).unwrap_err();
         assert!(
             matches!(
-                e.downcast_ref::<ShError>(),
-                Some(ShError::Shape { what: "directions", .. })
+                e.downcast_ref::<OpsError>(),
+                Some(OpsError::Shape {
+                    op: Op::ShColor,
+                    what: "directions",
+                    ..
+                })
             ),
             "{e}"
         );
     }
     assert_eq!(tape.len(), before);
     let e = ShColor::new(7).map_err(TapeError::from).unwrap_err();
-    assert!(e.to_string().contains("degree 7"), "{e}");
+    assert_eq!(e.to_string(), "sh_color: degree is 7 (must be 0, 1, 2 or 3)");
+    assert_eq!(e.downcast_ref::<OpsError>().map(OpsError::op), Some(Op::ShColor));
 }

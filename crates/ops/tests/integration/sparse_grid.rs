@@ -5,7 +5,7 @@
 use crate::grid_common::{oracle, oracle_grid_gradient, positions_in_cells, random_field};
 
 use fogray_ops::grid::{sparse, NodeIndex, SparseGridField};
-use fogray_ops::{GridBox, GridError, GridField, GridWanted};
+use fogray_ops::{At, GridBox, GridField, GridWanted, Op, OpsError};
 use fogray_tape::{gradcheck, Float, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{Array2, ArrayD, IxDyn};
 use rand::{Rng, SeedableRng};
@@ -187,16 +187,21 @@ fn bad_input_is_an_error_naming_it() {
     let short = data.slice(ndarray::s![1.., ..]).to_owned();
     assert!(matches!(
         field.evaluate(&short.view().into_dyn(), &p.view().into_dyn()),
-        Err(GridError::Shape {
+        Err(OpsError::Shape {
+            op: Op::SparseGridField,
             what: "sparse grid values",
             ..
         })
     ));
     p[[2, 1]] = f64::NAN;
-    assert_eq!(
+    assert!(matches!(
         field.evaluate(&data.view().into_dyn(), &p.view().into_dyn()),
-        Err(GridError::NanPosition { sample: 2, axis: 1 })
-    );
+        Err(OpsError::Domain {
+            op: Op::SparseGridField,
+            at: At::Entry { row: 2, column: 1 },
+            ..
+        })
+    ));
     let up = Array2::<f64>::zeros((3, 2));
     p[[2, 1]] = 0.0;
     assert!(matches!(
@@ -206,7 +211,8 @@ fn bad_input_is_an_error_naming_it() {
             &up.view().into_dyn(),
             BOTH
         ),
-        Err(GridError::Shape {
+        Err(OpsError::Shape {
+            op: Op::SparseGridField,
             what: "upstream gradient",
             ..
         })

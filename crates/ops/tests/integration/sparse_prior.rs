@@ -3,7 +3,7 @@
 
 use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
-use fogray_ops::{GridBox, PriorError};
+use fogray_ops::{GridBox, Op, OpsError};
 use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{Array2, IxDyn};
 use rand::{Rng, SeedableRng};
@@ -102,7 +102,8 @@ fn values_of_another_shape_are_an_error() {
     let v = Array2::<f64>::zeros((7, 2));
     assert!(matches!(
         sparse.value(&v.view().into_dyn()),
-        Err(PriorError::Shape {
+        Err(OpsError::Shape {
+            op: Op::SparseTotalVariation,
             what: "sparse grid values",
             ..
         })

@@ -8,13 +8,13 @@ use fogray_tape::{BackwardCtx, CustomOp, Float, OpError, Tape, TapeError, Var};
 use ndarray::{ArrayD, ArrayViewD};
 
 use super::super::geometry::{GridBox, Layout};
-use super::super::op::{array, check_positions, flat, op_error};
+use super::super::op::{array, check_positions, flat};
 use super::super::scratch::Scratch;
 use super::super::{GridGradients, GridWanted};
 use super::index::NodeIndex;
 use super::kernels::{forward, position_gradient};
 use super::scatter::data_gradient;
-use crate::error::GridError;
+use crate::error::{Op, OpsError};
 
 /// A 3-D grid of `C` channels over a [`GridBox`] that stores only the nodes its
 /// [`NodeIndex`] keeps, as packed values `[kept, C]`, looked up trilinearly at packed
@@ -34,11 +34,12 @@ pub struct SparseGridField {
 impl SparseGridField {
     /// The field over the 3-D box `bbox` of the nodes `index` keeps, `channels` per node.
     ///
-    /// Errors ([`GridError::Shape`]): a 2-D box, no channel, or more values than memory can
+    /// Errors ([`OpsError::Shape`]): a 2-D box, no channel, or more values than memory can
     /// address.
-    pub fn new(bbox: GridBox, index: NodeIndex, channels: usize) -> Result<Self, GridError> {
+    pub fn new(bbox: GridBox, index: NodeIndex, channels: usize) -> Result<Self, OpsError> {
         if bbox.dims() != 3 {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::SparseGridField,
                 what: "sparse grid box",
                 expected: "3 axes".into(),
                 got: format!("{} axes", bbox.dims()),
@@ -50,7 +51,8 @@ impl SparseGridField {
                 .checked_mul(channels)
                 .is_none_or(|v| v > isize::MAX as usize / 8)
         {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::SparseGridField,
                 what: "sparse grid channels",
                 expected: "at least one, and fewer values than memory can address".into(),
                 got: channels.to_string(),
@@ -93,9 +95,10 @@ impl SparseGridField {
         Layout::<3>::new(&self.bbox, &self.index.nodes())
     }
 
-    fn check_data<F: Float>(&self, data: &ArrayViewD<'_, F>) -> Result<(), GridError> {
+    fn check_data<F: Float>(&self, data: &ArrayViewD<'_, F>) -> Result<(), OpsError> {
         if data.shape() != self.data_shape() {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::SparseGridField,
                 what: "sparse grid values",
                 expected: format!("{:?}", self.data_shape()),
                 got: format!("{:?}", data.shape()),
@@ -107,15 +110,15 @@ impl SparseGridField {
     /// Looks the packed values `data` (`[kept, C]`) up at `positions` (`[n, 3]`): `[n, C]`.
     /// A position outside the box reads 0; a corner that is not stored adds nothing.
     ///
-    /// Errors: the shapes do not fit ([`GridError::Shape`]), a NaN coordinate
-    /// ([`GridError::NanPosition`], the first one).
+    /// Errors: the shapes do not fit ([`OpsError::Shape`]), a NaN coordinate
+    /// ([`OpsError::Domain`], the first one).
     pub fn evaluate<F: Float>(
         &self,
         data: &ArrayViewD<'_, F>,
         positions: &ArrayViewD<'_, F>,
-    ) -> Result<ArrayD<F>, GridError> {
+    ) -> Result<ArrayD<F>, OpsError> {
         self.check_data(data)?;
-        let (positions, n) = check_positions(positions, 3)?;
+        let (positions, n) = check_positions(Op::SparseGridField, positions, 3)?;
         let mut out = scratch(n * self.channels);
         forward(
             &self.layout(),
@@ -125,7 +128,7 @@ impl SparseGridField {
             self.channels,
             &mut out,
         );
-        array(&[n, self.channels], out)
+        array(Op::SparseGridField, &[n, self.channels], out)
     }
 
     /// The gradients of a loss with `upstream = dL/doutput` (`[n, C]`) for the lookup of
@@ -139,12 +142,13 @@ impl SparseGridField {
         positions: &ArrayViewD<'_, F>,
         upstream: &ArrayViewD<'_, F>,
         wanted: GridWanted,
-    ) -> Result<GridGradients<F>, GridError> {
+    ) -> Result<GridGradients<F>, OpsError> {
         self.check_data(data)?;
-        let (positions, n) = check_positions(positions, 3)?;
+        let (positions, n) = check_positions(Op::SparseGridField, positions, 3)?;
         let ch = self.channels;
         if upstream.shape() != [n, ch] {
-            return Err(GridError::Shape {
+            return Err(OpsError::Shape {
+                op: Op::SparseGridField,
                 what: "upstream gradient",
                 expected: format!("[{n}, {ch}]"),
                 got: format!("{:?}", upstream.shape()),
@@ -155,14 +159,14 @@ impl SparseGridField {
         let grid = if wanted.grid {
             let mut out = scratch(self.index.kept() * ch);
             data_gradient(&layout, &self.index, &positions, &upstream, ch, &mut out, &self.scratch);
-            Some(array(&self.data_shape(), out)?)
+            Some(array(Op::SparseGridField, &self.data_shape(), out)?)
         } else {
             None
         };
         let positions = if wanted.positions {
             let mut out = scratch(n * 3);
             position_gradient(&layout, &self.index, &flat(data), &positions, &upstream, ch, &mut out);
-            Some(array(&[n, 3], out)?)
+            Some(array(Op::SparseGridField, &[n, 3], out)?)
         } else {
             None
         };
@@ -172,7 +176,7 @@ impl SparseGridField {
     /// Records the lookup of `data` (`[kept, C]`) at `positions` (`[n, 3]`) on `tape`; the
     /// output is `[n, C]`, its backward reaches the values and the positions.
     ///
-    /// Errors (the tape is unchanged): as [`SparseGridField::evaluate`] (the [`GridError`]
+    /// Errors (the tape is unchanged): as [`SparseGridField::evaluate`] (the [`OpsError`]
     /// inside [`TapeError::Op`]), or a stale handle.
     pub fn apply<F: Float>(&self, tape: &mut Tape<F>, data: Var, positions: Var) -> Result<Var, TapeError> {
         tape.apply1(self.clone(), &[data, positions])
@@ -194,7 +198,7 @@ impl<F: Float> CustomOp<F> for SparseGridField {
                 inputs.len()
             )));
         };
-        Ok((vec![self.evaluate(data, positions).map_err(op_error)?], ()))
+        Ok((vec![self.evaluate(data, positions)?], ()))
     }
 
     fn backward(
@@ -209,7 +213,7 @@ impl<F: Float> CustomOp<F> for SparseGridField {
             grid: ctx.needs_input_grad(0),
             positions: ctx.needs_input_grad(1),
         };
-        let out = self.vjp(&ctx.input(0), &ctx.input(1), g, wanted).map_err(op_error)?;
+        let out = self.vjp(&ctx.input(0), &ctx.input(1), g, wanted)?;
         Ok(vec![out.grid, out.positions])
     }
 }

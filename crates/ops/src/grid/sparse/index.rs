@@ -1,7 +1,7 @@
 //! Which nodes of a sparse grid are stored, and where: an index from every node of the full
 //! lattice to its row of the packed values, rows in node order.
 
-use crate::error::GridError;
+use crate::error::{Op, OpsError};
 
 /// The row of a node that is not stored.
 const ABSENT: u32 = u32::MAX;
@@ -23,7 +23,7 @@ const ABSENT: u32 = u32::MAX;
 /// assert_eq!(index.row([0, 1, 1]), Some(3));
 /// assert_eq!(index.row([1, 0, 0]), None);
 /// assert_eq!(index.row([2, 0, 0]), Some(4));
-/// # Ok::<(), fogray_ops::GridError>(())
+/// # Ok::<(), fogray_ops::OpsError>(())
 /// ```
 #[derive(Debug, Clone, PartialEq)]
 pub struct NodeIndex {
@@ -39,10 +39,15 @@ impl NodeIndex {
     /// The nodes of an `nodes[0] x nodes[1] x nodes[2]` lattice for which `keep` (one entry
     /// per node, in linear order) is true.
     ///
-    /// Errors ([`GridError::Shape`]): an axis with fewer than 2 nodes, a mask of another
+    /// Errors ([`OpsError::Shape`]): an axis with fewer than 2 nodes, a mask of another
     /// length, or more kept nodes than a `u32` row number holds.
-    pub fn from_mask(nodes: [usize; 3], keep: &[bool]) -> Result<Self, GridError> {
-        let fail = |what: &'static str, expected: String, got: String| GridError::Shape { what, expected, got };
+    pub fn from_mask(nodes: [usize; 3], keep: &[bool]) -> Result<Self, OpsError> {
+        let fail = |what: &'static str, expected: String, got: String| OpsError::Shape {
+            op: Op::SparseGridField,
+            what,
+            expected,
+            got,
+        };
         if let Some(a) = nodes.iter().position(|&n| n < 2) {
             return Err(fail(
                 "sparse grid nodes",
@@ -102,7 +107,7 @@ impl NodeIndex {
     /// Every node of the lattice kept (the dense grid, stored as a sparse one).
     ///
     /// Errors: as [`NodeIndex::from_mask`].
-    pub fn full(nodes: [usize; 3]) -> Result<Self, GridError> {
+    pub fn full(nodes: [usize; 3]) -> Result<Self, OpsError> {
         let total = nodes
             .iter()
             .try_fold(1usize, |acc, &n| acc.checked_mul(n))
@@ -180,14 +185,27 @@ mod tests {
 
     #[test]
     fn bad_lattices_and_masks_are_errors() {
-        assert!(matches!(NodeIndex::full([1, 4, 4]), Err(GridError::Shape { .. })));
+        assert!(matches!(
+            NodeIndex::full([1, 4, 4]),
+            Err(OpsError::Shape {
+                op: Op::SparseGridField,
+                ..
+            })
+        ));
         assert!(matches!(
             NodeIndex::from_mask([2, 2, 2], &[true; 7]),
-            Err(GridError::Shape { what: "keep mask", .. })
+            Err(OpsError::Shape {
+                op: Op::SparseGridField,
+                what: "keep mask",
+                ..
+            })
         ));
         assert!(matches!(
             NodeIndex::full([usize::MAX / 2, 4, 4]),
-            Err(GridError::Shape { .. })
+            Err(OpsError::Shape {
+                op: Op::SparseGridField,
+                ..
+            })
         ));
     }
 }
