@@ -245,10 +245,8 @@ struct ReportArgs {
 const REPORT_EVALUATIONS: usize = 60;
 
 fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
-    use fogray_grid::report::anchor::Anchor;
-    use fogray_grid::report::configuration::RunConfig;
-    use fogray_grid::report::run::{run_configs, ReportOptions};
-    use fogray_grid::report::same_steps::same_steps;
+    use fogray::fit::curves::Anchor;
+    use fogray::fit::sweep::{run_configs, same_steps, RunConfig, SweepOptions};
     use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
     /// Timed passes of each bandwidth measurement (the best is kept).
     const TRIAD_PASSES: usize = 5;
@@ -273,7 +271,7 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     };
     settings.check()?;
     let budget = settings.budget();
-    let options = ReportOptions {
+    let options = SweepOptions {
         fit: settings,
         configs,
         slice_pixels: 128,
