@@ -4,7 +4,8 @@
 //! (a synthetic one, a dataset on disk) is fitted, rendered and saved the same way:
 //!
 //! - [`model`]: what the pipeline asks of a radiance field ([`RadianceField`]); [`dense`]: the
-//!   dense grid of density and colour, its first implementation;
+//!   dense grid of density and colour, its first implementation; [`dispatch`]: work generic
+//!   over the model run with the types that settings or a model file name;
 //! - [`settings`]: one settings struct ([`FitSettings`]) for the command line, the checkpoint
 //!   and resume;
 //! - [`dataset`], [`batch`]: views (a camera and its picture) to training rays and test views;
@@ -73,6 +74,7 @@ pub mod curves;
 pub mod dataset;
 pub mod dense;
 pub mod depth;
+pub mod dispatch;
 pub mod error;
 pub mod images;
 pub mod interrupt;

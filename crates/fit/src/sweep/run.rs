@@ -6,11 +6,10 @@ use ndarray::Array3;
 use serde::Serialize;
 
 use crate::dataset::Dataset;
-use crate::dense::DenseGrid;
+use crate::dispatch::{with_model, ModelWork};
 use crate::model::RadianceField;
-use crate::settings::{FitSettings, ModelKind, Precision, SceneBox};
+use crate::settings::{FitSettings, SceneBox};
 use crate::slices::{model_density_planes, occupancy_planes, PlaneImage};
-use crate::sparse::SparseGrid;
 use crate::train::{fit, FitResult, LogEntry, Progress};
 
 use super::config::RunConfig;
@@ -137,38 +136,31 @@ pub(crate) fn run_config(
     slice_pixels: usize,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<ConfigRun, SweepError> {
-    match fit_config.model {
-        ModelKind::Dense => {
-            run_model::<DenseGrid<f32>, DenseGrid<f64>>(data, config, fit_config, slice_pixels, progress)
-        }
-        ModelKind::Sparse => {
-            run_model::<SparseGrid<f32>, SparseGrid<f64>>(data, config, fit_config, slice_pixels, progress)
-        }
-    }
+    let work = FitAndKeep {
+        data,
+        config,
+        fit_config,
+        slice_pixels,
+        progress,
+    };
+    with_model(config.precision, fit_config.model, work)
 }
 
-/// [`run_config`] with the model `M32` in f32 or `M64` in f64, as `config` asks.
-fn run_model<M32: RadianceField<f32>, M64: RadianceField<f64>>(
-    data: &Dataset,
-    config: &RunConfig,
-    fit_config: &FitSettings,
+/// [`run_config`]'s work, for one model type.
+struct FitAndKeep<'a> {
+    data: &'a Dataset,
+    config: &'a RunConfig,
+    fit_config: &'a FitSettings,
     slice_pixels: usize,
-    progress: &mut dyn FnMut(Progress),
-) -> Result<ConfigRun, SweepError> {
-    let density_box = fit_config.model_box();
-    match config.precision {
-        Precision::F32 => keep(
-            config,
-            fit::<f32, M32>(data, fit_config, progress)?,
-            density_box,
-            slice_pixels,
-        ),
-        Precision::F64 => keep(
-            config,
-            fit::<f64, M64>(data, fit_config, progress)?,
-            density_box,
-            slice_pixels,
-        ),
+    progress: &'a mut dyn FnMut(Progress),
+}
+
+impl ModelWork for FitAndKeep<'_> {
+    type Output = Result<ConfigRun, SweepError>;
+
+    fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
+        let result = fit::<F, M>(self.data, self.fit_config, self.progress)?;
+        keep(self.config, result, self.fit_config.model_box(), self.slice_pixels)
     }
 }
 
