@@ -6,7 +6,7 @@
 //! and samples as linear in it too, so that "the PSNR at 30 s" and "the time to reach 25 dB"
 //! are read between the evaluations around them rather than rounded to one of them.
 //!
-//! - [`reach`]: [`psnr_at`], [`reach()`] and [`final_psnr`] on one log;
+//! - [`reach`](mod@reach): [`psnr_at`], [`reach()`] and [`final_psnr`] on one log;
 //! - [`compare`]: fused against taped, occupancy against uniform sampling, a run against an
 //!   anchor, each at a PSNR both reach;
 //! - [`anchor`]: an outside pipeline's log ([`Anchor`]), read from JSON.

@@ -52,7 +52,8 @@ fn reach_is_the_first_crossing_interpolated_in_time_steps_and_samples() {
     assert_eq!(r.steps, 18.75);
     assert_eq!(r.samples, 1875.0);
     assert_eq!(r.samples_per_ray(10), Some(10.0)); // 1875 / (18.75 x 10)
-                                                   // 25 dB: only in the last climb, 2/3 of the way from (6 s, 23) to (8 s, 26).
+
+    // 25 dB: only in the last climb, 2/3 of the way from (6 s, 23) to (8 s, 26).
     assert_relative_eq!(
         reach(&log, 25.0).unwrap().unwrap().seconds,
         6.0 + 4.0 / 3.0,

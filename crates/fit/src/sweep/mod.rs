@@ -6,8 +6,8 @@
 //! - [`config`]: the configurations and their names (`fused-uniform`, `taped-occupancy-f64`);
 //! - [`run`]: running the fits ([`run_configs`]) and keeping what a report shows of each
 //!   ([`ConfigRun`]);
-//! - [`same_steps`]: fused against taped over the same steps, the time each method takes to
-//!   the same PSNR;
+//! - [`same_steps`](mod@same_steps): fused against taped over the same steps, the time each
+//!   method takes to the same PSNR;
 //! - [`pairs`]: the runs that differ in one setting compared on their curves (fused against
 //!   taped, occupancy against uniform, each run against an anchor).
 //!

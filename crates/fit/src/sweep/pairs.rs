@@ -12,7 +12,9 @@ use super::config::shared_name;
 use super::run::ConfigRun;
 
 /// Fused against taped for every sampling and precision that has both, named by the pair's
-/// shared part (`"uniform"`, `"occupancy-f64"`). Errors: [`CurveError::Log`] for a log that is not a curve.
+/// shared part (`"uniform"`, `"occupancy-f64"`).
+///
+/// Errors: [`CurveError::Log`] for a log that is not a curve.
 pub fn fused_vs_taped_rows(runs: &[ConfigRun]) -> Result<Vec<(String, FusedVsTaped)>, CurveError> {
     let mut rows = Vec::new();
     for f in runs.iter().filter(|r| r.method == "fused") {
@@ -27,7 +29,9 @@ pub fn fused_vs_taped_rows(runs: &[ConfigRun]) -> Result<Vec<(String, FusedVsTap
 }
 
 /// Occupancy against uniform for every method and precision that has both, `batch` rays per
-/// step. Errors: [`CurveError::Log`] for a log that is not a curve, or a `batch` of 0.
+/// step.
+///
+/// Errors: [`CurveError::Log`] for a log that is not a curve, or a `batch` of 0.
 pub fn occupancy_vs_uniform_rows(
     runs: &[ConfigRun],
     batch: usize,

@@ -94,7 +94,7 @@ pub struct ReportContext<'a> {
     /// Markdown for the pictures section (images and captions), or empty.
     pub pictures: &'a str,
     /// Fused against taped over the same steps, as
-    /// [`same_steps`](fogray::fit::sweep::same_steps) gives them.
+    /// [`same_steps`](fn@fogray::fit::sweep::same_steps) gives them.
     pub same_steps: &'a [(String, SameSteps)],
     /// Fused against taped at the first crossing, as
     /// [`fused_vs_taped_rows`](fogray::fit::sweep::pairs::fused_vs_taped_rows) gives them.

@@ -45,7 +45,7 @@ pub struct ReportSetup<'a> {
     /// An outside pipeline's run to set beside the configurations, if given.
     pub anchor: Option<&'a Anchor>,
     /// Fused against taped over the same steps, as
-    /// [`same_steps`](fogray::fit::sweep::same_steps) gives them (empty for none).
+    /// [`same_steps`](fn@fogray::fit::sweep::same_steps) gives them (empty for none).
     pub same_steps: &'a [(String, SameSteps)],
     /// The machine's memory bandwidth before and after the runs, if measured.
     pub bandwidth: Option<MachineBandwidth>,
