@@ -8,13 +8,12 @@ use std::time::Instant;
 use fogray_data::{load, LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::dense::DenseGrid;
+use fogray_fit::dispatch::{with_model, ModelWork};
 use fogray_fit::interrupt::StopFlag;
 use fogray_fit::metrics::haze_fraction;
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
-use fogray_fit::settings::{FitSettings, ModelKind, Precision, SceneBox};
-use fogray_fit::sparse::SparseGrid;
+use fogray_fit::settings::{FitSettings, SceneBox};
 use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
 use fogray_fit::RadianceField;
 use fogray_tape::Float;
@@ -202,10 +201,14 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
         std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
     }
     let stop = StopFlag::on_ctrl_c()?;
-    match settings.precision {
-        Precision::F32 => fit_model::<f32>(args, &settings, &data, &stop, clock),
-        Precision::F64 => fit_model::<f64>(args, &settings, &data, &stop, clock),
-    }
+    let work = FitWork {
+        args,
+        settings: &settings,
+        data: &data,
+        stop: &stop,
+        clock,
+    };
+    with_model(settings.precision, settings.model, work)
 }
 
 fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
@@ -238,16 +241,20 @@ fn entries(args: &FitArgs) -> Result<BTreeMap<String, String>, CliError> {
     ]))
 }
 
-fn fit_model<F: Float>(
-    args: &FitArgs,
-    settings: &FitSettings,
-    data: &Dataset,
-    stop: &StopFlag,
+/// A fit of one model type, as fogray-fit's dispatch runs it.
+struct FitWork<'a> {
+    args: &'a FitArgs,
+    settings: &'a FitSettings,
+    data: &'a Dataset,
+    stop: &'a StopFlag,
     clock: Instant,
-) -> Result<FitOutcome, CliError> {
-    match settings.model {
-        ModelKind::Dense => fit_and_report::<F, DenseGrid<F>>(args, settings, data, stop, clock),
-        ModelKind::Sparse => fit_and_report::<F, SparseGrid<F>>(args, settings, data, stop, clock),
+}
+
+impl ModelWork for FitWork<'_> {
+    type Output = Result<FitOutcome, CliError>;
+
+    fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
+        fit_and_report::<F, M>(self.args, self.settings, self.data, self.stop, self.clock)
     }
 }
 

@@ -1,26 +1,17 @@
 //! A model file that a command reads (`fogray render`, `fogray export`): its metadata, read
-//! first, and the dispatch from its kind and precision to the model type that loads it, so
-//! that each command writes its work once, generic over the model.
+//! first, and the dispatch from its kind and precision to the model type that loads it
+//! (fogray-fit's [`with_model`]), so that each command writes its work once, generic over the
+//! model.
 
 use std::path::{Path, PathBuf};
 
 use fogray_fit::checkpoint::{read_info, ModelInfo};
-use fogray_fit::dense::DenseGrid;
+use fogray_fit::dispatch::{with_model, ModelWork};
 use fogray_fit::model::RadianceField;
-use fogray_fit::settings::Precision;
-use fogray_fit::sparse::SparseGrid;
+use fogray_fit::settings::ModelKind;
 use fogray_tape::Float;
 
 use crate::error::CliError;
-
-/// The kinds of model the command line reads.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Kind {
-    /// [`DenseGrid`].
-    Dense,
-    /// [`SparseGrid`].
-    Sparse,
-}
 
 /// What a command does with a model, once its type is known.
 pub trait WithModel {
@@ -41,7 +32,7 @@ pub struct SavedModel {
     /// Its metadata (settings, nodes, the application's entries).
     pub info: ModelInfo,
     /// Its kind.
-    pub kind: Kind,
+    pub kind: ModelKind,
 }
 
 impl SavedModel {
@@ -51,17 +42,13 @@ impl SavedModel {
     /// command line does not know.
     pub fn open(path: &Path, command: &str) -> Result<Self, CliError> {
         let info = read_info(path)?;
-        let kind = match info.kind.as_str() {
-            k if k == DenseGrid::<f32>::KIND => Kind::Dense,
-            k if k == SparseGrid::<f32>::KIND => Kind::Sparse,
-            _ => {
-                return Err(CliError::Option(format!(
-                    "{}: a {:?} model, which {command} does not know",
-                    path.display(),
-                    info.kind
-                )))
-            }
-        };
+        let kind = ModelKind::of_kind(&info.kind).ok_or_else(|| {
+            CliError::Option(format!(
+                "{}: a {:?} model, which {command} does not know",
+                path.display(),
+                info.kind
+            ))
+        })?;
         Ok(SavedModel {
             path: path.to_path_buf(),
             info,
@@ -73,12 +60,21 @@ impl SavedModel {
     ///
     /// Errors: `work`'s.
     pub fn with<W: WithModel>(&self, work: W) -> Result<W::Output, CliError> {
-        let path = &self.path;
-        match (self.info.settings.precision, self.kind) {
-            (Precision::F32, Kind::Dense) => work.run::<f32, DenseGrid<f32>>(path),
-            (Precision::F64, Kind::Dense) => work.run::<f64, DenseGrid<f64>>(path),
-            (Precision::F32, Kind::Sparse) => work.run::<f32, SparseGrid<f32>>(path),
-            (Precision::F64, Kind::Sparse) => work.run::<f64, SparseGrid<f64>>(path),
-        }
+        let at = AtPath { work, path: &self.path };
+        with_model(self.info.settings.precision, self.kind, at)
+    }
+}
+
+/// A command's work on the model file `path`, as fogray-fit's dispatch runs it.
+struct AtPath<'a, W> {
+    work: W,
+    path: &'a Path,
+}
+
+impl<W: WithModel> ModelWork for AtPath<'_, W> {
+    type Output = Result<W::Output, CliError>;
+
+    fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
+        self.work.run::<F, M>(self.path)
     }
 }

@@ -4,7 +4,8 @@
 //! (a synthetic one, a dataset on disk) is fitted, rendered and saved the same way:
 //!
 //! - [`model`]: what the pipeline asks of a radiance field ([`RadianceField`]); [`dense`]: the
-//!   dense grid of density and colour, its first implementation;
+//!   dense grid of density and colour, its first implementation; [`dispatch`]: work generic
+//!   over the model run with the types that settings or a model file name;
 //! - [`settings`]: one settings struct ([`FitSettings`]) for the command line, the checkpoint
 //!   and resume;
 //! - [`dataset`], [`batch`]: views (a camera and its picture) to training rays and test views;
@@ -14,7 +15,11 @@
 //!   opacity, depth);
 //! - [`checkpoint`]: a fit to a safetensors file and back; [`metrics`]: PSNR;
 //!   [`mesh`]: a model's surface as a coloured triangle mesh (marching cubes, PLY);
-//!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves.
+//!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves; [`slices`]: a
+//!   model's density and its occupancy grid on planes through its box;
+//! - [`sweep`]: one fit per configuration (fused or taped, uniform or occupancy, f32 or f64)
+//!   for the same budget; [`curves`]: logs read as curves and compared (the PSNR at a time,
+//!   the time to a PSNR, one run against another or against an outside pipeline's log).
 //!
 //! A user's whole fit: cameras and pictures in, a fitted model, its test PSNR, a checkpoint
 //! and a render out.
@@ -65,9 +70,11 @@
 
 pub mod batch;
 pub mod checkpoint;
+pub mod curves;
 pub mod dataset;
 pub mod dense;
 pub mod depth;
+pub mod dispatch;
 pub mod environment;
 pub mod error;
 pub mod images;
@@ -82,8 +89,10 @@ pub mod sampling;
 pub mod schedule;
 pub mod settings;
 pub mod shading;
+pub mod slices;
 pub mod sparse;
 pub mod state;
+pub mod sweep;
 #[cfg(test)]
 mod testing;
 pub mod train;

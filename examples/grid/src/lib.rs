@@ -2,8 +2,9 @@
 //!
 //! A scene with no known shape: a density and a colour at every point of space, which
 //! gradient descent on photographs must find. This crate holds the parts of that experiment
-//! that are particular to its scene; the model, the fit, the render and the checkpoints are
-//! fogray-fit's (`fogray::fit`):
+//! that are particular to its scene; the model, the fit, the render, the checkpoints, the
+//! sweep over configurations, the curves it compares and the density slices are fogray-fit's
+//! (`fogray::fit`):
 //!
 //! - [`scene`]: constant-density spheres and boxes in front of a background, from JSON;
 //! - [`exact`]: the exact emission-absorption render of such a scene along a ray (the medium
@@ -12,7 +13,6 @@
 //!   which of them are held out for testing;
 //! - [`photographs`]: the exact photographs of every view;
 //! - [`views`]: the ring's photographs as the pipeline's data (fogray-fit's `Dataset`);
-//! - [`slices`]: the density and the occupancy grid on planes through the box;
 //! - [`report`]: the speed-against-error report over configurations.
 //!
 //! ```
@@ -47,5 +47,4 @@ pub mod photographs;
 pub mod report;
 pub mod ring;
 pub mod scene;
-pub mod slices;
 pub mod views;

@@ -16,15 +16,16 @@ use serde::Serialize;
 
 use fogray::fit::checkpoint::{self, ModelInfo};
 use fogray::fit::dataset::Dataset;
-use fogray::fit::dense::DenseGrid;
 use fogray::fit::depth::write_depth_png;
+use fogray::fit::dispatch::{with_model, ModelWork};
 use fogray::fit::images::{nested, write_comparison_png, write_png};
 use fogray::fit::interrupt::StopFlag;
 use fogray::fit::metrics::psnr;
 use fogray::fit::plots;
 use fogray::fit::render::{render_picture, RenderOptions};
-use fogray::fit::settings::{FitSettings, Precision};
+use fogray::fit::settings::{FitSettings, ModelKind};
 use fogray::fit::train::{fit_from, FitResult, Progress};
+use fogray::fit::RadianceField;
 use fogray_grid::photographs::{photograph, photographs};
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
@@ -245,10 +246,8 @@ struct ReportArgs {
 const REPORT_EVALUATIONS: usize = 60;
 
 fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
-    use fogray_grid::report::anchor::Anchor;
-    use fogray_grid::report::configuration::RunConfig;
-    use fogray_grid::report::run::{run_configs, ReportOptions};
-    use fogray_grid::report::same_steps::same_steps;
+    use fogray::fit::curves::Anchor;
+    use fogray::fit::sweep::{run_configs, same_steps, RunConfig, SweepOptions};
     use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
     /// Timed passes of each bandwidth measurement (the best is kept).
     const TRIAD_PASSES: usize = 5;
@@ -273,7 +272,7 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     };
     settings.check()?;
     let budget = settings.budget();
-    let options = ReportOptions {
+    let options = SweepOptions {
         fit: settings,
         configs,
         slice_pixels: 128,
@@ -424,10 +423,15 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     }
     let data = dataset(&problem.scene, &ring)?;
     let stop = StopFlag::on_ctrl_c()?;
-    match settings.precision {
-        Precision::F32 => fit_and_save::<f32>(&args, &data, &settings, &problem, resume.as_ref(), &stop),
-        Precision::F64 => fit_and_save::<f64>(&args, &data, &settings, &problem, resume.as_ref(), &stop),
-    }
+    let work = FitWork {
+        args: &args,
+        data: &data,
+        settings: &settings,
+        problem: &problem,
+        resume: resume.as_ref(),
+        stop: &stop,
+    };
+    with_model(settings.precision, settings.model, work)
 }
 
 /// A resumed fit's settings, scene and cameras: the file's, except those given on the command
@@ -485,7 +489,32 @@ fn default_model_path(args: &FitArgs) -> PathBuf {
 /// Exit status of a fit stopped by Ctrl-C (after saving it): 128 + SIGINT, as a shell reports.
 const INTERRUPTED: i32 = 130;
 
-fn fit_and_save<F: fogray::tape::Float>(
+/// A fit with the model its settings name, as fogray-fit's dispatch runs it.
+struct FitWork<'a> {
+    args: &'a FitArgs,
+    data: &'a Dataset,
+    settings: &'a FitSettings,
+    problem: &'a Problem,
+    resume: Option<&'a Resume>,
+    stop: &'a StopFlag,
+}
+
+impl ModelWork for FitWork<'_> {
+    type Output = Result<()>;
+
+    fn run<F: fogray::tape::Float, M: RadianceField<F>>(self) -> Result<()> {
+        fit_and_save::<F, M>(
+            self.args,
+            self.data,
+            self.settings,
+            self.problem,
+            self.resume,
+            self.stop,
+        )
+    }
+}
+
+fn fit_and_save<F: fogray::tape::Float, M: RadianceField<F>>(
     args: &FitArgs,
     data: &Dataset,
     settings: &FitSettings,
@@ -494,7 +523,7 @@ fn fit_and_save<F: fogray::tape::Float>(
     stop: &StopFlag,
 ) -> Result<()> {
     let start = match resume {
-        Some(r) => Some(checkpoint::load::<F, DenseGrid<F>>(&r.path)?.start),
+        Some(r) => Some(checkpoint::load::<F, M>(&r.path)?.start),
         None => None,
     };
     let save_path = args.save_model.clone().unwrap_or_else(|| default_model_path(args));
@@ -520,7 +549,7 @@ fn fit_and_save<F: fogray::tape::Float>(
         bar.set_position((p.fraction * 1000.0) as u64);
         bar.set_message(format!("step {}", p.step));
     };
-    let result = fit_from::<F, DenseGrid<F>>(data, settings, start, Some(stop.flag()), &mut progress)?;
+    let result = fit_from::<F, M>(data, settings, start, Some(stop.flag()), &mut progress)?;
     if args.save_model.is_some() || result.interrupted {
         checkpoint::save(
             &save_path,
@@ -542,11 +571,11 @@ fn fit_and_save<F: fogray::tape::Float>(
     report_fit(args, settings, data, result, &bar)
 }
 
-fn report_fit<F: fogray::tape::Float>(
+fn report_fit<F: fogray::tape::Float, M>(
     args: &FitArgs,
     settings: &FitSettings,
     data: &Dataset,
-    result: FitResult<F, DenseGrid<F>>,
+    result: FitResult<F, M>,
     bar: &indicatif::ProgressBar,
 ) -> Result<()> {
     bar.finish_and_clear();
@@ -723,15 +752,46 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if views.is_empty() {
         anyhow::bail!("no view to render: the ring has no test views; pass --view I or --all");
     }
+    let kind = ModelKind::of_kind(&info.kind).with_context(|| {
+        format!(
+            "{}: a {:?} model, which fogray-grid does not know",
+            args.model.display(),
+            info.kind
+        )
+    })?;
     create_dir(&args.out)?;
-    match info.settings.precision {
-        Precision::F32 => render_views::<f32>(&args, &ring, &scene, &views),
-        Precision::F64 => render_views::<f64>(&args, &ring, &scene, &views),
+    let work = RenderWork {
+        args: &args,
+        ring: &ring,
+        scene: &scene,
+        views: &views,
+    };
+    with_model(info.settings.precision, kind, work)
+}
+
+/// The views to render from the model file, as fogray-fit's dispatch runs it.
+struct RenderWork<'a> {
+    args: &'a RenderArgs,
+    ring: &'a Ring,
+    scene: &'a Scene,
+    views: &'a [usize],
+}
+
+impl ModelWork for RenderWork<'_> {
+    type Output = Result<()>;
+
+    fn run<F: fogray::tape::Float, M: RadianceField<F>>(self) -> Result<()> {
+        render_views::<F, M>(self.args, self.ring, self.scene, self.views)
     }
 }
 
-fn render_views<F: fogray::tape::Float>(args: &RenderArgs, ring: &Ring, scene: &Scene, views: &[usize]) -> Result<()> {
-    let saved = checkpoint::load::<F, DenseGrid<F>>(&args.model)?;
+fn render_views<F: fogray::tape::Float, M: RadianceField<F>>(
+    args: &RenderArgs,
+    ring: &Ring,
+    scene: &Scene,
+    views: &[usize],
+) -> Result<()> {
+    let saved = checkpoint::load::<F, M>(&args.model)?;
     let occupancy = saved.occupancy_grid()?;
     let model = saved.start.model;
     let options = RenderOptions {

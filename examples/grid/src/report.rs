@@ -1,50 +1,43 @@
 //! The speed-against-error report: one fit per configuration (fused or taped ops, uniform or
-//! occupancy sampling, f32 or f64), run one after another for the same training budget, compared
-//! on test PSNR against training time, with pictures of the best configuration's model.
+//! occupancy sampling, f32 or f64), run one after another for the same training budget
+//! (fogray-fit's [`sweep`](fogray::fit::sweep)), compared on test PSNR against training time
+//! ([`curves`](fogray::fit::curves)), with pictures of the best configuration's model beside
+//! the scene's exact density.
 //!
-//! - [`reach`]: a log read as a curve (PSNR at a time, time to a PSNR);
-//! - [`anchor`]: an outside pipeline's log, set beside the configurations;
-//! - [`compare`]: fused against taped, occupancy against uniform, each against the anchor;
-//! - [`same_steps`]: fused against taped over the same steps (the time to the same PSNR);
-//! - [`configuration`]: the configurations and their names;
-//! - [`run`]: running the fits; [`markdown`] and [`mod@write`]: the report's files.
+//! - [`markdown`]: the report's tables, as numbers and as markdown;
+//! - [`mod@write`]: the report's files.
 //!
 //! ```
-//! use fogray::fit::train::LogEntry;
-//! use fogray_grid::report::reach::{psnr_at, reach};
+//! use fogray::fit::settings::Budget;
+//! use fogray_grid::report::markdown::checkpoints;
 //!
-//! let e = |step, seconds, test_psnr| LogEntry { step, seconds, train_loss: 0.0, test_psnr, test_ssim: f64::NAN, samples: 100 * step };
-//! let log = [e(0, 0.0, 10.0), e(10, 2.0, 20.0), e(20, 4.0, 24.0)];
-//! assert_eq!(psnr_at(&log, 1.0)?, Some(15.0)); // halfway from 10 dB to 20 dB
-//! assert_eq!(reach(&log, 22.0)?.unwrap().seconds, 3.0);
-//! assert_eq!(psnr_at(&log, 5.0)?, None); // the run stopped at 4 s
-//! # Ok::<(), fogray_grid::report::ReportError>(())
+//! // The table's PSNR columns of a 60 s report: a quarter, half and all of the budget.
+//! assert_eq!(checkpoints(Budget::Seconds(60.0), &[]), vec![15.0, 30.0, 60.0]);
 //! ```
 
 use std::path::PathBuf;
 
 use thiserror::Error;
 
+use fogray::fit::curves::CurveError;
 use fogray::fit::images::ImageError;
+use fogray::fit::sweep::SweepError;
 use fogray::fit::FitError;
 
-pub mod anchor;
-pub mod compare;
-pub mod configuration;
 pub mod markdown;
-pub mod reach;
-pub mod run;
-pub mod same_steps;
 pub mod write;
 
 /// Why a report could not be made.
 #[non_exhaustive]
 #[derive(Debug, Clone, PartialEq, Error)]
 pub enum ReportError {
-    /// A log that cannot be read as a curve (empty, out of time order, a NaN PSNR).
-    #[error("bad log: {0}")]
-    Log(String),
-    /// A bad configuration name or report setting.
+    /// A log that cannot be read as a curve, or an anchor that cannot be read.
+    #[error(transparent)]
+    Curve(#[from] CurveError),
+    /// A bad configuration or report setting, or a fit's error, from the sweep.
+    #[error(transparent)]
+    Sweep(#[from] SweepError),
+    /// A report with no runs.
     #[error("{0}")]
     Config(String),
     /// From a fit.

@@ -389,4 +389,17 @@ mod tests {
             matches!(scene.validate(), Err(SceneError::InvalidValue { ref what, .. }) if what.ends_with("density"))
         );
     }
+
+    #[test]
+    fn the_scene_density_adds_where_primitives_overlap() {
+        let scene = Scene::default();
+        assert_eq!(scene.density_at([0.0, 0.0, 0.1]), 40.0); // red sphere's centre
+        assert_eq!(scene.density_at([0.0, 0.0, -0.7]), 60.0); // floor slab
+        assert_eq!(scene.density_at([0.95, 0.95, 0.95]), 0.0); // empty corner
+
+        // The blue sphere (centre (0.45, 0.35, -0.2), radius 0.25) reaches into the red one
+        // (centre (0, 0, 0.1), radius 0.45) at (0.3, 0.2, -0.1): 0.3^2 + 0.2^2 + 0.2^2 = 0.17 <
+        // 0.2025, and 0.15^2 + 0.15^2 + 0.1^2 = 0.055 < 0.0625.
+        assert_eq!(scene.density_at([0.3, 0.2, -0.1]), 55.0);
+    }
 }

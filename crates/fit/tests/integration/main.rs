@@ -13,4 +13,5 @@ mod mesh;
 mod metrics;
 mod resume;
 mod sparse;
+mod sweep;
 mod train;

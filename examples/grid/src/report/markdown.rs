@@ -1,17 +1,12 @@
-//! The report's tables, as numbers ([`config_rows`], [`fused_vs_taped_rows`],
-//! [`occupancy_vs_uniform_rows`]) and as markdown ([`report`]).
+//! The report's tables, as numbers ([`checkpoints`], [`config_rows`]; the pairs of
+//! configurations are fogray-fit's [`sweep::pairs`](fogray::fit::sweep::pairs)) and as markdown
+//! ([`report`]).
 
+use fogray::fit::curves::{psnr_at, AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
+use fogray::fit::settings::Budget;
+use fogray::fit::sweep::{ConfigRun, SameSteps};
 use fogray::stamp::Stamp;
 
-use fogray::fit::settings::Budget;
-
-use super::anchor::Anchor;
-use super::compare::{
-    against_anchor, fused_vs_taped, occupancy_vs_uniform, AgainstAnchor, FusedVsTaped, OccupancyVsUniform,
-};
-use super::reach::psnr_at;
-use super::run::ConfigRun;
-use super::same_steps::SameSteps;
 use super::write::MachineBandwidth;
 use super::ReportError;
 
@@ -51,7 +46,7 @@ pub struct ConfigRow {
     pub occupied_fraction: f64,
 }
 
-/// The main table's rows. Errors: [`ReportError::Log`] for a log that is not a curve.
+/// The main table's rows. Errors: [`ReportError::Curve`] for a log that is not a curve.
 pub fn config_rows(runs: &[ConfigRun], checkpoints: &[f64]) -> Result<Vec<ConfigRow>, ReportError> {
     runs.iter()
         .map(|r| {
@@ -70,59 +65,6 @@ pub fn config_rows(runs: &[ConfigRun], checkpoints: &[f64]) -> Result<Vec<Config
             })
         })
         .collect()
-}
-
-/// Fused against taped for every sampling and precision that has both, named by the pair's
-/// shared part (`"uniform"`, `"occupancy-f64"`). Errors: as [`config_rows`].
-pub fn fused_vs_taped_rows(runs: &[ConfigRun]) -> Result<Vec<(String, FusedVsTaped)>, ReportError> {
-    let mut rows = Vec::new();
-    for f in runs.iter().filter(|r| r.method == "fused") {
-        if let Some(t) = runs
-            .iter()
-            .find(|t| t.method == "taped" && t.sampling == f.sampling && t.precision == f.precision)
-        {
-            rows.push((shared(f.sampling, f.precision), fused_vs_taped(&f.log, &t.log)?));
-        }
-    }
-    Ok(rows)
-}
-
-/// Occupancy against uniform for every method and precision that has both, `batch` rays per
-/// step. Errors: as [`config_rows`], or a `batch` of 0.
-pub fn occupancy_vs_uniform_rows(
-    runs: &[ConfigRun],
-    batch: usize,
-) -> Result<Vec<(String, OccupancyVsUniform)>, ReportError> {
-    let mut rows = Vec::new();
-    for o in runs.iter().filter(|r| r.sampling == "occupancy") {
-        if let Some(u) = runs
-            .iter()
-            .find(|u| u.sampling == "uniform" && u.method == o.method && u.precision == o.precision)
-        {
-            rows.push((
-                shared(o.method, o.precision),
-                occupancy_vs_uniform(&o.log, &u.log, batch)?,
-            ));
-        }
-    }
-    Ok(rows)
-}
-
-/// Every configuration against the anchor, at the anchor's final test PSNR. Errors: as
-/// [`config_rows`].
-pub fn anchor_rows(runs: &[ConfigRun], anchor: &Anchor) -> Result<Vec<(String, AgainstAnchor)>, ReportError> {
-    let entries = anchor.entries();
-    runs.iter()
-        .map(|r| Ok((r.name.clone(), against_anchor(&r.log, &entries)?)))
-        .collect()
-}
-
-pub(crate) fn shared(name: &str, precision: &str) -> String {
-    if precision == "f32" {
-        name.to_string()
-    } else {
-        format!("{name}-{precision}")
-    }
 }
 
 fn num(v: Option<f64>, decimals: usize) -> String {
@@ -147,16 +89,19 @@ pub struct ReportContext<'a> {
     /// Test evaluations each run makes over its budget (besides the one at the start).
     pub evaluations: usize,
     /// An outside pipeline's run to compare with, if given, and every configuration against
-    /// it (as [`anchor_rows`] gives them).
+    /// it (as [`anchor_rows`](fogray::fit::sweep::pairs::anchor_rows) gives them).
     pub anchor: Option<(&'a Anchor, &'a [(String, AgainstAnchor)])>,
     /// Markdown for the pictures section (images and captions), or empty.
     pub pictures: &'a str,
     /// Fused against taped over the same steps, as
-    /// [`same_steps`](super::same_steps::same_steps) gives them.
+    /// [`same_steps`](fn@fogray::fit::sweep::same_steps) gives them.
     pub same_steps: &'a [(String, SameSteps)],
-    /// Fused against taped at the first crossing, as [`fused_vs_taped_rows`] gives them.
+    /// Fused against taped at the first crossing, as
+    /// [`fused_vs_taped_rows`](fogray::fit::sweep::pairs::fused_vs_taped_rows) gives them.
     pub fused_vs_taped: &'a [(String, FusedVsTaped)],
-    /// Occupancy against uniform, as [`occupancy_vs_uniform_rows`] gives them.
+    /// Occupancy against uniform, as
+    /// [`occupancy_vs_uniform_rows`](fogray::fit::sweep::pairs::occupancy_vs_uniform_rows) gives
+    /// them.
     pub occupancy_vs_uniform: &'a [(String, OccupancyVsUniform)],
     /// The machine's memory bandwidth before and after the runs, if measured.
     pub bandwidth: Option<MachineBandwidth>,

@@ -8,17 +8,17 @@ use fogray::stamp::Stamp;
 use serde::Serialize;
 
 use crate::scene::Scene;
-use crate::slices::{scene_density_planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
+use fogray::fit::curves::{AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::images::write_comparison_png;
 use fogray::fit::plots::{psnr_curves_against, Curve, XAxis};
 use fogray::fit::settings::Budget;
+use fogray::fit::slices::{planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
+use fogray::fit::sweep::{best, ConfigRun, SameSteps};
 
-use super::anchor::Anchor;
-use super::compare::{AgainstAnchor, FusedVsTaped, OccupancyVsUniform};
-use super::markdown::{anchor_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows, report, ReportContext};
-use super::run::{best, ConfigRun};
-use super::same_steps::SameSteps;
+use fogray::fit::sweep::pairs::{anchor_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows};
+
+use super::markdown::{report, ReportContext};
 use super::ReportError;
 
 /// Magnification of the test views in their PNGs.
@@ -45,7 +45,7 @@ pub struct ReportSetup<'a> {
     /// An outside pipeline's run to set beside the configurations, if given.
     pub anchor: Option<&'a Anchor>,
     /// Fused against taped over the same steps, as
-    /// [`same_steps`](super::same_steps::same_steps) gives them (empty for none).
+    /// [`same_steps`](fn@fogray::fit::sweep::same_steps) gives them (empty for none).
     pub same_steps: &'a [(String, SameSteps)],
     /// The machine's memory bandwidth before and after the runs, if measured.
     pub bandwidth: Option<MachineBandwidth>,
@@ -145,7 +145,7 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
                 })
                 .collect()
         };
-        let exact = log(&scene_density_planes(scene, n));
+        let exact = log(&planes(&top.pictures.density_box, n, |p| scene.density_at(p)));
         let fitted = log(&top.pictures.density);
         let colouring = Colouring::Map {
             lo: LOWEST_DENSITY.log10(),
@@ -207,7 +207,7 @@ fn pictures(dir: &Path, runs: &[ConfigRun], data: &Dataset, scene: &Scene) -> Re
 /// grid, `occupancy-slices.png`. Returns `report.md`'s path.
 ///
 /// Errors: [`ReportError::Write`] or [`ReportError::Image`] for a file that cannot be written,
-/// [`ReportError::Log`] for a log that is not a curve, [`ReportError::Config`] for no runs.
+/// [`ReportError::Curve`] for a log that is not a curve, [`ReportError::Config`] for no runs.
 pub fn write_report(
     dir: &Path,
     runs: &[ConfigRun],

@@ -2,18 +2,15 @@
 //! `fit` runs, its tables read their logs, and its files are there.
 
 use crate::common::default_scene_data;
+use fogray::fit::curves::{Anchor, AnchorPoint};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::dense::DenseGrid;
 use fogray::fit::settings::{Budget, FitSettings, Sampling};
+use fogray::fit::sweep::pairs::fused_vs_taped_rows;
+use fogray::fit::sweep::{run_configs, same_steps, SweepOptions, DEFAULT_CONFIGS};
 use fogray::fit::train::{fit, LogEntry};
 use fogray::machine::Bandwidth;
-use fogray_grid::report::anchor::{Anchor, AnchorPoint};
-use fogray_grid::report::configuration::DEFAULT_CONFIGS;
-use fogray_grid::report::markdown::fused_vs_taped_rows;
-use fogray_grid::report::run::{run_configs, ReportOptions};
-use fogray_grid::report::same_steps::same_steps;
 use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
-use fogray_grid::report::ReportError;
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
 
@@ -34,7 +31,7 @@ fn tiny() -> (Scene, Dataset, FitSettings) {
 #[test]
 fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     let (scene, data, config) = tiny();
-    let options = ReportOptions {
+    let options = SweepOptions {
         fit: config,
         configs: DEFAULT_CONFIGS.to_vec(),
         slice_pixels: 12,
@@ -232,90 +229,4 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     write_report(&dir, &runs, &data, &scene, &setup).unwrap();
     assert!(!dir.join("psnr-vs-seconds-log.png").exists() && !dir.join("psnr-vs-seconds-log.svg").exists());
     let _ = std::fs::remove_dir_all(&dir);
-}
-
-#[test]
-fn bad_options_fail_before_any_fit() {
-    let (_, data, config) = tiny();
-    let mut ran = false;
-    for (configs, slice_pixels) in [
-        (vec![], 8),
-        (vec![DEFAULT_CONFIGS[0], DEFAULT_CONFIGS[0]], 8),
-        (DEFAULT_CONFIGS.to_vec(), 0),
-    ] {
-        let options = ReportOptions {
-            fit: config,
-            configs,
-            slice_pixels,
-        };
-        let result = run_configs(&data, &options, &mut |_, _| ran = true);
-        assert!(matches!(result, Err(ReportError::Config(_))));
-    }
-    assert!(!ran);
-    // A fit's own check (a zero batch) comes back as the fit's error.
-    let options = ReportOptions {
-        fit: FitSettings { batch: 0, ..config },
-        configs: vec![DEFAULT_CONFIGS[0]],
-        slice_pixels: 8,
-    };
-    assert!(matches!(
-        run_configs(&data, &options, &mut |_, _| {}),
-        Err(ReportError::Fit(_))
-    ));
-}
-
-#[test]
-fn with_a_budget_of_seconds_each_pair_trains_again_for_the_taped_runs_steps() {
-    let (_, data, config) = tiny();
-    let options = ReportOptions {
-        fit: config.with_budget(Budget::Seconds(0.3)),
-        configs: vec![DEFAULT_CONFIGS[2], DEFAULT_CONFIGS[3]],
-        slice_pixels: 12,
-    };
-    let runs = run_configs(&data, &options, &mut |_, _| {}).unwrap();
-    let taped_steps = runs[1].steps;
-    assert!(taped_steps > 0);
-    let mut heard: Vec<String> = Vec::new();
-    let pairs = same_steps(&data, &options, &runs, &mut |label, _| {
-        if heard.last().map(String::as_str) != Some(label) {
-            heard.push(label.to_string());
-        }
-    })
-    .unwrap();
-    assert_eq!(
-        heard,
-        [
-            format!("fused-occupancy, {taped_steps} steps"),
-            format!("taped-occupancy, {taped_steps} steps"),
-            format!("fused-occupancy, {taped_steps} steps, again")
-        ]
-    );
-    assert_eq!(pairs.len(), 1);
-    let (name, pair) = &pairs[0];
-    assert_eq!(name, "occupancy");
-    assert!(pair.extra_runs);
-    assert_eq!(
-        (pair.steps, pair.fused.steps, pair.taped.steps),
-        (taped_steps, taped_steps, taped_steps)
-    );
-    // The same steps of the same arithmetic: the same PSNR but for rounding.
-    assert!(
-        (pair.fused.final_test_psnr - pair.taped.final_test_psnr).abs() < 0.01,
-        "{pair:?}"
-    );
-    // The fused run again: the same steps to the same bits, only its time differs; the
-    // speed-up is over the mean of the two.
-    let again = pair.fused_again.expect("a fused run after the taped one");
-    assert_eq!(
-        (again.steps, again.final_test_psnr),
-        (taped_steps, pair.fused.final_test_psnr)
-    );
-    let mean = 0.5 * (pair.fused.seconds + again.seconds);
-    assert_eq!(pair.fused_seconds(), mean);
-    assert_eq!(pair.speedup, Some(pair.taped.seconds / mean));
-
-    // Runs that are not the configurations' are refused before anything trains.
-    let mut ran = false;
-    let result = same_steps(&data, &options, &runs[..1], &mut |_, _| ran = true);
-    assert!(matches!(result, Err(ReportError::Config(_))) && !ran);
 }

@@ -1,26 +1,25 @@
-//! Running the report's fits, one after another (they are timed, so never side by side), and
-//! keeping of each what the report shows: its log and figures, and pictures of its final model.
+//! Running a sweep's fits, one after another (they are timed, so never side by side), and
+//! keeping of each what a report shows: its log and figures, and pictures of its final model.
 
-use fogray::tape::Float;
+use fogray_tape::Float;
 use ndarray::Array3;
 use serde::Serialize;
 
+use crate::dataset::Dataset;
+use crate::dispatch::{with_model, ModelWork};
+use crate::model::RadianceField;
+use crate::settings::{FitSettings, SceneBox};
 use crate::slices::{model_density_planes, occupancy_planes, PlaneImage};
-use fogray::fit::dataset::Dataset;
-use fogray::fit::dense::DenseGrid;
-use fogray::fit::settings::FitSettings;
-use fogray::fit::train::{fit, FitResult, LogEntry, Progress};
+use crate::train::{fit, FitResult, LogEntry, Progress};
 
-use fogray::fit::settings::Precision;
+use super::config::RunConfig;
+use super::SweepError;
 
-use super::configuration::RunConfig;
-use super::ReportError;
-
-/// What the report runs.
+/// What a sweep runs.
 #[derive(Debug, Clone, PartialEq)]
-pub struct ReportOptions {
-    /// The settings every fit shares (grid, batch, budget, seed, ...); each configuration sets
-    /// the method and the sampling.
+pub struct SweepOptions {
+    /// The settings every fit shares (grid, batch, budget, seed, model, ...); each
+    /// configuration sets the method, the sampling and the precision.
     pub fit: FitSettings,
     /// The configurations, in the order they run (at least one, no repeats).
     pub configs: Vec<RunConfig>,
@@ -28,8 +27,8 @@ pub struct ReportOptions {
     pub slice_pixels: usize,
 }
 
-/// One configuration's fit: the fit's JSON figures (as `fogray-grid fit --json` prints them)
-/// with the configuration's name, and pictures of the final model (not serialised).
+/// One configuration's fit: the fit's figures (as `fogray-grid fit --json` prints them, for
+/// JSON) with the configuration's name, and pictures of the final model (not serialised).
 #[derive(Debug, Clone, Serialize)]
 pub struct ConfigRun {
     /// `METHOD-SAMPLING[-PRECISION]`.
@@ -57,40 +56,55 @@ pub struct ConfigRun {
     pub pictures: FinalPictures,
 }
 
-/// What the report draws of a final model.
-#[derive(Debug, Clone, Default)]
+/// What a report draws of a final model.
+#[derive(Debug, Clone)]
 pub struct FinalPictures {
-    /// The test views' renders `[W][W][3]`, in view order.
+    /// The test views' renders `[H][W][3]`, in view order.
     pub renders: Vec<Array3<f64>>,
-    /// The density on the three planes through the centre.
+    /// The box the density planes cut through (the fit's [`FitSettings::model_box`]).
+    pub density_box: SceneBox,
+    /// The density on the three planes through the centre of `density_box`.
     pub density: Vec<PlaneImage>,
     /// The occupancy grid's middle planes (occupancy sampling only).
     pub occupancy: Option<Vec<PlaneImage>>,
 }
 
-fn check(options: &ReportOptions) -> Result<(), ReportError> {
+impl Default for FinalPictures {
+    /// No pictures, over the unit box.
+    fn default() -> Self {
+        FinalPictures {
+            renders: Vec::new(),
+            density_box: SceneBox::UNIT,
+            density: Vec::new(),
+            occupancy: None,
+        }
+    }
+}
+
+fn check(options: &SweepOptions) -> Result<(), SweepError> {
     if options.configs.is_empty() {
-        return Err(ReportError::Config("no configuration to run".into()));
+        return Err(SweepError::Config("no configuration to run".into()));
     }
     for (i, c) in options.configs.iter().enumerate() {
         if options.configs[..i].contains(c) {
-            return Err(ReportError::Config(format!("configuration {c} is given twice")));
+            return Err(SweepError::Config(format!("configuration {c} is given twice")));
         }
     }
     if options.slice_pixels == 0 {
-        return Err(ReportError::Config("slices need at least 1 pixel per side".into()));
+        return Err(SweepError::Config("slices need at least 1 pixel per side".into()));
     }
     Ok(())
 }
 
-fn keep<F: Float>(
+fn keep<F: Float, M: RadianceField<F>>(
     config: &RunConfig,
-    result: FitResult<F, DenseGrid<F>>,
+    result: FitResult<F, M>,
+    density_box: SceneBox,
     slice_pixels: usize,
-) -> Result<ConfigRun, ReportError> {
-    let density = model_density_planes(&result.model, slice_pixels)?;
+) -> Result<ConfigRun, SweepError> {
+    let density = model_density_planes(&result.model, &density_box, slice_pixels)?;
     let occupancy = match &result.occupancy {
-        Some(grid) => Some(occupancy_planes(grid).map_err(fogray::fit::FitError::from)?),
+        Some(grid) => Some(occupancy_planes(grid).map_err(crate::FitError::from)?),
         None => None,
     };
     Ok(ConfigRun {
@@ -106,45 +120,60 @@ fn keep<F: Float>(
         occupied_fraction: result.occupied_fraction,
         pictures: FinalPictures {
             renders: result.renders,
+            density_box,
             density,
             occupancy,
         },
     })
 }
 
-/// Fits `data` with `fit_config` in the precision of `config` (whose method and sampling
-/// `fit_config` is expected to carry), and keeps what the report shows of the fit.
+/// Fits `data` with `fit_config` (whose method, sampling and precision are expected to be
+/// `config`'s) with the model it names, and keeps what a report shows of the fit.
 pub(crate) fn run_config(
     data: &Dataset,
     config: &RunConfig,
     fit_config: &FitSettings,
     slice_pixels: usize,
     progress: &mut dyn FnMut(Progress),
-) -> Result<ConfigRun, ReportError> {
-    match config.precision {
-        Precision::F32 => keep(
-            config,
-            fit::<f32, DenseGrid<f32>>(data, fit_config, progress)?,
-            slice_pixels,
-        ),
-        Precision::F64 => keep(
-            config,
-            fit::<f64, DenseGrid<f64>>(data, fit_config, progress)?,
-            slice_pixels,
-        ),
+) -> Result<ConfigRun, SweepError> {
+    let work = FitAndKeep {
+        data,
+        config,
+        fit_config,
+        slice_pixels,
+        progress,
+    };
+    with_model(config.precision, fit_config.model, work)
+}
+
+/// [`run_config`]'s work, for one model type.
+struct FitAndKeep<'a> {
+    data: &'a Dataset,
+    config: &'a RunConfig,
+    fit_config: &'a FitSettings,
+    slice_pixels: usize,
+    progress: &'a mut dyn FnMut(Progress),
+}
+
+impl ModelWork for FitAndKeep<'_> {
+    type Output = Result<ConfigRun, SweepError>;
+
+    fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
+        let result = fit::<F, M>(self.data, self.fit_config, self.progress)?;
+        keep(self.config, result, self.fit_config.model_box(), self.slice_pixels)
     }
 }
 
 /// Fits every configuration of `options` to `data` in turn; `progress` hears the index of the
 /// configuration running and its fit's progress.
 ///
-/// Errors: [`ReportError::Config`] for no configuration, a repeated one or 0 slice pixels
+/// Errors: [`SweepError::Config`] for no configuration, a repeated one or 0 slice pixels
 /// (before anything runs); a fit's error.
 pub fn run_configs(
     data: &Dataset,
-    options: &ReportOptions,
+    options: &SweepOptions,
     progress: &mut dyn FnMut(usize, Progress),
-) -> Result<Vec<ConfigRun>, ReportError> {
+) -> Result<Vec<ConfigRun>, SweepError> {
     check(options)?;
     let mut runs = Vec::with_capacity(options.configs.len());
     for (i, config) in options.configs.iter().enumerate() {

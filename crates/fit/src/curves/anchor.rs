@@ -1,32 +1,32 @@
 //! A pipeline run outside fogray (a PyTorch fit of the same scene, say), read from its log so
-//! that the report can set it beside the configurations: its curve on the plots, and how much
-//! sooner each configuration reaches the test PSNR the anchor ends at.
+//! that a report can set it beside fogray's runs: its curve on the plots, and how much sooner
+//! each run reaches the test PSNR the anchor ends at ([`against_anchor`](super::against_anchor)).
 //!
 //! The file is JSON: `{"name": "...", "note": "...", "log": [{"seconds": s, "test_psnr": p}, ...]}`
 //! with `note` optional and each entry's `step` optional (other fields are ignored, so a
-//! `fogray-grid fit --json` output with a `name` added is an anchor too). The seconds must be
-//! training seconds measured like fogray's (evaluations excluded) on the same machine; the
-//! report can only say where the numbers came from, not check them.
+//! `fogray fit --json` or `fogray-grid fit --json` output with a `name` added is an anchor
+//! too). The seconds must be training seconds measured like fogray's (evaluations excluded) on
+//! the same machine; a report can only say where the numbers came from, not check them.
 //!
 //! ```
-//! use fogray_grid::report::anchor::Anchor;
+//! use fogray_fit::curves::Anchor;
 //!
 //! let anchor = Anchor::from_json(
 //!     r#"{"name": "other", "log": [{"seconds": 0, "test_psnr": 10}, {"seconds": 300, "test_psnr": 23.9}]}"#,
 //! )?;
 //! assert_eq!(anchor.final_psnr(), 23.9);
 //! assert!(Anchor::from_json(r#"{"name": "other", "log": []}"#).is_err());
-//! # Ok::<(), fogray_grid::report::ReportError>(())
+//! # Ok::<(), fogray_fit::curves::CurveError>(())
 //! ```
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use fogray::fit::train::LogEntry;
+use crate::train::LogEntry;
 
 use super::reach::check;
-use super::ReportError;
+use super::CurveError;
 
 /// One evaluation of the anchor's run.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -55,13 +55,13 @@ pub struct Anchor {
 impl Anchor {
     /// Reads an anchor from its JSON text.
     ///
-    /// Errors: [`ReportError::Config`] for text that is not such an object, an empty name, an
+    /// Errors: [`CurveError::Anchor`] for text that is not such an object, an empty name, an
     /// empty log, a negative or non-finite time, a non-finite PSNR, or times (or steps) that
     /// decrease.
-    pub fn from_json(text: &str) -> Result<Self, ReportError> {
-        let anchor: Anchor = serde_json::from_str(text).map_err(|e| ReportError::Config(format!("anchor: {e}")))?;
+    pub fn from_json(text: &str) -> Result<Self, CurveError> {
+        let anchor: Anchor = serde_json::from_str(text).map_err(|e| CurveError::Anchor(format!("anchor: {e}")))?;
         if anchor.name.trim().is_empty() {
-            return Err(ReportError::Config("anchor: the name is empty".into()));
+            return Err(CurveError::Anchor("anchor: the name is empty".into()));
         }
         if let Some((i, p)) = anchor
             .log
@@ -69,21 +69,21 @@ impl Anchor {
             .enumerate()
             .find(|(_, p)| !(p.seconds >= 0.0 && p.seconds.is_finite() && p.test_psnr.is_finite()))
         {
-            return Err(ReportError::Config(format!(
+            return Err(CurveError::Anchor(format!(
                 "anchor: entry {i}: seconds {} must be finite and not negative, test PSNR {} finite",
                 p.seconds, p.test_psnr
             )));
         }
-        check(&anchor.entries()).map_err(|e| ReportError::Config(format!("anchor: {e}")))?;
+        check(&anchor.entries()).map_err(|e| CurveError::Anchor(format!("anchor: {e}")))?;
         Ok(anchor)
     }
 
-    /// Reads the anchor file at `path`. Errors: [`ReportError::Config`] naming the file, for a
+    /// Reads the anchor file at `path`. Errors: [`CurveError::Anchor`] naming the file, for a
     /// file that cannot be read or as [`Anchor::from_json`].
-    pub fn read(path: &Path) -> Result<Self, ReportError> {
+    pub fn read(path: &Path) -> Result<Self, CurveError> {
         let text = std::fs::read_to_string(path)
-            .map_err(|e| ReportError::Config(format!("cannot read the anchor {}: {e}", path.display())))?;
-        Self::from_json(&text).map_err(|e| ReportError::Config(format!("{}: {e}", path.display())))
+            .map_err(|e| CurveError::Anchor(format!("cannot read the anchor {}: {e}", path.display())))?;
+        Self::from_json(&text).map_err(|e| CurveError::Anchor(format!("{}: {e}", path.display())))
     }
 
     /// The log as a fit's log entries (steps 0 where the file gives none; no training loss or

@@ -1,32 +1,13 @@
-//! Pictures of what a fit learnt inside the box: the density on the three planes through the
-//! centre of `[-1, 1]^3` (the scene's exact density beside the model's), and the occupancy
-//! grid's occupied cells on the same planes, drawn as PNGs with a colour bar.
-//!
-//! ```
-//! use fogray::ops::sample::GridAxis;
-//! use fogray_grid::scene::Scene;
-//! use fogray_grid::slices::scene_density_planes;
-//!
-//! let planes = scene_density_planes(&Scene::default(), 32);
-//! assert_eq!(planes.len(), 3);
-//! // The red sphere (density 40) fills the centre of the plane z = 0.
-//! let z = planes.iter().find(|p| p.axis == GridAxis::Z).unwrap();
-//! assert_eq!(z.values[[16, 16]], 40.0);
-//! ```
+//! Plane images drawn as one PNG: titled rows of panels, each pixel a magnified square, with a
+//! colour bar (or an occupied/empty legend) on the right.
 
 use std::path::Path;
 
-use fogray::fit::dense::DenseGrid;
-use fogray::fit::images::ImageError;
-use fogray::fit::settings::SceneBox;
-use fogray::fit::{FitError, RadianceField};
-use fogray::ops::sample::{GridAxis, OccupancyGrid};
-use fogray::ops::OpsError;
-use fogray::tape::Float;
-use ndarray::Array2;
+use fogray_ops::sample::GridAxis;
 use plotters::prelude::*;
 
-use crate::scene::Scene;
+use super::{axis_name, in_plane_axes, PlaneImage};
+use crate::images::ImageError;
 
 const FONT: &str = "sans-serif";
 const GAP: i32 = 10;
@@ -34,99 +15,6 @@ const TITLE: i32 = 24;
 /// Width of the colour bar and of the space for its labels, in PNG pixels.
 const BAR: i32 = 22;
 const BAR_LABELS: i32 = 190;
-
-/// The three planes, in the order they are drawn.
-pub const AXES: [GridAxis; 3] = [GridAxis::X, GridAxis::Y, GridAxis::Z];
-
-/// Values on one plane through the centre of the box, as an image: `values[[row, column]]`,
-/// row 0 at the top. Across x the columns run along y and the rows down z; across y, along x
-/// and down z; across z, along x and down y.
-#[derive(Debug, Clone, PartialEq)]
-pub struct PlaneImage {
-    /// The axis the plane is across (the plane is that coordinate = 0).
-    pub axis: GridAxis,
-    /// `[rows][columns]`.
-    pub values: Array2<f64>,
-}
-
-/// `"x"`, `"y"` or `"z"`.
-pub fn axis_name(axis: GridAxis) -> &'static str {
-    match axis {
-        GridAxis::X => "x",
-        GridAxis::Y => "y",
-        GridAxis::Z => "z",
-    }
-}
-
-/// The axes along an image's columns and up its rows.
-pub fn in_plane_axes(axis: GridAxis) -> (usize, usize) {
-    match axis {
-        GridAxis::X => (1, 2),
-        GridAxis::Y => (0, 2),
-        GridAxis::Z => (0, 1),
-    }
-}
-
-/// The point at the centre of pixel `(row, column)` of an `n x n` image of the plane across
-/// `axis` through the box's centre.
-pub fn pixel_point(axis: GridAxis, n: usize, row: usize, column: usize) -> [f64; 3] {
-    // The grid example's models cover the unit box.
-    let SceneBox { min: lo, max: hi } = SceneBox::UNIT;
-    let (across, up) = in_plane_axes(axis);
-    let mut p = std::array::from_fn(|a| 0.5 * (lo[a] + hi[a]));
-    p[across] = lo[across] + (column as f64 + 0.5) / n as f64 * (hi[across] - lo[across]);
-    p[up] = hi[up] - (row as f64 + 0.5) / n as f64 * (hi[up] - lo[up]);
-    p
-}
-
-fn plane_of(axis: GridAxis, n: usize, value: impl Fn([f64; 3]) -> f64) -> PlaneImage {
-    PlaneImage {
-        axis,
-        values: Array2::from_shape_fn((n, n), |(a, b)| value(pixel_point(axis, n, a, b))),
-    }
-}
-
-/// The scene's exact density on the three planes, `n x n` pixels each (n >= 1; 0 gives empty
-/// images).
-pub fn scene_density_planes(scene: &Scene, n: usize) -> Vec<PlaneImage> {
-    AXES.iter()
-        .map(|&axis| plane_of(axis, n, |p| scene.density_at(p)))
-        .collect()
-}
-
-/// The model's density on the three planes, `n x n` pixels each.
-///
-/// Errors: as [`RadianceField::densities`].
-pub fn model_density_planes<F: Float>(model: &DenseGrid<F>, n: usize) -> Result<Vec<PlaneImage>, FitError> {
-    AXES.iter()
-        .map(|&axis| {
-            let points = Array2::from_shape_fn((n * n, 3), |(k, a)| F::lit(pixel_point(axis, n, k / n, k % n)[a]));
-            let density = model.densities(points.view())?;
-            Ok(PlaneImage {
-                axis,
-                values: Array2::from_shape_fn((n, n), |(a, b)| density[a * n + b].as_f64()),
-            })
-        })
-        .collect()
-}
-
-/// The occupancy grid's middle plane of cells across each axis (index `resolution / 2`), as
-/// images of one pixel per cell: 1 occupied, 0 empty.
-///
-/// Errors: none for a grid from [`OccupancyGrid::new`]; [`OpsError`] passed on.
-pub fn occupancy_planes(grid: &OccupancyGrid) -> Result<Vec<PlaneImage>, OpsError> {
-    let r = grid.resolution();
-    AXES.iter()
-        .map(|&axis| {
-            // The slice is indexed by the two other axes in order: [across, up].
-            let slice = grid.slice(axis, r / 2)?;
-            Ok(PlaneImage {
-                axis,
-                values: Array2::from_shape_fn((r, r), |(a, b)| f64::from(u8::from(slice.occupied[[b, r - 1 - a]]))),
-            })
-        })
-        .collect()
-}
 
 /// How values become colours.
 #[derive(Debug, Clone, PartialEq)]
@@ -295,6 +183,3 @@ pub fn write_planes_png(
     }
     root.present().map_err(e)
 }
-
-#[cfg(test)]
-mod tests;

@@ -4,7 +4,7 @@
 //! budget. Partway through a timed run, the faster method is therefore still on a coarser grid
 //! at a higher rate than a run of that length would be, and where the curves flatten, the
 //! first time one run passes the other's final PSNR says more about the schedule than about
-//! the ops (the first crossing of [`fused_vs_taped`](super::compare::fused_vs_taped)). The
+//! the ops (the first crossing of [`fused_vs_taped`](crate::curves::fused_vs_taped)). The
 //! fused ops and their taped twins do the same arithmetic, so over the same number of steps,
 //! each with its schedule over those steps, the two end at the same PSNR up to rounding: the
 //! ratio of their training seconds is the speed-up to that PSNR.
@@ -15,17 +15,17 @@
 
 use serde::Serialize;
 
-use fogray::fit::dataset::Dataset;
-use fogray::fit::settings::Method;
-use fogray::fit::settings::{Budget, FitSettings};
-use fogray::fit::train::Progress;
+use crate::dataset::Dataset;
+use crate::settings::Method;
+use crate::settings::{Budget, FitSettings};
+use crate::train::Progress;
 
-use super::configuration::RunConfig;
-use super::run::{run_config, ConfigRun, ReportOptions};
-use super::ReportError;
+use super::config::{shared_name, RunConfig};
+use super::run::{run_config, ConfigRun, SweepOptions};
+use super::SweepError;
 
 /// Test evaluations of an extra run: only its final PSNR is reported (evaluations are off the
-/// clock either way; fewer of them shorten the report).
+/// clock either way; fewer of them shorten the sweep).
 const EXTRA_RUN_EVALUATIONS: usize = 1;
 
 /// One method's run of a pair.
@@ -52,10 +52,10 @@ impl StepsRun {
 /// A fused and a taped run of the same steps, each with its schedule over those steps.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct SameSteps {
-    /// The steps of both (those the taped configuration made in the report's budget).
+    /// The steps of both (those the taped configuration made in the sweep's budget).
     pub steps: usize,
     /// Whether the pair was run for this comparison (a budget of seconds) rather than taken
-    /// from the report's runs (a budget of steps, which already are such a pair).
+    /// from the sweep's runs (a budget of steps, which already are such a pair).
     pub extra_runs: bool,
     /// The fused run (with extra runs, the one before the taped run).
     pub fused: StepsRun,
@@ -79,27 +79,28 @@ impl SameSteps {
 }
 
 /// Fused against taped over the same steps for every sampling and precision that `options`
-/// runs with both methods, named as the report's other pairs are (`"uniform"`,
-/// `"occupancy-f64"`). `runs` are the report's runs of `options.configs`, in that order.
+/// runs with both methods, each named by [`shared_name`] (`"uniform"`, `"occupancy-f64"`).
+/// `runs` are the sweep's runs of `options.configs` ([`run_configs`](super::run_configs)), in
+/// that order.
 ///
-/// With a budget of steps the report's own runs are the pairs. With a budget of seconds, each
+/// With a budget of steps the sweep's own runs are the pairs. With a budget of seconds, each
 /// pair trains again (fused, taped, then fused again: see the module docs) for the steps the
 /// taped run made, with one evaluation (at its end); `progress` hears each extra
 /// run's name (such as `"taped-occupancy, 826 steps"`, and `"fused-occupancy, 826 steps,
 /// again"`) and its fit's progress. A taped run that made no step gives no pair.
 ///
-/// Errors: [`ReportError::Config`] if `runs` are not the runs of `options.configs`; a fit's
+/// Errors: [`SweepError::Config`] if `runs` are not the runs of `options.configs`; a fit's
 /// error.
 pub fn same_steps(
     data: &Dataset,
-    options: &ReportOptions,
+    options: &SweepOptions,
     runs: &[ConfigRun],
     progress: &mut dyn FnMut(&str, Progress),
-) -> Result<Vec<(String, SameSteps)>, ReportError> {
+) -> Result<Vec<(String, SameSteps)>, SweepError> {
     let names_match =
         runs.len() == options.configs.len() && runs.iter().zip(&options.configs).all(|(r, c)| r.name == c.to_string());
     if !names_match {
-        return Err(ReportError::Config(
+        return Err(SweepError::Config(
             "the runs are not those of the report's configurations".into(),
         ));
     }
@@ -123,11 +124,11 @@ pub fn same_steps(
         if taped.steps == 0 {
             continue;
         }
-        let name = super::markdown::shared(fused.sampling, fused.precision);
+        let name = shared_name(fused.sampling, fused.precision);
         let (fused_run, fused_again, taped_run) = match options.fit.budget() {
             Budget::Steps(_) => (StepsRun::of(fused), None, StepsRun::of(taped)),
             Budget::Seconds(_) => {
-                let mut run = |config: &RunConfig, again: &str| -> Result<StepsRun, ReportError> {
+                let mut run = |config: &RunConfig, again: &str| -> Result<StepsRun, SweepError> {
                     let fit_config = FitSettings {
                         method: config.method,
                         sampling: config.sampling,

@@ -1,14 +1,14 @@
-//! Which fits the report runs: a method, a sampling and a precision, named
+//! Which fits a sweep runs: a method, a sampling and a precision, named
 //! `METHOD-SAMPLING[-PRECISION]` (`fused-uniform`, `taped-occupancy`, `fused-uniform-f64`).
 
 use std::fmt;
 use std::str::FromStr;
 
-use fogray::fit::settings::{Method, Precision, Sampling};
+use crate::settings::{Method, Precision, Sampling};
 
-use super::ReportError;
+use super::SweepError;
 
-/// One configuration of the report.
+/// One configuration of a sweep.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct RunConfig {
     /// Fused ops or taped twins.
@@ -19,7 +19,7 @@ pub struct RunConfig {
     pub precision: Precision,
 }
 
-/// The report's default configurations: fused and taped, uniform and occupancy, all in f32.
+/// The default configurations of a sweep: fused and taped, uniform and occupancy, all in f32.
 pub const DEFAULT_CONFIGS: [RunConfig; 4] = [
     RunConfig::f32(Method::Fused, Sampling::Uniform),
     RunConfig::f32(Method::Taped, Sampling::Uniform),
@@ -50,13 +50,13 @@ impl fmt::Display for RunConfig {
 }
 
 impl FromStr for RunConfig {
-    type Err = ReportError;
+    type Err = SweepError;
 
     /// Reads `METHOD-SAMPLING[-PRECISION]`: `fused|taped`, `uniform|occupancy`, `f32|f64`
-    /// (f32 if absent). Error: [`ReportError::Config`] naming what is wrong.
-    fn from_str(name: &str) -> Result<Self, ReportError> {
+    /// (f32 if absent). Error: [`SweepError::Config`] naming what is wrong.
+    fn from_str(name: &str) -> Result<Self, SweepError> {
         let bad = |what: &str| {
-            ReportError::Config(format!(
+            SweepError::Config(format!(
                 "configuration {name:?}: {what} (expected METHOD-SAMPLING[-PRECISION], e.g. fused-uniform or taped-occupancy-f64)"
             ))
         };
@@ -84,5 +84,16 @@ impl FromStr for RunConfig {
             sampling,
             precision,
         })
+    }
+}
+
+/// The name of a pair of configurations that differ in one setting: the setting they share
+/// (`part`, such as `"uniform"` for fused against taped) and the precision they share, left out
+/// for `"f32"` (`"uniform"`, `"occupancy-f64"`).
+pub fn shared_name(part: &str, precision: &str) -> String {
+    if precision == "f32" {
+        part.to_string()
+    } else {
+        format!("{part}-{precision}")
     }
 }

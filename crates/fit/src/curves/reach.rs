@@ -4,9 +4,9 @@
 
 use serde::Serialize;
 
-use fogray::fit::train::LogEntry;
+use crate::train::LogEntry;
 
-use super::ReportError;
+use super::CurveError;
 
 /// Where a curve first reaches a test PSNR, interpolated between the two evaluations around
 /// the crossing.
@@ -36,19 +36,19 @@ impl Reach {
 }
 
 /// A log fit to read: not empty, times finite and non-decreasing, no NaN PSNR.
-pub(crate) fn check(log: &[LogEntry]) -> Result<(), ReportError> {
+pub(crate) fn check(log: &[LogEntry]) -> Result<(), CurveError> {
     if log.is_empty() {
-        return Err(ReportError::Log("the log is empty".into()));
+        return Err(CurveError::Log("the log is empty".into()));
     }
     for (i, e) in log.iter().enumerate() {
         if !e.seconds.is_finite() || e.test_psnr.is_nan() {
-            return Err(ReportError::Log(format!(
+            return Err(CurveError::Log(format!(
                 "entry {i}: seconds {} and test PSNR {} must be numbers",
                 e.seconds, e.test_psnr
             )));
         }
         if i > 0 && (e.seconds < log[i - 1].seconds || e.step < log[i - 1].step) {
-            return Err(ReportError::Log(format!("entry {i} goes back in time")));
+            return Err(CurveError::Log(format!("entry {i} goes back in time")));
         }
     }
     Ok(())
@@ -68,9 +68,9 @@ fn lerp(a: f64, b: f64, f: f64) -> f64 {
 /// The test PSNR at `seconds` of training, linear between the evaluations around it; `None`
 /// before the first evaluation or after the last (the run did not get there).
 ///
-/// Errors: [`ReportError::Log`] for an empty log, a non-finite time, a NaN PSNR, or times or
+/// Errors: [`CurveError::Log`] for an empty log, a non-finite time, a NaN PSNR, or times or
 /// steps that decrease.
-pub fn psnr_at(log: &[LogEntry], seconds: f64) -> Result<Option<f64>, ReportError> {
+pub fn psnr_at(log: &[LogEntry], seconds: f64) -> Result<Option<f64>, CurveError> {
     check(log)?;
     let Some(after) = log.iter().position(|e| e.seconds >= seconds) else {
         return Ok(None);
@@ -87,7 +87,7 @@ pub fn psnr_at(log: &[LogEntry], seconds: f64) -> Result<Option<f64>, ReportErro
 /// the first at or above it, linear in PSNR; `None` if no evaluation reaches it.
 ///
 /// Errors: as [`psnr_at`].
-pub fn reach(log: &[LogEntry], psnr: f64) -> Result<Option<Reach>, ReportError> {
+pub fn reach(log: &[LogEntry], psnr: f64) -> Result<Option<Reach>, CurveError> {
     check(log)?;
     let Some(i) = log.iter().position(|e| e.test_psnr >= psnr) else {
         return Ok(None);
@@ -105,7 +105,7 @@ pub fn reach(log: &[LogEntry], psnr: f64) -> Result<Option<Reach>, ReportError> 
 }
 
 /// The last evaluation's test PSNR. Errors: as [`psnr_at`].
-pub fn final_psnr(log: &[LogEntry]) -> Result<f64, ReportError> {
+pub fn final_psnr(log: &[LogEntry]) -> Result<f64, CurveError> {
     check(log)?;
     Ok(log[log.len() - 1].test_psnr)
 }

@@ -1,13 +1,14 @@
-//! The two questions the report answers about pairs of configurations: how much sooner the
-//! fused ops reach what the taped twins reach, and how many samples per ray occupancy sampling
-//! spends against uniform sampling for the same test PSNR.
+//! Two runs' curves set against each other at a test PSNR both reach: how much sooner the
+//! fused ops reach what the taped twins reach, how many samples per ray occupancy sampling
+//! spends against uniform sampling for the same test PSNR, and how much sooner a run reaches
+//! what an outside pipeline (an [`Anchor`](super::Anchor)) ends at.
 
 use serde::Serialize;
 
-use fogray::fit::train::LogEntry;
+use crate::train::LogEntry;
 
 use super::reach::{final_psnr, reach, Reach};
-use super::ReportError;
+use super::CurveError;
 
 /// Fused against taped at the taped run's final test PSNR, or at the fused run's if that is
 /// lower (on the same steps the two differ only by rounding, and either may end a hair above).
@@ -52,10 +53,10 @@ fn ratio(num: f64, den: f64) -> Option<f64> {
 
 /// How much sooner `fused` reached the final test PSNR of `taped` (see [`FusedVsTaped`]).
 ///
-/// Errors: [`ReportError::Log`] for a log that is empty, not in time order, or has a NaN PSNR.
-pub fn fused_vs_taped(fused: &[LogEntry], taped: &[LogEntry]) -> Result<FusedVsTaped, ReportError> {
+/// Errors: [`CurveError::Log`] for a log that is empty, not in time order, or has a NaN PSNR.
+pub fn fused_vs_taped(fused: &[LogEntry], taped: &[LogEntry]) -> Result<FusedVsTaped, CurveError> {
     let target = final_psnr(taped)?.min(final_psnr(fused)?);
-    let missing = || ReportError::Log("a run misses its own final PSNR".into());
+    let missing = || CurveError::Log("a run misses its own final PSNR".into());
     let t = reach(taped, target)?.ok_or_else(missing)?;
     let f = reach(fused, target)?.ok_or_else(missing)?;
     Ok(FusedVsTaped {
@@ -69,17 +70,17 @@ pub fn fused_vs_taped(fused: &[LogEntry], taped: &[LogEntry]) -> Result<FusedVsT
 /// Samples per ray and seconds of `occupancy` and `uniform` (both with `batch` rays per step)
 /// to the lower of their final test PSNRs.
 ///
-/// Errors: [`ReportError::Log`] as for [`fused_vs_taped`], or a `batch` of 0.
+/// Errors: [`CurveError::Log`] as for [`fused_vs_taped`], or a `batch` of 0.
 pub fn occupancy_vs_uniform(
     occupancy: &[LogEntry],
     uniform: &[LogEntry],
     batch: usize,
-) -> Result<OccupancyVsUniform, ReportError> {
+) -> Result<OccupancyVsUniform, CurveError> {
     if batch == 0 {
-        return Err(ReportError::Log("the batch must be at least 1 ray".into()));
+        return Err(CurveError::Log("the batch must be at least 1 ray".into()));
     }
     let target = final_psnr(occupancy)?.min(final_psnr(uniform)?);
-    let missing = || ReportError::Log("a run misses its own final PSNR".into());
+    let missing = || CurveError::Log("a run misses its own final PSNR".into());
     let o = reach(occupancy, target)?.ok_or_else(missing)?;
     let u = reach(uniform, target)?.ok_or_else(missing)?;
     let (os, us) = (o.samples_per_ray(batch), u.samples_per_ray(batch));
@@ -94,7 +95,7 @@ pub fn occupancy_vs_uniform(
     })
 }
 
-/// A configuration against an outside pipeline (an [`Anchor`](super::anchor::Anchor)) at the
+/// A configuration against an outside pipeline (an [`Anchor`](super::Anchor)) at the
 /// test PSNR the anchor ends at.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct AgainstAnchor {
@@ -111,10 +112,10 @@ pub struct AgainstAnchor {
 
 /// How much sooner `run` reached the final test PSNR of `anchor` (see [`AgainstAnchor`]).
 ///
-/// Errors: [`ReportError::Log`] for a log that is empty, not in time order, or has a NaN PSNR.
-pub fn against_anchor(run: &[LogEntry], anchor: &[LogEntry]) -> Result<AgainstAnchor, ReportError> {
+/// Errors: [`CurveError::Log`] for a log that is empty, not in time order, or has a NaN PSNR.
+pub fn against_anchor(run: &[LogEntry], anchor: &[LogEntry]) -> Result<AgainstAnchor, CurveError> {
     let target = final_psnr(anchor)?;
-    let a = reach(anchor, target)?.ok_or_else(|| ReportError::Log("the anchor misses its own final PSNR".into()))?;
+    let a = reach(anchor, target)?.ok_or_else(|| CurveError::Log("the anchor misses its own final PSNR".into()))?;
     let r = reach(run, target)?;
     Ok(AgainstAnchor {
         target_psnr: target,

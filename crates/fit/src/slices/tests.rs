@@ -1,41 +1,36 @@
-//! The planes' geometry against hand-placed points, the scene's density, and the occupancy
-//! grid's planes drawn the right way up.
+//! The planes' geometry against hand-placed points, a fresh model's density, and the
+//! occupancy grid's planes drawn the right way up.
 
-use fogray::ops::rays::Aabb;
-use fogray::ops::sample::{CellPoints, GridAxis, OccupancyConfig, OccupancyGrid};
+use fogray_ops::rays::Aabb;
+use fogray_ops::sample::{CellPoints, GridAxis, OccupancyConfig, OccupancyGrid};
 use ndarray::{Array1, ArrayView2};
 
 use super::*;
-use crate::scene::Scene;
-use fogray::fit::dense::DenseGrid;
-use fogray::fit::images::ImageError;
-use fogray::fit::settings::SceneBox;
+use crate::dense::DenseGrid;
+use crate::images::ImageError;
 
 #[test]
 fn pixel_centres_run_right_along_the_first_axis_and_up_the_second() {
     // 4 x 4 pixels over [-1, 1]: centres at -0.75, -0.25, 0.25, 0.75.
-    assert_eq!(pixel_point(GridAxis::Z, 4, 0, 0), [-0.75, 0.75, 0.0]);
-    assert_eq!(pixel_point(GridAxis::Z, 4, 3, 1), [-0.25, -0.75, 0.0]);
-    assert_eq!(pixel_point(GridAxis::X, 4, 0, 3), [0.0, 0.75, 0.75]);
-    assert_eq!(pixel_point(GridAxis::Y, 4, 2, 0), [-0.75, 0.0, -0.25]);
-}
-
-#[test]
-fn the_scene_density_adds_where_primitives_overlap() {
-    let scene = Scene::default();
-    assert_eq!(scene.density_at([0.0, 0.0, 0.1]), 40.0); // red sphere's centre
-    assert_eq!(scene.density_at([0.0, 0.0, -0.7]), 60.0); // floor slab
-    assert_eq!(scene.density_at([0.95, 0.95, 0.95]), 0.0); // empty corner
-                                                           // The blue sphere (centre (0.45, 0.35, -0.2), radius 0.25) reaches into the red one
-                                                           // (centre (0, 0, 0.1), radius 0.45) at (0.3, 0.2, -0.1): 0.3^2 + 0.2^2 + 0.2^2 = 0.17 <
-                                                           // 0.2025, and 0.15^2 + 0.15^2 + 0.1^2 = 0.055 < 0.0625.
-    assert_eq!(scene.density_at([0.3, 0.2, -0.1]), 55.0);
+    let unit = SceneBox::UNIT;
+    assert_eq!(pixel_point(&unit, GridAxis::Z, 4, 0, 0), [-0.75, 0.75, 0.0]);
+    assert_eq!(pixel_point(&unit, GridAxis::Z, 4, 3, 1), [-0.25, -0.75, 0.0]);
+    assert_eq!(pixel_point(&unit, GridAxis::X, 4, 0, 3), [0.0, 0.75, 0.75]);
+    assert_eq!(pixel_point(&unit, GridAxis::Y, 4, 2, 0), [-0.75, 0.0, -0.25]);
+    // [0, 2] x [0, 4] x [0, 8] in 2 x 2 pixels across z: the plane z = 4, the top-left pixel's
+    // centre a quarter of the way along x (0.5) and a quarter of the way down y from 4 (3).
+    let uneven = SceneBox {
+        min: [0.0; 3],
+        max: [2.0, 4.0, 8.0],
+    };
+    assert_eq!(pixel_point(&uneven, GridAxis::Z, 2, 0, 0), [0.5, 3.0, 4.0]);
+    assert_eq!(pixel_point(&uneven, GridAxis::X, 2, 1, 1), [1.0, 3.0, 2.0]);
 }
 
 #[test]
 fn a_fresh_model_has_the_shifted_density_everywhere() {
     let model = DenseGrid::<f32>::new(SceneBox::UNIT, 5, -4.0, 0.0).unwrap();
-    let planes = model_density_planes(&model, 6).unwrap();
+    let planes = model_density_planes(&model, &SceneBox::UNIT, 6).unwrap();
     assert_eq!(planes.iter().map(|p| p.axis).collect::<Vec<_>>(), AXES.to_vec());
     let want = softplus(-4.0); // 0.01815
     for v in planes.iter().flat_map(|p| p.values.iter()) {
@@ -77,11 +72,11 @@ fn occupancy_planes_are_drawn_right_way_up() {
 
 #[test]
 fn plane_pictures_reject_bad_input() {
-    let dir = std::env::temp_dir().join(format!("fogray-grid-slices-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("fogray-fit-slices-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("planes.png");
-    let small = scene_density_planes(&Scene::default(), 4);
-    let large = scene_density_planes(&Scene::default(), 5);
+    let small = planes(&SceneBox::UNIT, 4, |p| p[0]);
+    let large = planes(&SceneBox::UNIT, 5, |p| p[0]);
     let colouring = Colouring::Map {
         lo: 0.0,
         hi: 60.0,
