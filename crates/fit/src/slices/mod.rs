@@ -16,7 +16,7 @@
 //! ```
 
 use fogray_ops::sample::{GridAxis, OccupancyGrid};
-use fogray_ops::SampleError;
+use fogray_ops::OpsError;
 use fogray_tape::Float;
 use ndarray::Array2;
 
@@ -107,8 +107,8 @@ pub fn model_density_planes<F: Float, M: RadianceField<F>>(
 /// The occupancy grid's middle plane of cells across each axis (index `resolution / 2`), as
 /// images of one pixel per cell: 1 occupied, 0 empty.
 ///
-/// Errors: none for a grid from [`OccupancyGrid::new`]; [`SampleError`] passed on.
-pub fn occupancy_planes(grid: &OccupancyGrid) -> Result<Vec<PlaneImage>, SampleError> {
+/// Errors: none for a grid from [`OccupancyGrid::new`]; [`OpsError`] passed on.
+pub fn occupancy_planes(grid: &OccupancyGrid) -> Result<Vec<PlaneImage>, OpsError> {
     let r = grid.resolution();
     AXES.iter()
         .map(|&axis| {
