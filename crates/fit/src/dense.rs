@@ -34,7 +34,7 @@ use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, IxDyn};
 
-use crate::environment::{add_environment, copy_environment};
+use crate::environment::{add_environment, copy_environment, environment_on_tape};
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
@@ -51,8 +51,6 @@ pub const GRID: &str = "grid";
 pub struct DenseGrid<F: Float> {
     params: Params<F>,
     grid: ParamId,
-    /// The learned background's coefficients, with a shading that has one.
-    environment: Option<ParamId>,
     field: GridField,
     shading: Shading,
     prior: TotalVariation,
@@ -117,13 +115,12 @@ impl<F: Float> DenseGrid<F> {
         )?;
         let mut params = Params::new();
         let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, channels)))?;
-        let environment = add_environment(&mut params, &shading)?;
+        add_environment(&mut params, &shading)?;
         let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
         Ok(DenseGrid {
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
             params,
             grid,
-            environment,
             field,
             shading,
             prior,
@@ -201,7 +198,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
             .into_shape_with_order(IxDyn(&[nodes, nodes, nodes, channels]))
             .map_err(|e| FitError::Config(format!("resampled grid: {e}")))?;
         grown.params.get_mut(grown.grid)?.assign(&raw);
-        copy_environment(&self.params, self.environment, &mut grown.params, grown.environment)?;
+        copy_environment(&self.params, &mut grown.params)?;
         Ok(grown)
     }
 
@@ -237,10 +234,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let environment = self
-            .environment
-            .map(|id| tape.param_from(&self.params, id))
-            .transpose()?;
+        let environment = environment_on_tape(tape, &self.params)?;
         let background = TrainingBackground::Shared(background);
         let shaded = self.shading.composite_inputs(
             tape,
@@ -269,10 +263,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let grid = tape.param_from(&self.params, self.grid)?;
-        let environment = self
-            .environment
-            .map(|id| tape.param_from(&self.params, id))
-            .transpose()?;
+        let environment = environment_on_tape(tape, &self.params)?;
         let shaded = self.shading.composite_inputs(
             tape,
             rays,

@@ -20,7 +20,7 @@
 //! ```
 
 use fogray_ops::ShColor;
-use fogray_tape::params::{ParamId, Params};
+use fogray_tape::params::Params;
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array2, ArrayView2};
 
@@ -104,30 +104,30 @@ impl Environment {
 }
 
 /// Adds the coefficients of `shading`'s learned background to `params` as [`ENVIRONMENT`],
-/// all 0 (grey from every direction); nothing for a shading without one.
+/// all 0 (grey from every direction); nothing for a shading without one. A model finds them
+/// again by that name.
 ///
 /// Errors: the store already has a parameter of that name.
-pub(crate) fn add_environment<F: Float>(
-    params: &mut Params<F>,
-    shading: &Shading,
-) -> Result<Option<ParamId>, FitError> {
-    shading
-        .environment
-        .map(|e| params.add(ENVIRONMENT, Array2::<F>::zeros((1, e.coefficient_count()))))
-        .transpose()
-        .map_err(FitError::from)
+pub(crate) fn add_environment<F: Float>(params: &mut Params<F>, shading: &Shading) -> Result<(), FitError> {
+    if let Some(e) = shading.environment {
+        params.add(ENVIRONMENT, Array2::<F>::zeros((1, e.coefficient_count())))?;
+    }
+    Ok(())
+}
+
+/// The learned background's coefficients in `params` lent to `tape`; `None` for a model
+/// without one.
+///
+/// Errors: from the tape.
+pub(crate) fn environment_on_tape<F: Float>(tape: &mut Tape<F>, params: &Params<F>) -> Result<Option<Var>, TapeError> {
+    params.id(ENVIRONMENT).map(|id| tape.param_from(params, id)).transpose()
 }
 
 /// A grown model keeps the background it learned: `from`'s coefficients into `to`'s.
 ///
-/// Errors: one model has the parameter and the other not, or the ids name no parameter.
-pub(crate) fn copy_environment<F: Float>(
-    from: &Params<F>,
-    from_id: Option<ParamId>,
-    to: &mut Params<F>,
-    to_id: Option<ParamId>,
-) -> Result<(), FitError> {
-    match (from_id, to_id) {
+/// Errors: one store has them and the other not.
+pub(crate) fn copy_environment<F: Float>(from: &Params<F>, to: &mut Params<F>) -> Result<(), FitError> {
+    match (from.id(ENVIRONMENT), to.id(ENVIRONMENT)) {
         (None, None) => Ok(()),
         (Some(a), Some(b)) => {
             let values = from.get(a)?.to_owned();

@@ -30,7 +30,7 @@ use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView2};
 
-use crate::environment::{add_environment, copy_environment};
+use crate::environment::{add_environment, copy_environment, environment_on_tape};
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
@@ -50,8 +50,6 @@ pub const DILATION: usize = 2;
 pub struct SparseGrid<F: Float> {
     params: Params<F>,
     data: ParamId,
-    /// The learned background's coefficients, with a shading that has one.
-    environment: Option<ParamId>,
     field: SparseGridField,
     shading: Shading,
     prior: SparseTotalVariation,
@@ -110,12 +108,11 @@ impl<F: Float> SparseGrid<F> {
         let field = SparseGridField::new(GridBox::new(&scene_box.min, &scene_box.max)?, index, channels)?;
         let mut params = Params::new();
         let data = params.add(DATA, Array2::<F>::zeros((field.index().kept(), channels)))?;
-        let environment = add_environment(&mut params, &shading)?;
+        add_environment(&mut params, &shading)?;
         let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
         Ok(SparseGrid {
             params,
             data,
-            environment,
             prior: SparseTotalVariation::new(prior, &field),
             field,
             shading,
@@ -171,7 +168,7 @@ impl<F: Float> SparseGrid<F> {
         let data = self.params.get(self.data)?;
         let raw = self.field.evaluate(&data, &positions.view().into_dyn())?;
         grown.params.get_mut(grown.data)?.assign(&raw);
-        copy_environment(&self.params, self.environment, &mut grown.params, grown.environment)?;
+        copy_environment(&self.params, &mut grown.params)?;
         Ok(grown)
     }
 
@@ -367,10 +364,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
         let data = tape.param_from(&self.params, self.data)?;
-        let environment = self
-            .environment
-            .map(|id| tape.param_from(&self.params, id))
-            .transpose()?;
+        let environment = environment_on_tape(tape, &self.params)?;
         let background = TrainingBackground::Shared(background);
         let shaded = self.shading.composite_inputs(
             tape,
@@ -396,10 +390,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
         let data = tape.param_from(&self.params, self.data)?;
-        let environment = self
-            .environment
-            .map(|id| tape.param_from(&self.params, id))
-            .transpose()?;
+        let environment = environment_on_tape(tape, &self.params)?;
         let shaded = self.shading.composite_inputs(
             tape,
             rays,

@@ -242,40 +242,36 @@ pub enum OpsError {
     },
 }
 
+/// `$body` with `$op` bound to the op field of `$error` (every variant has one), so that the
+/// list of variants is written once.
+macro_rules! with_op {
+    ($error:expr, $op:ident => $body:expr) => {
+        match $error {
+            OpsError::Offsets { $op, .. }
+            | OpsError::Shape { $op, .. }
+            | OpsError::Domain { $op, .. }
+            | OpsError::Config { $op, .. }
+            | OpsError::Mismatch { $op, .. }
+            | OpsError::Box { $op, .. }
+            | OpsError::EmptyImage { $op, .. }
+            | OpsError::OutOfRange { $op, .. }
+            | OpsError::Frame { $op, .. }
+            | OpsError::NotUnit { $op, .. }
+            | OpsError::Density { $op, .. } => $body,
+        }
+    };
+}
+
 impl OpsError {
     /// The op the error came from.
     pub fn op(&self) -> Op {
-        match self {
-            OpsError::Offsets { op, .. }
-            | OpsError::Shape { op, .. }
-            | OpsError::Domain { op, .. }
-            | OpsError::Config { op, .. }
-            | OpsError::Mismatch { op, .. }
-            | OpsError::Box { op, .. }
-            | OpsError::EmptyImage { op, .. }
-            | OpsError::OutOfRange { op, .. }
-            | OpsError::Frame { op, .. }
-            | OpsError::NotUnit { op, .. }
-            | OpsError::Density { op, .. } => *op,
-        }
+        with_op!(self, op => *op)
     }
 
     /// The same error, naming `to` instead: a check shared by two ops (the composite's, run by
     /// the fused composite + MSE) reports the op that ran it.
     pub(crate) fn in_op(mut self, to: Op) -> Self {
-        match &mut self {
-            OpsError::Offsets { op, .. }
-            | OpsError::Shape { op, .. }
-            | OpsError::Domain { op, .. }
-            | OpsError::Config { op, .. }
-            | OpsError::Mismatch { op, .. }
-            | OpsError::Box { op, .. }
-            | OpsError::EmptyImage { op, .. }
-            | OpsError::OutOfRange { op, .. }
-            | OpsError::Frame { op, .. }
-            | OpsError::NotUnit { op, .. }
-            | OpsError::Density { op, .. } => *op = to,
-        }
+        with_op!(&mut self, op => *op = to);
         self
     }
 
