@@ -15,8 +15,9 @@ pub struct Subject<S> {
     precision: PhantomData<fn() -> S>,
 }
 
+/// The composite's own error, whole: a caller reads it back typed through the tape.
 fn op_error(e: fogray_ops::OpsError) -> OpError {
-    OpError::InvalidArgument(e.to_string())
+    OpError::typed(e)
 }
 
 fn cast<A: Float, B: Float>(x: &ArrayViewD<'_, A>) -> ArrayD<B> {
@@ -118,4 +119,31 @@ pub fn loss<S: Float>(
         l = tape.add(l, ld)?;
     }
     Ok(l)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use fogray_ops::{Op, OpsError};
+    use ndarray::arr1;
+
+    /// A negative density is the composite's error, readable whole through the tape (it was
+    /// once flattened into a string).
+    #[test]
+    fn the_composites_error_comes_back_typed() {
+        let mut tape = Tape::<f64>::new();
+        let v = [
+            tape.param(arr1(&[0.5, -1.0]).into_dyn()),
+            tape.param(arr1(&[0.1, 0.1]).into_dyn()),
+            tape.param(ndarray::Array2::from_elem((2, 3), 0.5).into_dyn()),
+            tape.param(ndarray::Array2::from_elem((1, 3), 1.0).into_dyn()),
+        ];
+        let op = Composite::packed(fogray_tape::Offsets::new(&[0, 2]).unwrap());
+        let color = ndarray::Array2::from_elem((1, 3), 1.0).into_dyn();
+        let err = loss::<f64>(&mut tape, &v, &op, &color, None).unwrap_err();
+        let typed = err
+            .downcast_ref::<OpsError>()
+            .unwrap_or_else(|| panic!("untyped: {err}"));
+        assert_eq!(typed.op(), Op::Composite);
+    }
 }

@@ -254,7 +254,7 @@ impl<F: Float> CustomOp<F> for DensityColor {
     type Saved = KeptDecays;
 
     fn name(&self) -> &'static str {
-        "density_color"
+        Op::DensityColor.name()
     }
 
     fn saved_bytes(&self, saved: &KeptDecays) -> usize {

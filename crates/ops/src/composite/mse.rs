@@ -209,7 +209,7 @@ impl<F: Float> CustomOp<F> for CompositeMse {
     type Saved = MseResiduals<F>;
 
     fn name(&self) -> &'static str {
-        "composite_mse"
+        Op::CompositeMse.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, MseResiduals<F>), OpError> {

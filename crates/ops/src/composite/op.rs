@@ -564,7 +564,7 @@ impl<F: Float> CustomOp<F> for Composite {
     type Saved = Residuals<F>;
 
     fn name(&self) -> &'static str {
-        "composite"
+        Op::Composite.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, Residuals<F>), OpError> {

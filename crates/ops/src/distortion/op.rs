@@ -11,7 +11,7 @@ use ndarray::{Array1, ArrayD, ArrayView1, ArrayViewD, IxDyn};
 use super::check::{check_shapes, check_values, shape_error};
 use super::config::DistortionLoss;
 use super::kernel;
-use crate::error::OpsError;
+use crate::error::{Op, OpsError};
 
 /// The three inputs, flat and checked.
 struct Checked<'a, F: Float> {
@@ -126,7 +126,7 @@ impl<F: Float> CustomOp<F> for DistortionLoss {
     type Saved = ();
 
     fn name(&self) -> &'static str {
-        "distortion_loss"
+        Op::DistortionLoss.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {

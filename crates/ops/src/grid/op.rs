@@ -309,7 +309,7 @@ impl<F: Float> CustomOp<F> for GridField {
     type Saved = ();
 
     fn name(&self) -> &'static str {
-        "grid_field"
+        Op::GridField.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {

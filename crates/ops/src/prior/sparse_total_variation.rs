@@ -195,7 +195,7 @@ impl<F: Float> CustomOp<F> for SparseTotalVariation {
     type Saved = ();
 
     fn name(&self) -> &'static str {
-        "sparse_total_variation"
+        Op::SparseTotalVariation.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {

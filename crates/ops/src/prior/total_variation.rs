@@ -291,7 +291,7 @@ impl<F: Float> CustomOp<F> for TotalVariation {
     type Saved = ();
 
     fn name(&self) -> &'static str {
-        "total_variation"
+        Op::TotalVariation.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {

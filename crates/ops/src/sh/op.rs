@@ -125,7 +125,7 @@ impl<F: Float> CustomOp<F> for ShColor {
     type Saved = ();
 
     fn name(&self) -> &'static str {
-        "sh_color"
+        Op::ShColor.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {

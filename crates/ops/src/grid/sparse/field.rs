@@ -188,7 +188,7 @@ impl<F: Float> CustomOp<F> for SparseGridField {
     type Saved = ();
 
     fn name(&self) -> &'static str {
-        "sparse_grid_field"
+        Op::SparseGridField.name()
     }
 
     fn forward(&self, inputs: &[ArrayViewD<'_, F>]) -> Result<(Vec<ArrayD<F>>, ()), OpError> {
