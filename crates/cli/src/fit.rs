@@ -13,7 +13,7 @@ use fogray_fit::interrupt::StopFlag;
 use fogray_fit::metrics::haze_fraction;
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
-use fogray_fit::settings::{FitSettings, SceneBox};
+use fogray_fit::settings::{Budget, FitSettings, SceneBox};
 use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
 use fogray_fit::RadianceField;
 use fogray_tape::Float;
@@ -44,8 +44,27 @@ pub const RECOMMENDED_LR: &str = "0.4";
 pub const RECOMMENDED_LR_FINAL: &str = "0.04";
 
 /// The lattice `fogray fit` grows to unless `--grid` is given: 128 nodes per axis (32, 64,
-/// then 128), the finest that a minute's fit on two cores still trains well.
+/// then 128), the finest that a minute's fit on two cores still trains well; from
+/// [`LONG_FIT_SECONDS`] of training on, [`RECOMMENDED_GRID_LONG`] ([`long_fit_grid`]).
 pub const RECOMMENDED_GRID: &str = "128";
+
+/// The lattice of a long fit unless `--grid` is given (48, 96, then 192): its finer nodes
+/// cost a step twice as much, which a long budget pays back in held-out PSNR and a short one
+/// does not (lego, reports/lego/report.md).
+pub const RECOMMENDED_GRID_LONG: usize = 192;
+
+/// The training seconds from which [`RECOMMENDED_GRID_LONG`] is the recommended lattice.
+pub const LONG_FIT_SECONDS: f64 = 150.0;
+
+/// The lattice a fit of `budget` grows to when `--grid` is not given, where it is not
+/// [`RECOMMENDED_GRID`]: [`RECOMMENDED_GRID_LONG`] for a budget of [`LONG_FIT_SECONDS`] or
+/// more; `None` for shorter ones and for a budget of steps, which says nothing of time.
+pub fn long_fit_grid(budget: Budget) -> Option<usize> {
+    match budget {
+        Budget::Seconds(s) if s >= LONG_FIT_SECONDS => Some(RECOMMENDED_GRID_LONG),
+        _ => None,
+    }
+}
 
 /// Where the data comes from and how it is read (shared by `fogray fit` and `fogray render`).
 #[derive(Debug, Clone, clap::Args)]
@@ -372,4 +391,19 @@ fn held_out_views<F: Float, M: RadianceField<F>>(
         views.push(view);
     }
     Ok(views)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_long_budget_of_seconds_grows_to_the_finer_lattice() {
+        assert_eq!(long_fit_grid(Budget::Seconds(60.0)), None);
+        assert_eq!(long_fit_grid(Budget::Seconds(LONG_FIT_SECONDS - 1e-9)), None);
+        assert_eq!(long_fit_grid(Budget::Seconds(LONG_FIT_SECONDS)), Some(192));
+        assert_eq!(long_fit_grid(Budget::Seconds(300.0)), Some(192));
+        // Steps say nothing of time.
+        assert_eq!(long_fit_grid(Budget::Steps(1_000_000)), None);
+    }
 }

@@ -5,7 +5,8 @@ use std::io::Read;
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand, ValueEnum};
+use clap::parser::ValueSource;
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use fogray_cli::error::CliError;
@@ -61,7 +62,7 @@ enum Command {
         long_about = FIT_HELP,
         mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)),
         mut_arg("model", |a| a.default_value(fit::RECOMMENDED_MODEL)),
-        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID)),
+        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID).help(GRID_HELP)),
         mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV)),
         mut_arg("lr", |a| a.default_value(fit::RECOMMENDED_LR)),
         mut_arg("lr_final", |a| a.default_value(fit::RECOMMENDED_LR_FINAL))
@@ -372,8 +373,23 @@ fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Pu
     }
 }
 
+/// `fogray fit --grid`'s help: its default depends on the budget.
+const GRID_HELP: &str = "Nodes per axis of the grid (of its last growth stage); unless given, 128, or 192 for \
+                         --seconds 150 and more";
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let matches = Cli::command().get_matches();
+    let mut cli = match Cli::from_arg_matches(&matches) {
+        Ok(cli) => cli,
+        Err(e) => e.exit(),
+    };
+    if let Command::Fit(args) = &mut cli.command {
+        let fit = matches.subcommand_matches("fit");
+        let given = fit.and_then(|m| m.value_source("grid")) == Some(ValueSource::CommandLine);
+        if let (false, Some(n)) = (given, fit::long_fit_grid(args.settings.budget())) {
+            args.settings.grid = n;
+        }
+    }
     let (name, result) = match &cli.command {
         Command::Fit(args) => match fit::run(args) {
             Ok(fit::FitOutcome::Done(text)) => ("fit", Ok(text)),

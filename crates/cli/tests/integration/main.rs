@@ -6,5 +6,6 @@ mod cli;
 mod common;
 mod export;
 mod fit_render;
+mod interrupt;
 mod lego;
 mod orbit;
