@@ -64,7 +64,13 @@ pub fn all() -> Vec<Config> {
         ),
         c(
             "sparse-128-300s",
-            "sparse 128^3, degree 1 (the defaults), 300 s",
+            "sparse 128^3, degree 1, 300 s (the defaults of a short fit)",
+            "--grid 128",
+            300.0,
+        ),
+        c(
+            "sparse-192-300s",
+            "sparse 192^3, degree 1, 300 s (the defaults: a long fit grows to 192^3)",
             "",
             300.0,
         ),

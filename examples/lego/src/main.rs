@@ -21,6 +21,7 @@ use clap::Parser;
 use serde::{Deserialize, Serialize};
 
 use configs::Config;
+use fogray_fit::curves::Anchor;
 
 /// Runs the configurations and writes the report.
 #[derive(Parser)]
@@ -43,6 +44,11 @@ struct Args {
     /// Scale every budget by this factor (a quick check of the pipeline, not a measurement).
     #[arg(long, default_value_t = 1.0)]
     budget_scale: f64,
+    /// An outside pipeline's run on the same views and machine (a PyTorch fit, say), as
+    /// fogray_fit::curves::Anchor JSON: its curve joins the plot, and each run's time to the
+    /// PSNR it ends at is set against its own.
+    #[arg(long, value_name = "FILE")]
+    anchor: Option<PathBuf>,
 }
 
 /// One evaluation of a run's log, as `fogray fit --json` writes it.
@@ -146,6 +152,8 @@ fn run_one(fogray: &Path, args: &Args, config: &Config, out: &Path) -> Result<Ru
 fn main() -> Result<()> {
     let args = Args::parse();
     let fogray = fogray_binary(&args)?;
+    // Read before the runs, so that a bad file costs seconds, not the report's half hour.
+    let anchor = args.anchor.as_deref().map(Anchor::read).transpose()?;
     let configs: Vec<Config> = configs::all()
         .into_iter()
         .filter(|c| args.only.is_empty() || args.only.iter().any(|o| o == c.name))
@@ -159,7 +167,7 @@ fn main() -> Result<()> {
         let dir = args.out.join("runs").join(config.name);
         runs.push(run_one(&fogray, &args, config, &dir)?);
     }
-    write::report(&args, &runs)?;
+    write::report(&args, &runs, anchor.as_ref())?;
     eprintln!("fogray-lego: wrote {}", args.out.join("report.md").display());
     Ok(())
 }

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 
 use anyhow::{Context, Result};
 use fogray::stamp::Stamp;
-use fogray_fit::curves::{psnr_at, reach, Anchor, AnchorPoint};
+use fogray_fit::curves::{against_anchor, psnr_at, reach, Anchor, AnchorPoint};
 use fogray_fit::plots::{psnr_curves_against, Curve, XAxis};
 use fogray_fit::train::LogEntry;
 
@@ -42,7 +42,7 @@ fn cell(v: Option<f64>) -> String {
 }
 
 /// Writes report.md, report.json, psnr-vs-seconds.{png,svg} and the held-out view.
-pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
+pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>) -> Result<()> {
     let out = &args.out;
     let nerfacto = Anchor {
         name: "nerfacto, CPU (the issue's run)".into(),
@@ -57,6 +57,7 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
             .collect(),
     };
     let anchor = nerfacto.entries();
+    let outside_log = outside.map(Anchor::entries);
     let logs: Vec<Vec<LogEntry>> = runs.iter().map(log_entries).collect();
     let mut curves: Vec<Curve<'_>> = runs
         .iter()
@@ -70,19 +71,23 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
         label: nerfacto.name.clone(),
         log: &anchor,
     });
-    let dashed = [curves.len() - 1];
+    if let (Some(a), Some(log)) = (outside, &outside_log) {
+        curves.push(Curve {
+            label: a.name.clone(),
+            log,
+        });
+    }
+    let dashed: Vec<usize> = (runs.len()..curves.len()).collect();
     psnr_curves_against(&out.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &dashed)
         .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
 
-    let command = format!(
-        "fogray-lego --data <lego> --downscale {}{}",
-        args.downscale,
-        if args.budget_scale == 1.0 {
-            String::new()
-        } else {
-            format!(" --budget-scale {}", args.budget_scale)
-        }
-    );
+    let mut command = format!("fogray-lego --data <lego> --downscale {}", args.downscale);
+    if args.budget_scale != 1.0 {
+        write!(command, " --budget-scale {}", args.budget_scale)?;
+    }
+    if let Some(file) = &args.anchor {
+        write!(command, " --anchor {}", file.display())?;
+    }
     let stamp = Stamp::now(&command);
     let first = &runs[0].result;
     let mut md = String::new();
@@ -141,6 +146,9 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
         NERFACTO_PEAK_BYTES / 1e9,
         NERFACTO_RENDER_SECONDS
     )?;
+    if let (Some(a), Some(log)) = (outside, &outside_log) {
+        against_outside(&mut md, a, log, runs, &logs)?;
+    }
     writeln!(md, "![held-out PSNR against training seconds](psnr-vs-seconds.png)\n")?;
     // The held-out view of the defaults' run, as fogray fit --out wrote it.
     if let Some(run) = runs.iter().rev().find(|r| r.config.flags.is_empty()) {
@@ -148,6 +156,8 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
         let mut views: Vec<_> = std::fs::read_dir(&dir)
             .with_context(|| format!("{}", dir.display()))?
             .filter_map(|e| e.ok().map(|e| e.path()))
+            // The view itself, not its depth map.
+            .filter(|p| !p.to_string_lossy().ends_with("-depth.png"))
             .collect();
         views.sort();
         if let Some(view) = views.first() {
@@ -166,7 +176,43 @@ pub fn report(args: &Args, runs: &[Run]) -> Result<()> {
     std::fs::write(out.join("report.md"), md)?;
     std::fs::write(
         out.join("report.json"),
-        serde_json::to_string_pretty(&serde_json::json!({ "stamp": stamp, "runs": runs }))?,
+        serde_json::to_string_pretty(&serde_json::json!({ "stamp": stamp, "runs": runs, "anchor": outside }))?,
     )?;
+    Ok(())
+}
+
+/// Each run against an outside pipeline's run: when each first reached the PSNR the outside
+/// run ends at, and how many times sooner than it.
+fn against_outside(
+    md: &mut String,
+    anchor: &Anchor,
+    log: &[LogEntry],
+    runs: &[Run],
+    logs: &[Vec<LogEntry>],
+) -> Result<()> {
+    let target = anchor.final_psnr();
+    let theirs = reach(log, target)?.map_or(f64::NAN, |r| r.seconds);
+    writeln!(
+        md,
+        "Against {}: {:.2} dB after {:.0} s (first reached at {:.1} s). {}\n",
+        anchor.name,
+        target,
+        log.last().map_or(f64::NAN, |e| e.seconds),
+        theirs,
+        anchor.note.as_deref().unwrap_or("")
+    )?;
+    writeln!(md, "| run | s to {target:.2} dB | times sooner |")?;
+    writeln!(md, "|---|---|---|")?;
+    for (run, own) in runs.iter().zip(logs) {
+        let versus = against_anchor(own, log)?;
+        writeln!(
+            md,
+            "| {} | {} | {} |",
+            run.config.name,
+            cell(versus.run.map(|r| r.seconds)),
+            versus.speedup.map_or("-".into(), |x| format!("{x:.0}x")),
+        )?;
+    }
+    writeln!(md)?;
     Ok(())
 }
