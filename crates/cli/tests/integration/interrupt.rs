@@ -4,6 +4,7 @@
 
 use std::io::{BufRead, BufReader};
 use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
 
 use fogray_fit::checkpoint::read_info;
 
@@ -35,10 +36,18 @@ fn fit_then_ctrl_c(args: &[&str]) -> i32 {
         .status()
         .unwrap();
     assert!(kill.success());
-    // Drain stderr so that the child never blocks on a full pipe.
-    let mut rest = String::new();
-    while stderr.read_line(&mut rest).unwrap() != 0 {}
-    child.wait().unwrap().code().unwrap_or(-1)
+    // It stops after the step under way; a fit that ignored the signal would run its budget.
+    let start = Instant::now();
+    loop {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code().unwrap_or(-1);
+        }
+        if start.elapsed() > Duration::from_secs(60) {
+            child.kill().unwrap();
+            panic!("fogray fit did not stop on SIGINT");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
 }
 
 #[test]
