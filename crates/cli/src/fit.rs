@@ -56,6 +56,10 @@ pub const RECOMMENDED_GRID_LONG: usize = 192;
 /// The training seconds from which [`RECOMMENDED_GRID_LONG`] is the recommended lattice.
 pub const LONG_FIT_SECONDS: f64 = 150.0;
 
+/// `fogray fit --grid`'s help, which says how its default depends on the budget.
+pub const GRID_HELP: &str =
+    "Nodes per axis of the grid (of its last growth stage); unless given, 128, or 192 for --seconds 150 and more";
+
 /// The lattice a fit of `budget` grows to when `--grid` is not given, where it is not
 /// [`RECOMMENDED_GRID`]: [`RECOMMENDED_GRID_LONG`] for a budget of [`LONG_FIT_SECONDS`] or
 /// more; `None` for shorter ones and for a budget of steps, which says nothing of time.
@@ -405,5 +409,10 @@ mod tests {
         assert_eq!(long_fit_grid(Budget::Seconds(300.0)), Some(192));
         // Steps say nothing of time.
         assert_eq!(long_fit_grid(Budget::Steps(1_000_000)), None);
+        // The help states the same three numbers.
+        let said = format!(
+            "unless given, {RECOMMENDED_GRID}, or {RECOMMENDED_GRID_LONG} for --seconds {LONG_FIT_SECONDS} and more"
+        );
+        assert!(GRID_HELP.ends_with(&said), "{GRID_HELP:?} against {said:?}");
     }
 }

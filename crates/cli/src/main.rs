@@ -62,7 +62,7 @@ enum Command {
         long_about = FIT_HELP,
         mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)),
         mut_arg("model", |a| a.default_value(fit::RECOMMENDED_MODEL)),
-        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID).help(GRID_HELP)),
+        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID).help(fit::GRID_HELP)),
         mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV)),
         mut_arg("lr", |a| a.default_value(fit::RECOMMENDED_LR)),
         mut_arg("lr_final", |a| a.default_value(fit::RECOMMENDED_LR_FINAL))
@@ -372,10 +372,6 @@ fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Pu
         command: format!("fogray {}", args.join(" ")),
     }
 }
-
-/// `fogray fit --grid`'s help: its default depends on the budget.
-const GRID_HELP: &str = "Nodes per axis of the grid (of its last growth stage); unless given, 128, or 192 for \
-                         --seconds 150 and more";
 
 fn main() -> ExitCode {
     let matches = Cli::command().get_matches();
