@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, write_ball, LENS};
+use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, write_ball, LENS, TINY_FIT};
 
 /// A good dataset of 8 views of 8x8 pixels in a fresh folder `dir/name`.
 fn dataset(dir: &Path, name: &str) -> PathBuf {
@@ -16,18 +16,8 @@ fn dataset(dir: &Path, name: &str) -> PathBuf {
 
 /// `fogray fit` on `data`, as short as a fit goes (it must not get that far).
 fn fit(data: &Path, extra: &[&str]) -> crate::common::Run {
-    let mut args = vec![
-        "fit",
-        "--data",
-        arg(data),
-        "--steps",
-        "1",
-        "--grid",
-        "8",
-        "--batch",
-        "64",
-        "--json",
-    ];
+    let mut args = vec!["fit", "--data", arg(data)];
+    args.extend(TINY_FIT);
     args.extend_from_slice(extra);
     fogray(&args)
 }

@@ -39,6 +39,10 @@ fn run_output(out: std::process::Output) -> Run {
     }
 }
 
+/// The flags of the smallest fit the tests save a model from: one step of 64 rays on an 8^3
+/// grid, JSON on stdout.
+pub const TINY_FIT: [&str; 7] = ["--steps", "1", "--grid", "8", "--batch", "64", "--json"];
+
 /// A path as a command-line argument (temporary paths are UTF-8 here).
 pub fn arg(path: &Path) -> &str {
     path.to_str().unwrap()

@@ -3,7 +3,9 @@
 
 use std::path::{Path, PathBuf};
 
-use crate::common::{arg, assert_refused, cameras, fogray, fogray_in, frame_name, intrinsics, write_ball, LENS};
+use crate::common::{
+    arg, assert_refused, cameras, fogray, fogray_in, frame_name, intrinsics, write_ball, LENS, TINY_FIT,
+};
 
 /// A one-step fit of the ball's dataset (8 views of 8x8 pixels) in `dir`: the dataset and the
 /// model file.
@@ -11,20 +13,9 @@ fn tiny_model(dir: &Path) -> (PathBuf, PathBuf) {
     let data = dir.join("data");
     write_ball(&data, &cameras(8, intrinsics(8), LENS));
     let model = dir.join("tiny.safetensors");
-    let run = fogray(&[
-        "fit",
-        "--data",
-        arg(&data),
-        "--steps",
-        "1",
-        "--grid",
-        "8",
-        "--batch",
-        "64",
-        "--json",
-        "--save-model",
-        arg(&model),
-    ]);
+    let mut args = vec!["fit", "--data", arg(&data), "--save-model", arg(&model)];
+    args.extend(TINY_FIT);
+    let run = fogray(&args);
     assert_eq!(run.code, 0, "{}", run.stderr);
     (data, model)
 }
@@ -140,23 +131,9 @@ fn an_orbit_takes_its_defaults_from_the_models_dataset() {
 fn a_model_fitted_from_a_relative_path_finds_its_dataset_from_anywhere() {
     let dir = tempfile::tempdir().unwrap();
     write_ball(&dir.path().join("data"), &cameras(8, intrinsics(8), LENS));
-    let fit = fogray_in(
-        dir.path(),
-        &[
-            "fit",
-            "--data",
-            "data",
-            "--steps",
-            "1",
-            "--grid",
-            "8",
-            "--batch",
-            "64",
-            "--json",
-            "--save-model",
-            "m.safetensors",
-        ],
-    );
+    let mut args = vec!["fit", "--data", "data", "--save-model", "m.safetensors"];
+    args.extend(TINY_FIT);
+    let fit = fogray_in(dir.path(), &args);
     assert_eq!(fit.code, 0, "{}", fit.stderr);
     let out = dir.path().join("frames");
     let model = dir.path().join("m.safetensors");
