@@ -43,6 +43,12 @@ pub const RECOMMENDED_LR: &str = "0.4";
 /// See [`RECOMMENDED_LR`].
 pub const RECOMMENDED_LR_FINAL: &str = "0.04";
 
+/// The distortion-loss weight `fogray fit` uses unless `--distortion` is given: a little of
+/// mip-NeRF 360's loss pulls each ray's weights onto its surface, which clears the haze a
+/// photograph cannot tell from a sheet and gains held-out PSNR at short and long budgets
+/// alike; ten times more costs PSNR (lego, reports/lego/report.md).
+pub const RECOMMENDED_DISTORTION: &str = "0.01";
+
 /// The lattice `fogray fit` grows to unless `--grid` is given: 128 nodes per axis (32, 64,
 /// then 128), the finest that a minute's fit on two cores still trains well; from
 /// [`LONG_FIT_SECONDS`] of training on, [`RECOMMENDED_GRID_LONG`] ([`long_fit_grid`]).
@@ -113,9 +119,16 @@ pub fn parse_colour(text: &str) -> Result<[f64; 3], String> {
 #[derive(Debug, Clone, clap::Args)]
 pub struct FitArgs {
     /// A Blender / NeRF-synthetic folder (transforms_train.json ...), an instant-ngp or
-    /// nerfstudio folder (transforms.json), or a transforms file.
-    #[arg(long, value_name = "PATH")]
-    pub data: PathBuf,
+    /// nerfstudio folder (transforms.json), or a transforms file. Resuming, the saved fit's
+    /// unless given.
+    #[arg(long, value_name = "PATH", required_unless_present = "resume")]
+    pub data: Option<PathBuf>,
+    /// Continue the fit saved in FILE (by --save-model, or by Ctrl-C) up to its budget, or to
+    /// the --steps or --seconds given (counting the steps and seconds it has done): its
+    /// settings, dataset, --downscale and --background are the file's except where given;
+    /// --grid and --precision, if given, must be the file's.
+    #[arg(long, value_name = "FILE")]
+    pub resume: Option<PathBuf>,
     #[command(flatten)]
     pub data_args: DataArgs,
     /// Write the fitted model here (safetensors; `fogray render --model` reads it).
@@ -206,19 +219,95 @@ pub fn load_fit_data(path: &Path, data_args: &DataArgs) -> Result<(Dataset, Scen
     Ok((data, SceneBox { min, max }))
 }
 
-/// Runs `fogray fit`.
+/// What a fit reads and how it trains: the flags, or, resuming, the saved fit's choices under
+/// the flags given.
+#[derive(Debug, Clone)]
+pub struct FitPlan {
+    /// The dataset.
+    pub data: PathBuf,
+    /// How its pictures are read.
+    pub data_args: DataArgs,
+    /// The fit's settings (the scene box is the dataset's unless they name one).
+    pub settings: FitSettings,
+    /// The saved fit to continue.
+    pub resume: Option<PathBuf>,
+}
+
+/// The plan of `fogray fit` with `args`, where `given(id)` says whether the flag of clap id
+/// `id` was given on the command line. A fresh fit of a long budget grows to
+/// [`RECOMMENDED_GRID_LONG`] unless `--grid` is given ([`long_fit_grid`]); a resumed one keeps
+/// the file's lattice.
 ///
-/// Errors: a bad dataset (naming the file), bad settings, a file that cannot be written.
-pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
+/// Errors: a model file that cannot be read or that another lattice or precision was asked
+/// of, a saved dataset entry that cannot be read (naming the file).
+pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, CliError> {
+    let Some(file) = &args.resume else {
+        let data = args
+            .data
+            .clone()
+            .ok_or_else(|| CliError::Option("give --data PATH, or --resume FILE".into()))?;
+        let mut settings = args.settings;
+        if let (false, Some(n)) = (given("grid"), long_fit_grid(settings.budget())) {
+            settings.grid = n;
+        }
+        return Ok(FitPlan {
+            data,
+            data_args: args.data_args.clone(),
+            settings,
+            resume: None,
+        });
+    };
+    let info = checkpoint::read_info(file)?;
+    let settings = args.settings.given_over(&info.settings, given)?;
+    info.check_matches(file, settings.precision, settings.grid)?;
+    let entry = |key: &str| {
+        info.extra.get(key).ok_or_else(|| {
+            CliError::Option(format!(
+                "{} has no saved {key} (it was not written by fogray fit): give --{key}",
+                file.display()
+            ))
+        })
+    };
+    let unreadable = |key: &str, text: &str| {
+        CliError::Option(format!("{}: its saved {key} {text:?} cannot be read", file.display()))
+    };
+    let data = match &args.data {
+        Some(path) => path.clone(),
+        None => PathBuf::from(entry("data")?),
+    };
+    let mut data_args = args.data_args.clone();
+    if !given("downscale") {
+        let text = entry("downscale")?;
+        data_args.downscale = text.parse().map_err(|_| unreadable("downscale", text))?;
+    }
+    if !given("background") {
+        let text = entry("background")?;
+        data_args.background = serde_json::from_str(text).map_err(|_| unreadable("background", text))?;
+    }
+    Ok(FitPlan {
+        data,
+        data_args,
+        settings,
+        resume: Some(file.clone()),
+    })
+}
+
+/// Runs `fogray fit`, where `given(id)` says whether the flag of clap id `id` was given on the
+/// command line ([`plan`]).
+///
+/// Errors: a bad dataset or model file (naming the file), bad settings, a file that cannot be
+/// written.
+pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, CliError> {
     let clock = Instant::now();
     if let Some(file) = &args.save_model {
         checkpoint::check_destination(file)?;
     }
-    args.settings.check()?;
-    let (data, scene_box) = load_fit_data(&args.data, &args.data_args)?;
+    let plan = plan(args, given)?;
+    plan.settings.check()?;
+    let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args)?;
     let settings = FitSettings {
-        scene_box: Some(args.settings.scene_box.unwrap_or(scene_box)),
-        ..args.settings
+        scene_box: Some(plan.settings.scene_box.unwrap_or(scene_box)),
+        ..plan.settings
     };
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
@@ -226,6 +315,7 @@ pub fn run(args: &FitArgs) -> Result<FitOutcome, CliError> {
     let stop = StopFlag::on_ctrl_c()?;
     let work = FitWork {
         args,
+        plan: &plan,
         settings: &settings,
         data: &data,
         stop: &stop,
@@ -245,28 +335,30 @@ fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
     bar
 }
 
-/// The checkpoint's own entries: what `fogray render` needs beside the model.
-fn entries(args: &FitArgs) -> Result<BTreeMap<String, String>, CliError> {
+/// The checkpoint's own entries: what `fogray render` and `fogray fit --resume` need beside
+/// the model.
+fn entries(plan: &FitPlan) -> Result<BTreeMap<String, String>, CliError> {
     Ok(BTreeMap::from([
         (
             "background".to_string(),
-            serde_json::to_string(&args.data_args.background)?,
+            serde_json::to_string(&plan.data_args.background)?,
         ),
         // Absolute (the fit has just read it), so that a render from another folder finds it.
         (
             "data".to_string(),
-            std::fs::canonicalize(&args.data)
-                .unwrap_or_else(|_| args.data.clone())
+            std::fs::canonicalize(&plan.data)
+                .unwrap_or_else(|_| plan.data.clone())
                 .display()
                 .to_string(),
         ),
-        ("downscale".to_string(), args.data_args.downscale.to_string()),
+        ("downscale".to_string(), plan.data_args.downscale.to_string()),
     ]))
 }
 
 /// A fit of one model type, as fogray-fit's dispatch runs it.
 struct FitWork<'a> {
     args: &'a FitArgs,
+    plan: &'a FitPlan,
     settings: &'a FitSettings,
     data: &'a Dataset,
     stop: &'a StopFlag,
@@ -277,12 +369,13 @@ impl ModelWork for FitWork<'_> {
     type Output = Result<FitOutcome, CliError>;
 
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
-        fit_and_report::<F, M>(self.args, self.settings, self.data, self.stop, self.clock)
+        fit_and_report::<F, M>(self.args, self.plan, self.settings, self.data, self.stop, self.clock)
     }
 }
 
 fn fit_and_report<F: Float, M: RadianceField<F>>(
     args: &FitArgs,
+    plan: &FitPlan,
     settings: &FitSettings,
     data: &Dataset,
     stop: &StopFlag,
@@ -298,14 +391,22 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         bar.set_message(format!("step {}", p.step));
     };
     let [h, w] = data.train[0].size();
+    let start = match &plan.resume {
+        Some(file) => Some(checkpoint::load::<F, M>(file)?.start),
+        None => None,
+    };
     if !args.json {
+        let from = match (&plan.resume, &start) {
+            (Some(file), Some(s)) => format!(", from step {} of {}", s.training.step, file.display()),
+            _ => String::new(),
+        };
         eprintln!(
-            "fogray fit: {} training and {} held-out views of {w}x{h}; Ctrl-C stops and saves",
+            "fogray fit: {} training and {} held-out views of {w}x{h}{from}; Ctrl-C stops and saves",
             data.train.len(),
             data.test.len()
         );
     }
-    let result = fit_from::<F, M>(data, settings, None, Some(stop.flag()), &mut progress)?;
+    let result = fit_from::<F, M>(data, settings, start, Some(stop.flag()), &mut progress)?;
     bar.finish_and_clear();
     let save_path = match (&args.save_model, result.interrupted) {
         (Some(p), _) => Some(p.clone()),
@@ -316,7 +417,7 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         (None, false) => None,
     };
     if let Some(path) = &save_path {
-        checkpoint::save(path, &result.model, &result.training, settings, &entries(args)?)?;
+        checkpoint::save(path, &result.model, &result.training, settings, &entries(plan)?)?;
     }
     if let (true, Some(path)) = (result.interrupted, save_path) {
         return Ok(FitOutcome::Interrupted(path));
@@ -347,7 +448,7 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
             .sum(),
     };
     if let Some(dir) = &args.out {
-        crate::fit_report::write_out(dir, args, settings, data, &result, &held_out, &summary)?;
+        crate::fit_report::write_out(dir, plan, settings, data, &result, &held_out, &summary)?;
     }
     if args.json {
         return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));

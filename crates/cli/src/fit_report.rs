@@ -17,7 +17,7 @@ use fogray_fit::train::FitResult;
 use fogray_tape::Float;
 
 use crate::error::CliError;
-use crate::fit::{FitArgs, FitSummary};
+use crate::fit::{FitPlan, FitSummary};
 
 /// Writes `DIR/test/<name>.png` (photograph | render | error x4) and `DIR/test/<name>-depth.png`
 /// for each held-out view (`held_out`: its render with depth), `DIR/psnr.{png,svg}`,
@@ -26,7 +26,7 @@ use crate::fit::{FitArgs, FitSummary};
 /// Errors: a file that cannot be written, naming it.
 pub fn write_out<F: Float, M>(
     dir: &Path,
-    args: &FitArgs,
+    plan: &FitPlan,
     settings: &FitSettings,
     data: &Dataset,
     result: &FitResult<F, M>,
@@ -57,7 +57,7 @@ pub fn write_out<F: Float, M>(
     std::fs::write(&path, serde_json::to_string_pretty(summary)?).map_err(CliError::file("write", &path))?;
     let stamp = Stamp::now(&command_line());
     let names: Vec<&str> = data.test.iter().map(|t| t.name.as_str()).collect();
-    let text = markdown(args, settings, summary, &stamp, &names)?;
+    let text = markdown(plan, settings, summary, &stamp, &names)?;
     let path = dir.join("report.md");
     std::fs::write(&path, text).map_err(CliError::file("write", &path))
 }
@@ -88,7 +88,7 @@ fn number(v: f64, show: impl Fn(f64) -> String) -> String {
 
 /// report.md's text; `names` are the held-out views' names, in order.
 fn markdown(
-    args: &FitArgs,
+    plan: &FitPlan,
     settings: &FitSettings,
     s: &FitSummary,
     stamp: &Stamp,
@@ -97,7 +97,7 @@ fn markdown(
     let mut md = String::new();
     let [h, w] = s.size;
     let w_ = |e: std::fmt::Error| CliError::Option(format!("report.md: {e}"));
-    writeln!(md, "# fogray fit of {}\n", args.data.display()).map_err(w_)?;
+    writeln!(md, "# fogray fit of {}\n", plan.data.display()).map_err(w_)?;
     writeln!(md, "{}\n", stamp.markdown()).map_err(w_)?;
     writeln!(
         md,
@@ -170,9 +170,9 @@ fn markdown(
     writeln!(
         md,
         "Data: `{}`, downscale {}, background {:?}.\n",
-        args.data.display(),
-        args.data_args.downscale,
-        args.data_args.background
+        plan.data.display(),
+        plan.data_args.downscale,
+        plan.data_args.background
     )
     .map_err(w_)?;
     writeln!(md, "```json\n{}\n```", serde_json::to_string_pretty(settings)?).map_err(w_)?;

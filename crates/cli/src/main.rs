@@ -65,7 +65,8 @@ enum Command {
         mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID).help(fit::GRID_HELP)),
         mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV)),
         mut_arg("lr", |a| a.default_value(fit::RECOMMENDED_LR)),
-        mut_arg("lr_final", |a| a.default_value(fit::RECOMMENDED_LR_FINAL))
+        mut_arg("lr_final", |a| a.default_value(fit::RECOMMENDED_LR_FINAL)),
+        mut_arg("distortion", |a| a.default_value(fit::RECOMMENDED_DISTORTION))
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms
@@ -375,22 +376,20 @@ fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Pu
 
 fn main() -> ExitCode {
     let matches = Cli::command().get_matches();
-    let mut cli = match Cli::from_arg_matches(&matches) {
+    let cli = match Cli::from_arg_matches(&matches) {
         Ok(cli) => cli,
         Err(e) => e.exit(),
     };
-    if let Command::Fit(args) = &mut cli.command {
-        let fit = matches.subcommand_matches("fit");
-        let given = fit.and_then(|m| m.value_source("grid")) == Some(ValueSource::CommandLine);
-        if let (false, Some(n)) = (given, fit::long_fit_grid(args.settings.budget())) {
-            args.settings.grid = n;
-        }
-    }
     let (name, result) = match &cli.command {
-        Command::Fit(args) => match fit::run(args) {
+        Command::Fit(args) => match fit::run(args, &|id| {
+            matches.subcommand_matches("fit").and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine)
+        }) {
             Ok(fit::FitOutcome::Done(text)) => ("fit", Ok(text)),
             Ok(fit::FitOutcome::Interrupted(path)) => {
-                eprintln!("fogray fit: interrupted: the model is saved to {}", path.display());
+                eprintln!(
+                    "fogray fit: interrupted: the fit is saved to {0} (continue it with fogray fit --resume {0})",
+                    path.display()
+                );
                 // 128 + SIGINT, as a shell reports a command stopped by Ctrl-C.
                 return ExitCode::from(130);
             }

@@ -49,11 +49,16 @@ pub fn all() -> Vec<Config> {
             "--tv 1.5e-4",
             60.0,
         ),
-        c("sparse-128", "sparse 128^3, degree 1 (the defaults)", "", 60.0),
         c(
-            "sparse-128-distortion-0.01",
-            "sparse 128^3, degree 1, distortion loss 0.01",
-            "--distortion 0.01",
+            "sparse-128-no-distortion",
+            "sparse 128^3, degree 1, no distortion loss",
+            "--distortion 0",
+            60.0,
+        ),
+        c(
+            "sparse-128",
+            "sparse 128^3, degree 1, distortion loss 0.01 (the defaults)",
+            "",
             60.0,
         ),
         c(
@@ -64,16 +69,27 @@ pub fn all() -> Vec<Config> {
         ),
         c(
             "sparse-128-300s",
-            "sparse 128^3, degree 1, 300 s (the defaults of a short fit)",
+            "sparse 128^3, degree 1, distortion 0.01, 300 s (the defaults of a short fit)",
             "--grid 128",
             300.0,
         ),
         c(
+            "sparse-192-300s-no-distortion",
+            "sparse 192^3, degree 1, no distortion loss, 300 s",
+            "--distortion 0",
+            300.0,
+        ),
+        c(
             "sparse-192-300s",
-            "sparse 192^3, degree 1, 300 s (the defaults: a long fit grows to 192^3)",
+            "sparse 192^3, degree 1, distortion 0.01, 300 s (the defaults: a long fit grows to 192^3)",
             "",
             300.0,
         ),
-        c("sparse-256-300s", "sparse 256^3, degree 1, 300 s", "--grid 256", 300.0),
+        c(
+            "sparse-256-300s",
+            "sparse 256^3, degree 1, distortion 0.01, 300 s",
+            "--grid 256",
+            300.0,
+        ),
     ]
 }

@@ -9,3 +9,4 @@ mod fit_render;
 mod interrupt;
 mod lego;
 mod orbit;
+mod resume;
