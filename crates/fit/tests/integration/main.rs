@@ -11,6 +11,7 @@ mod depth;
 mod environment;
 mod mesh;
 mod metrics;
+mod negative;
 mod resume;
 mod sparse;
 mod sweep;
