@@ -216,7 +216,8 @@ Images (PNG 8 or 16 bits, JPEG; grey, RGB or RGBA) are composited over --backgro
 
 The defaults are the recommended configuration: `fogray fit --data DIR --downscale 4` is a
 whole fit. Ctrl-C stops after the current step and saves the model (to --save-model, else
-fogray-model.safetensors in --out or here), exit status 130.
+fogray-model.safetensors in --out or here), exit status 130; `fogray fit --resume FILE`
+continues it.
 
 --json prints {"final_test_psnr", "seconds", "steps", "log": [{"step", "seconds",
 "train_loss", "test_psnr", "samples"}], "views", "size", "load_seconds"}; a progress bar on
