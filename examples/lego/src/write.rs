@@ -190,21 +190,27 @@ fn against_outside(
     runs: &[Run],
     logs: &[Vec<LogEntry>],
 ) -> Result<()> {
-    let target = anchor.final_psnr();
-    let theirs = reach(log, target)?.map_or(f64::NAN, |r| r.seconds);
+    // Each comparison carries the anchor's target and when the anchor reached it.
+    let against: Vec<_> = logs
+        .iter()
+        .map(|own| against_anchor(own, log))
+        .collect::<Result<_, _>>()?;
+    let Some(first) = against.first() else {
+        return Ok(());
+    };
+    let target = first.target_psnr;
     writeln!(
         md,
         "Against {}: {:.2} dB after {:.0} s (first reached at {:.1} s). {}\n",
         anchor.name,
         target,
         log.last().map_or(f64::NAN, |e| e.seconds),
-        theirs,
+        first.anchor.seconds,
         anchor.note.as_deref().unwrap_or("")
     )?;
     writeln!(md, "| run | s to {target:.2} dB | times sooner |")?;
     writeln!(md, "|---|---|---|")?;
-    for (run, own) in runs.iter().zip(logs) {
-        let versus = against_anchor(own, log)?;
+    for (run, versus) in runs.iter().zip(&against) {
         writeln!(
             md,
             "| {} | {} | {} |",
