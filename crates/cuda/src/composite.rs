@@ -9,7 +9,7 @@ use cudarc::driver::{
 };
 
 use crate::error::CudaError;
-use crate::kernel::compile;
+use crate::kernel::{compile_tuned, KernelTuning};
 use crate::packing::{check_packing, residual_len, BLOCK, CHANNELS};
 
 mod sealed {
@@ -204,6 +204,12 @@ impl CudaComposite {
     /// tests test for to skip), [`CudaError::NoDevice`], [`CudaError::NoNvrtc`],
     /// [`CudaError::Compile`], [`CudaError::Driver`].
     pub fn new(ordinal: usize) -> Result<Self, CudaError> {
+        Self::with_tuning(ordinal, KernelTuning::default())
+    }
+
+    /// [`CudaComposite::new`] with the kernels compiled for another staging layout (the
+    /// results are the same; see [`KernelTuning`]); [`CudaError::Tuning`] for one not built.
+    pub fn with_tuning(ordinal: usize, tuning: KernelTuning) -> Result<Self, CudaError> {
         // cudarc's dynamic loading panics when a library is missing; ask first.
         // SAFETY: only tries to open the library by its usual names.
         if !unsafe { cudarc::driver::sys::is_culib_present() } {
@@ -225,7 +231,7 @@ impl CudaComposite {
         let ctx = CudaContext::new(ordinal)?;
         let capability = ctx.compute_capability()?;
         let name = ctx.name()?;
-        let ptx = compile(capability)?;
+        let ptx = compile_tuned(capability, tuning)?;
         let module = ctx.load_module(ptx)?;
         let stream = ctx.default_stream();
         Ok(CudaComposite {

@@ -4,6 +4,37 @@ use cudarc::nvrtc::{compile_ptx_with_opts, CompileOptions, Ptx};
 
 use crate::error::CudaError;
 
+/// How the composite kernels stage their memory traffic, fixed when they are compiled. The
+/// results do not depend on it (every layout computes the same sums in the same order); the
+/// speed does, differently on each device, so the benchmark compares layouts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct KernelTuning {
+    /// Bytes of densities in the span of a ray that a lane takes per step: 32 or 64 (whole
+    /// 8-sample residual chunks, so at least one chunk).
+    pub span_bytes: u32,
+    /// Loads a lane issues before it stores any of them to shared memory: 4, 8 or 16.
+    pub loads_in_flight: u32,
+}
+
+impl Default for KernelTuning {
+    /// The layout measured fastest on an H100 (the benchmark's comparison of layouts).
+    fn default() -> Self {
+        KernelTuning {
+            span_bytes: 64,
+            loads_in_flight: 8,
+        }
+    }
+}
+
+impl KernelTuning {
+    fn check(&self) -> Result<(), CudaError> {
+        if ![32, 64].contains(&self.span_bytes) || ![4, 8, 16].contains(&self.loads_in_flight) {
+            return Err(CudaError::Tuning(*self));
+        }
+        Ok(())
+    }
+}
+
 /// The CUDA C source of the composite's kernels (forward, backward and the background
 /// gradient's reduction, each for f32 and f64 data).
 pub const COMPOSITE_SOURCE: &str = include_str!("kernels/composite.cu");
@@ -13,6 +44,12 @@ pub const COMPOSITE_SOURCE: &str = include_str!("kernels/composite.cu");
 /// that Hopper gets Hopper code; NVRTC 13 knows capability 7.5 and newer). Needs NVRTC only, no device: the tests compile it on any
 /// machine where libnvrtc loads.
 pub fn compile(capability: (i32, i32)) -> Result<Ptx, CudaError> {
+    compile_tuned(capability, KernelTuning::default())
+}
+
+/// [`compile`] with another staging layout than the default.
+pub fn compile_tuned(capability: (i32, i32), tuning: KernelTuning) -> Result<Ptx, CudaError> {
+    tuning.check()?;
     // SAFETY: only tries to open the library by its usual names (cudarc's loader panics when
     // it is missing, so ask first).
     if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
@@ -29,6 +66,8 @@ pub fn compile(capability: (i32, i32)) -> Result<Ptx, CudaError> {
         options: vec![
             format!("--gpu-architecture=compute_{major}{minor}"),
             "--std=c++17".into(),
+            format!("-DSPAN_BYTES={}", tuning.span_bytes),
+            format!("-DLOADS={}", tuning.loads_in_flight),
         ],
         ..Default::default()
     };

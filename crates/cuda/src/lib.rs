@@ -68,7 +68,7 @@ pub use composite::{
 };
 pub use cudarc;
 pub use error::CudaError;
-pub use kernel::{compile, COMPOSITE_SOURCE};
+pub use kernel::{compile, compile_tuned, KernelTuning, COMPOSITE_SOURCE};
 pub use packing::{check_packing, CHANNELS};
 
 /// Opens device 0 for a test or a benchmark, or says why not and returns `None` when there is

@@ -12,6 +12,10 @@ pub(crate) const CHUNK: usize = 8;
 /// Threads per block of the forward and backward kernels (the kernel source's `BLOCK`).
 pub(crate) const BLOCK: usize = 128;
 
+/// The most samples the rays of one warp (32 consecutive rays) may hold: the kernels index a
+/// warp's colours (three values a sample) with 32-bit offsets from its first sample.
+pub(crate) const WARP_SAMPLES: usize = (u32::MAX / 3) as usize;
+
 /// The residual's length for `rays` rays over `samples` samples: ray `r` starting at sample
 /// `s` keeps its chunk depths from index `s / CHUNK + r`, and has at most `len / CHUNK + 1`
 /// chunks.
@@ -76,6 +80,16 @@ pub fn check_packing(
             "{rays} rays is more than one launch covers"
         )));
     }
+    // Every warp's samples must be reachable with the kernels' 32-bit offsets.
+    for w in (0..rays).step_by(32) {
+        let held = offsets[(w + 32).min(rays)] - offsets[w];
+        if held > WARP_SAMPLES {
+            return Err(CudaError::TooLarge(format!(
+                "rays {w}..{} hold {held} samples; 32 consecutive rays may hold at most {WARP_SAMPLES}",
+                (w + 32).min(rays)
+            )));
+        }
+    }
     Ok(rays)
 }
 
@@ -93,6 +107,22 @@ mod tests {
         assert!(matches!(check_packing(&[0, 4], 5, 15, 3), Err(CudaError::Shape { .. })));
         assert!(matches!(check_packing(&[0, 4], 4, 8, 3), Err(CudaError::Shape { .. })));
         assert!(matches!(check_packing(&[0, 4], 4, 12, 1), Err(CudaError::Shape { .. })));
+    }
+
+    #[test]
+    fn a_warp_may_hold_what_32_bit_offsets_reach() {
+        // Lengths only: nothing of this size is allocated.
+        let n = WARP_SAMPLES;
+        assert_eq!(check_packing(&[0, n], n, 3 * n, 3).unwrap(), 1);
+        assert!(matches!(
+            check_packing(&[0, n + 1], n + 1, 3 * (n + 1), 3),
+            Err(CudaError::TooLarge(_))
+        ));
+        // The same samples over rays in two warps fit: each warp holds half.
+        let mut offsets: Vec<usize> = (0..=32).map(|r| r * (n / 32)).collect();
+        offsets.push(offsets[32] + n / 2 + 1);
+        let total = offsets[33];
+        assert_eq!(check_packing(&offsets, total, 3 * total, 3).unwrap(), 33);
     }
 
     #[test]

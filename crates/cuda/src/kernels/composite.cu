@@ -56,63 +56,255 @@ __device__ __forceinline__ void add_sample(const T* __restrict__ color, u64 k, d
     c2 = fma(w, (double)r2, c2);
 }
 
+// Both kernels run one thread per ray, and stage their global loads and stores through shared
+// memory a warp at a time, so that they are coalesced: in step j every lane of a warp takes
+// one span of its ray (at most 64 bytes of densities, whole residual chunks; the j-th from the front in
+// the forward, from the back in the backward), the warp copies the 32 spans' densities,
+// lengths and colours into shared memory with consecutive lanes on consecutive elements of a
+// span, and each lane then runs its ray's sums or recurrence on its own span, chunk by chunk.
+// A span of 16 f32 values is 64 bytes, what a DRAM access fetches: with spans of one 8-sample
+// chunk the other half came back for the next step and was often gone from L2 by then. A
+// lane's span is padded to an odd stride (span + 1, 3 span + 1 elements) so that the lanes'
+// reads of their spans do not conflict on banks. A span's start is kept as a 32-bit offset
+// from the warp's first sample (the host refuses a batch whose 32 consecutive rays hold
+// 2^32 / 3 samples or more), which keeps the kernels' registers few enough for several blocks
+// per multiprocessor.
+#define WARPS (BLOCK / 32)
+// The staging layout (`KernelTuning` on the host): bytes of densities in a span, and loads in
+// flight per lane.
+#ifndef SPAN_BYTES
+#define SPAN_BYTES 64
+#endif
+#ifndef LOADS
+#define LOADS 8
+#endif
+
+// Chunks per span: SPAN_BYTES of densities, at least one chunk.
+template <typename T>
+struct Span {
+    static constexpr int bytes_chunks = SPAN_BYTES / (CHUNK * (int)sizeof(T));
+    static constexpr int chunks = bytes_chunks > 0 ? bytes_chunks : 1;
+    static constexpr int len = chunks * CHUNK;
+};
+
+template <typename T>
+struct Stage {
+    static constexpr int SPAN = Span<T>::len;
+    T sigma[32 * (SPAN + 1)];
+    T delta[32 * (SPAN + 1)];
+    T color[32 * (3 * SPAN + 1)];
+    unsigned start[32];  // the lane's span, from the warp's first sample
+    int len[32];         // its samples (0: this lane has no span in this step)
+};
+
+// Copies PER values per sample of the warp's 32 spans from `global` (offset to the warp's
+// first sample) into `staged` (lane l's span at l * (PER span + 1)). The loads go out in
+// batches of (up to) LOADS before any of them is stored, so that a warp has LOADS loads in flight
+// (a load in the branch of its store waits for the one before). An element past its span
+// loads the warp's first sample instead, which exists whenever the warp takes a step.
+__host__ __device__ constexpr int gcd(int a, int b) { return b == 0 ? a : gcd(b, a % b); }
+
+template <typename T, int PER>
+__device__ __forceinline__ void gather(const T* __restrict__ global, T* staged, const Stage<T>& st, unsigned lane) {
+    constexpr int W = PER * Span<T>::len;
+    // Whole batches: LOADS, or the largest of its divisors that divides the span.
+    constexpr int B = gcd(LOADS, W);
+#pragma unroll 1
+    for (int t0 = 0; t0 < W; t0 += B) {
+        T v[B];
+        unsigned to[B];
+        bool in[B];
+#pragma unroll
+        for (int u = 0; u < B; ++u) {
+            unsigned idx = (t0 + u) * 32 + lane, l = idx / W, i = idx % W;
+            in[u] = (int)i < PER * st.len[l];
+            to[u] = l * (W + 1) + i;
+            v[u] = global[in[u] ? PER * st.start[l] + i : 0u];
+        }
+#pragma unroll
+        for (int u = 0; u < B; ++u) {
+            if (in[u]) staged[to[u]] = v[u];
+        }
+    }
+}
+
+// The reverse of `gather`: the staged spans back out to `global`.
+template <typename T, int PER>
+__device__ __forceinline__ void scatter(T* __restrict__ global, const T* staged, const Stage<T>& st, unsigned lane) {
+    constexpr int W = PER * Span<T>::len;
+#pragma unroll 4
+    for (int t = 0; t < W; ++t) {
+        unsigned idx = t * 32 + lane, l = idx / W, i = idx % W;
+        if ((int)i < PER * st.len[l]) global[PER * st.start[l] + i] = staged[l * (W + 1) + i];
+    }
+}
+
+// Sets this lane's span for the step (`len` 0 for none) and stages the warp's spans.
+template <typename T>
+__device__ __forceinline__ void stage_in(const T* __restrict__ sigma, const T* __restrict__ delta,
+                                         const T* __restrict__ color, u64 warp_start, u64 s0, int len,
+                                         Stage<T>& st, unsigned lane) {
+    st.start[lane] = (unsigned)(s0 - warp_start);
+    st.len[lane] = len;
+    __syncwarp();
+    gather<T, 1>(sigma + warp_start, st.sigma, st, lane);
+    gather<T, 1>(delta + warp_start, st.delta, st, lane);
+    gather<T, 3>(color + 3 * warp_start, st.color, st, lane);
+    __syncwarp();
+}
+
+// The warp's step count: its longest ray's span count.
+__device__ __forceinline__ u64 warp_max(u64 v) {
+#pragma unroll
+    for (int o = 16; o > 0; o >>= 1) {
+        u64 other = __shfl_xor_sync(0xffffffffu, v, o);
+        v = other > v ? other : v;
+    }
+    return v;
+}
+
 // The running optical depth is summed as the CPU op sums it (attenuation.rs,
 // `exclusive_prefix_sums`): in groups of 4 from the ray's first sample, the depth before each
 // sample of a group being the group's start plus the partial sum of the group (one addition
 // per group on the running total, not one per sample: on a 1e5-sample ray this is what keeps
 // T within 1e-12 of the CPU op's), and the last len % 4 samples one at a time. Every depth
-// then has the CPU op's bits. CHUNK is a multiple of 4, so chunks start at group starts.
+// then has the CPU op's bits. SPAN and CHUNK are multiples of 4, so spans and chunks start
+// at group starts.
 template <typename T>
 __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 rays, const T* __restrict__ sigma,
                                         const T* __restrict__ delta, const T* __restrict__ color,
                                         const T* __restrict__ background, T* __restrict__ out_color,
                                         T* __restrict__ out_opacity, double* __restrict__ chunk_depth,
                                         unsigned* __restrict__ invalid) {
-    u64 r = (u64)blockIdx.x * blockDim.x + threadIdx.x;
-    if (r >= rays) return;
-    u64 start = offsets[r], end = offsets[r + 1];
+    constexpr int SPAN = Span<T>::len, SPANS = Span<T>::chunks;
+    __shared__ Stage<T> stage[WARPS];
+    unsigned lane = threadIdx.x & 31u, wid = threadIdx.x >> 5;
+    u64 first = (u64)blockIdx.x * BLOCK + wid * 32;
+    // No block-wide barrier below: a warp with no ray leaves.
+    if (first >= rays) return;
+    u64 r = first + lane;
+    bool active = r < rays;
+    u64 warp_start = offsets[first];
+    u64 start = 0, end = 0, spans = 0;
+    if (active) {
+        start = offsets[r];
+        end = offsets[r + 1];
+        spans = (end - start + SPAN - 1) / SPAN;
+    }
     u64 base = chunk_base(start, r);
+    u64 steps = warp_max(spans);
+    Stage<T>& st = stage[wid];
+    const T* my_sigma = &st.sigma[lane * (SPAN + 1)];
+    const T* my_delta = &st.delta[lane * (SPAN + 1)];
+    const T* my_color = &st.color[lane * (3 * SPAN + 1)];
     double running = 0.0, c0 = 0.0, c1 = 0.0, c2 = 0.0;
     bool ok = true;
-    u64 k = start;
-    for (; k + 4 <= end; k += 4) {
-        if ((k - start) % CHUNK == 0) chunk_depth[base + (k - start) / CHUNK] = running;
-        double t0 = tau_of(sigma, delta, k, ok), t1 = tau_of(sigma, delta, k + 1, ok);
-        double t2 = tau_of(sigma, delta, k + 2, ok), t3 = tau_of(sigma, delta, k + 3, ok);
-        double p1 = t0 + t1, p2 = p1 + t2, p3 = p2 + t3;
-        add_sample(color, k, running, t0, c0, c1, c2, ok);
-        add_sample(color, k + 1, running + t0, t1, c0, c1, c2, ok);
-        add_sample(color, k + 2, running + p1, t2, c0, c1, c2, ok);
-        add_sample(color, k + 3, running + p2, t3, c0, c1, c2, ok);
-        running += p3;
+    for (u64 j = 0; j < steps; ++j) {
+        bool has = j < spans;
+        u64 s0 = start + j * SPAN;
+        int m = has ? ((end - s0 < SPAN) ? (int)(end - s0) : SPAN) : 0;
+        stage_in(sigma, delta, color, warp_start, s0, m, st, lane);
+#pragma unroll
+        for (int g = 0; g < SPAN; g += 4) {
+            if (g < m && g % CHUNK == 0) chunk_depth[base + j * SPANS + g / CHUNK] = running;
+            if (g + 4 <= m) {
+                double t0 = tau_of(my_sigma, my_delta, g, ok), t1 = tau_of(my_sigma, my_delta, g + 1, ok);
+                double t2 = tau_of(my_sigma, my_delta, g + 2, ok), t3 = tau_of(my_sigma, my_delta, g + 3, ok);
+                double p1 = t0 + t1, p2 = p1 + t2, p3 = p2 + t3;
+                add_sample(my_color, g, running, t0, c0, c1, c2, ok);
+                add_sample(my_color, g + 1, running + t0, t1, c0, c1, c2, ok);
+                add_sample(my_color, g + 2, running + p1, t2, c0, c1, c2, ok);
+                add_sample(my_color, g + 3, running + p2, t3, c0, c1, c2, ok);
+                running += p3;
+            } else {
+                // The ray's last len % 4 samples, one at a time.
+#pragma unroll
+                for (int i = g; i < g + 4; ++i) {
+                    if (i < m) {
+                        double t = tau_of(my_sigma, my_delta, i, ok);
+                        add_sample(my_color, i, running, t, c0, c1, c2, ok);
+                        running += t;
+                    }
+                }
+            }
+        }
+        // Before the next step overwrites the spans and the lanes' bounds.
+        __syncwarp();
     }
-    for (; k < end; ++k) {
-        if ((k - start) % CHUNK == 0) chunk_depth[base + (k - start) / CHUNK] = running;
-        double t = tau_of(sigma, delta, k, ok);
-        add_sample(color, k, running, t, c0, c1, c2, ok);
-        running += t;
+    if (active) {
+        double t_end = exp(-running);
+        out_color[3 * r] = (T)fma(t_end, (double)background[0], c0);
+        out_color[3 * r + 1] = (T)fma(t_end, (double)background[1], c1);
+        out_color[3 * r + 2] = (T)fma(t_end, (double)background[2], c2);
+        // Not 1 - T_end, which is 0 for a faint ray.
+        out_opacity[r] = (T)(-expm1(-running));
     }
-    double t_end = exp(-running);
-    out_color[3 * r] = (T)fma(t_end, (double)background[0], c0);
-    out_color[3 * r + 1] = (T)fma(t_end, (double)background[1], c1);
-    out_color[3 * r + 2] = (T)fma(t_end, (double)background[2], c2);
-    // Not 1 - T_end, which is 0 for a faint ray.
-    out_opacity[r] = (T)(-expm1(-running));
     if (!ok) atomicOr(invalid, 1u);
 }
 
-// The backward's global loads and stores are staged through shared memory, a warp at a time,
-// so that they are coalesced: in step j every lane of a warp takes its ray's j-th chunk from
-// the back (each a contiguous span of at most CHUNK samples), the warp copies the 32 spans'
-// densities, lengths and colours into shared memory with consecutive lanes on consecutive
-// elements of a span, each lane then runs its ray's recurrence on its own span exactly as
-// before (same operations, same order, same bits), writing its gradients over the span in
-// shared memory, and the warp copies the 32 spans' gradients out the same way. A lane's span
-// is padded to an odd stride (CHUNK + 1, 3 CHUNK + 1 elements) so that the lanes' reads of
-// their spans do not conflict on banks.
-#define WARPS (BLOCK / 32)
-#define SPAN (CHUNK + 1)
-#define CSPAN (3 * CHUNK + 1)
+// The backward of one chunk of `m` samples (staged at `sigma`, `delta`, `color`), whose first
+// sample lies behind the optical depth `running` (the forward's residual): its gradients
+// replace the staged values. `behind` and `t_next` carry the recurrence from the chunk behind;
+// `last` says this is the ray's last chunk, whose depth sum gives T_end.
+template <typename T>
+__device__ __forceinline__ void backward_chunk(T* sigma, T* delta, T* color, int m, double running, bool last,
+                                               double g0, double g1, double g2, double go, double& behind,
+                                               double& t_next, double& t_end) {
+    // Depths before each sample of the chunk, front to back in registers (unrolled: constant
+    // indices), grouped as in the forward so that they have its bits.
+    double dep[CHUNK];
+    bool unused = true;
+#pragma unroll
+    for (int g = 0; g < CHUNK; g += 4) {
+        if (g + 4 <= m) {
+            double t0 = tau_of(sigma, delta, g, unused), t1 = tau_of(sigma, delta, g + 1, unused);
+            double t2 = tau_of(sigma, delta, g + 2, unused), t3 = tau_of(sigma, delta, g + 3, unused);
+            double p1 = t0 + t1, p2 = p1 + t2, p3 = p2 + t3;
+            dep[g] = running;
+            dep[g + 1] = running + t0;
+            dep[g + 2] = running + p1;
+            dep[g + 3] = running + p2;
+            running += p3;
+        } else {
+            // The ray's last len % 4 samples, one at a time.
+#pragma unroll
+            for (int i = g; i < g + 4; ++i) {
+                if (i < m) {
+                    dep[i] = running;
+                    running += tau_of(sigma, delta, i, unused);
+                }
+            }
+        }
+    }
+    if (last) {
+        // `running` is now the whole ray's optical depth.
+        t_end = exp(-running);
+        t_next = t_end;
+    }
+#pragma unroll
+    for (int i = CHUNK - 1; i >= 0; --i) {
+        if (i < m) {
+            T s = sigma[i], d = delta[i];
+            double tau = (double)s * (double)d;
+            double alpha = -expm1(-tau);
+            double t_k = exp(-dep[i]);
+            double c0 = (double)color[3 * i], c1 = (double)color[3 * i + 1], c2 = (double)color[3 * i + 2];
+            double v = g0 * c0 + g1 * c1 + g2 * c2 + go;
+            double diff = v - behind;
+            // What the sample adds minus what it hides.
+            double g_tau = t_next * diff;
+            // The gradients over the sample's inputs, which it no longer needs.
+            sigma[i] = (T)((double)d * g_tau);
+            delta[i] = (T)((double)s * g_tau);
+            double w = t_k * alpha;
+            color[3 * i] = (T)(w * g0);
+            color[3 * i + 1] = (T)(w * g1);
+            color[3 * i + 2] = (T)(w * g2);
+            behind = fma(alpha, diff, behind);
+            t_next = t_k;
+        }
+    }
+}
 
 template <typename T>
 __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 rays, const T* __restrict__ sigma,
@@ -122,139 +314,58 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
                                          const double* __restrict__ chunk_depth, T* __restrict__ g_sigma,
                                          T* __restrict__ g_delta, T* __restrict__ g_color,
                                          double* __restrict__ bg_partial) {
+    constexpr int SPAN = Span<T>::len, SPANS = Span<T>::chunks;
     __shared__ double red[3][BLOCK];
-    __shared__ T st_sigma[WARPS][32 * SPAN];
-    __shared__ T st_delta[WARPS][32 * SPAN];
-    __shared__ T st_color[WARPS][32 * CSPAN];
-    __shared__ u64 st_s0[WARPS][32];
-    __shared__ int st_m[WARPS][32];
+    __shared__ Stage<T> stage[WARPS];
     unsigned lane = threadIdx.x & 31u, wid = threadIdx.x >> 5;
-    u64 r = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    u64 first = (u64)blockIdx.x * BLOCK + wid * 32;
+    u64 r = first + lane;
     bool active = r < rays;
-    u64 start = 0, end = 0, base = 0, chunks = 0;
+    // A warp with no ray takes no step (and still joins the block's reduction).
+    u64 warp_start = first < rays ? offsets[first] : 0;
+    u64 start = 0, end = 0, spans = 0;
     double g0 = 0.0, g1 = 0.0, g2 = 0.0, go = 0.0, behind = 0.0;
     if (active) {
         start = offsets[r];
         end = offsets[r + 1];
-        base = chunk_base(start, r);
-        chunks = (end - start + CHUNK - 1) / CHUNK;
+        spans = (end - start + SPAN - 1) / SPAN;
         g0 = (double)d_color[3 * r];
         g1 = (double)d_color[3 * r + 1];
         g2 = (double)d_color[3 * r + 2];
         go = has_d_opacity ? (double)d_opacity[r] : 0.0;
         behind = g0 * (double)background[0] + g1 * (double)background[1] + g2 * (double)background[2];
     }
-    // The warp's steps: its longest ray's chunk count.
-    u64 steps = chunks;
-#pragma unroll
-    for (int o = 16; o > 0; o >>= 1) {
-        u64 other = __shfl_xor_sync(0xffffffffu, steps, o);
-        steps = other > steps ? other : steps;
-    }
-    T* my_sigma = &st_sigma[wid][lane * SPAN];
-    T* my_delta = &st_delta[wid][lane * SPAN];
-    T* my_color = &st_color[wid][lane * CSPAN];
+    u64 base = chunk_base(start, r);
+    u64 steps = warp_max(spans);
+    Stage<T>& st = stage[wid];
+    T* my_sigma = &st.sigma[lane * (SPAN + 1)];
+    T* my_delta = &st.delta[lane * (SPAN + 1)];
+    T* my_color = &st.color[lane * (3 * SPAN + 1)];
     double t_end = 1.0, t_next = 1.0;
     for (u64 j = 0; j < steps; ++j) {
-        // This lane's chunk: the j-th from the back, or none (m = 0).
-        bool has = j < chunks;
-        u64 c = has ? chunks - 1 - j : 0;
-        u64 s0 = start + c * CHUNK;
-        int m = has ? ((end - s0 < CHUNK) ? (int)(end - s0) : CHUNK) : 0;
-        st_s0[wid][lane] = s0;
-        st_m[wid][lane] = m;
-        __syncwarp();
-        // Coalesced loads of the warp's spans.
+        // This lane's span: the j-th from the back, or none (m = 0).
+        bool has = j < spans;
+        u64 c = has ? spans - 1 - j : 0;
+        u64 s0 = start + c * SPAN;
+        int m = has ? ((end - s0 < SPAN) ? (int)(end - s0) : SPAN) : 0;
+        stage_in(sigma, delta, color, warp_start, s0, m, st, lane);
+        // The span's chunks, back to front.
 #pragma unroll
-        for (int t = 0; t < CHUNK; ++t) {
-            unsigned idx = t * 32 + lane, src = idx / CHUNK, i = idx % CHUNK;
-            if ((int)i < st_m[wid][src]) {
-                u64 k = st_s0[wid][src] + i;
-                st_sigma[wid][src * SPAN + i] = sigma[k];
-                st_delta[wid][src * SPAN + i] = delta[k];
-            }
-        }
-#pragma unroll
-        for (int t = 0; t < 3 * CHUNK; ++t) {
-            unsigned idx = t * 32 + lane, src = idx / (3 * CHUNK), i = idx % (3 * CHUNK);
-            if ((int)i < 3 * st_m[wid][src]) st_color[wid][src * CSPAN + i] = color[3 * st_s0[wid][src] + i];
-        }
-        __syncwarp();
-        if (has) {
-            // Depths before each sample of the chunk, front to back in registers (unrolled:
-            // constant indices), grouped as in the forward so that they have its bits.
-            double dep[CHUNK];
-            double running = chunk_depth[base + c];
-            bool unused = true;
-#pragma unroll
-            for (int g = 0; g < CHUNK; g += 4) {
-                if (g + 4 <= m) {
-                    double t0 = tau_of(my_sigma, my_delta, g, unused), t1 = tau_of(my_sigma, my_delta, g + 1, unused);
-                    double t2 = tau_of(my_sigma, my_delta, g + 2, unused), t3 = tau_of(my_sigma, my_delta, g + 3, unused);
-                    double p1 = t0 + t1, p2 = p1 + t2, p3 = p2 + t3;
-                    dep[g] = running;
-                    dep[g + 1] = running + t0;
-                    dep[g + 2] = running + p1;
-                    dep[g + 3] = running + p2;
-                    running += p3;
-                } else {
-                    // The ray's last len % 4 samples, one at a time.
-#pragma unroll
-                    for (int i = g; i < g + 4; ++i) {
-                        if (i < m) {
-                            dep[i] = running;
-                            running += tau_of(my_sigma, my_delta, i, unused);
-                        }
-                    }
-                }
-            }
-            if (j == 0) {
-                // `running` is now the whole ray's optical depth.
-                t_end = exp(-running);
-                t_next = t_end;
-            }
-#pragma unroll
-            for (int i = CHUNK - 1; i >= 0; --i) {
-                if (i < m) {
-                    T s = my_sigma[i], d = my_delta[i];
-                    double tau = (double)s * (double)d;
-                    double alpha = -expm1(-tau);
-                    double t_k = exp(-dep[i]);
-                    double c0 = (double)my_color[3 * i], c1 = (double)my_color[3 * i + 1];
-                    double c2 = (double)my_color[3 * i + 2];
-                    double v = g0 * c0 + g1 * c1 + g2 * c2 + go;
-                    double diff = v - behind;
-                    // What the sample adds minus what it hides.
-                    double g_tau = t_next * diff;
-                    // The gradients over the sample's inputs, which it no longer needs.
-                    my_sigma[i] = (T)((double)d * g_tau);
-                    my_delta[i] = (T)((double)s * g_tau);
-                    double w = t_k * alpha;
-                    my_color[3 * i] = (T)(w * g0);
-                    my_color[3 * i + 1] = (T)(w * g1);
-                    my_color[3 * i + 2] = (T)(w * g2);
-                    behind = fma(alpha, diff, behind);
-                    t_next = t_k;
-                }
+        for (int h = SPANS - 1; h >= 0; --h) {
+            int mh = m - h * CHUNK;
+            if (mh > 0) {
+                bool last = j == 0 && (h + 1) * CHUNK >= m;
+                backward_chunk(my_sigma + h * CHUNK, my_delta + h * CHUNK, my_color + 3 * h * CHUNK,
+                               mh < CHUNK ? mh : CHUNK, chunk_depth[base + c * SPANS + h], last, g0, g1, g2, go,
+                               behind, t_next, t_end);
             }
         }
         __syncwarp();
         // Coalesced stores of the warp's gradients.
-#pragma unroll
-        for (int t = 0; t < CHUNK; ++t) {
-            unsigned idx = t * 32 + lane, src = idx / CHUNK, i = idx % CHUNK;
-            if ((int)i < st_m[wid][src]) {
-                u64 k = st_s0[wid][src] + i;
-                g_sigma[k] = st_sigma[wid][src * SPAN + i];
-                g_delta[k] = st_delta[wid][src * SPAN + i];
-            }
-        }
-#pragma unroll
-        for (int t = 0; t < 3 * CHUNK; ++t) {
-            unsigned idx = t * 32 + lane, src = idx / (3 * CHUNK), i = idx % (3 * CHUNK);
-            if ((int)i < 3 * st_m[wid][src]) g_color[3 * st_s0[wid][src] + i] = st_color[wid][src * CSPAN + i];
-        }
-        // Before the next step overwrites the spans and the lanes' chunk bounds.
+        scatter<T, 1>(g_sigma + warp_start, st.sigma, st, lane);
+        scatter<T, 1>(g_delta + warp_start, st.delta, st, lane);
+        scatter<T, 3>(g_color + 3 * warp_start, st.color, st, lane);
+        // Before the next step overwrites the spans and the lanes' bounds.
         __syncwarp();
     }
     double gb0 = 0.0, gb1 = 0.0, gb2 = 0.0;

@@ -4,7 +4,7 @@
 //! or device (`FOGRAY_CUDA_REQUIRED=1` makes that a failure).
 
 use crate::common::{compare, random_case, rng, Case, Typed};
-use fogray_cuda::{device_for_tests, CudaComposite, CudaError, HostRays};
+use fogray_cuda::{device_for_tests, CudaComposite, CudaError, DeviceFloat, HostRays, KernelTuning};
 
 /// Scaled-error bounds, and the scale below which a value is judged absolutely (an f32 output
 /// below 1e-30 is near its subnormals, where relative precision ends).
@@ -209,4 +209,71 @@ fn the_scales_bound_the_cpu_values() {
             }
         }
     }
+}
+
+/// Every staging layout the kernels are built for sums in the same order: the same bits as
+/// the default layout, in f32 and f64, on random rays (lengths across the span sizes) and a
+/// ray longer than any span.
+#[test]
+fn every_staging_layout_gives_the_same_bits() {
+    let Some(default) = gpu() else { return };
+    let mut r = rng(31);
+    let mut cases = vec![random_case(&mut r, 500, 70)];
+    let long = rays_of(&[1, 3001, 17], |_, k| {
+        (0.05 + (k % 13) as f64 * 0.4, 0.01 + (k % 5) as f64 * 0.002)
+    });
+    cases.push(Case::new("a long ray between short ones", &long, &mut r));
+    let layouts: Vec<KernelTuning> = [32, 64]
+        .into_iter()
+        .flat_map(|span_bytes| {
+            [4, 8, 16].map(|loads_in_flight| KernelTuning {
+                span_bytes,
+                loads_in_flight,
+            })
+        })
+        .collect();
+    let others: Vec<CudaComposite> = layouts
+        .iter()
+        .map(|&t| CudaComposite::with_tuning(0, t).unwrap_or_else(|e| panic!("{t:?}: {e}")))
+        .collect();
+    for c in &cases {
+        same_bits::<f32>(&default, &others, &layouts, c);
+        same_bits::<f64>(&default, &others, &layouts, c);
+    }
+}
+
+fn same_bits<F: fogray_tape::Float + DeviceFloat>(
+    default: &CudaComposite,
+    others: &[CudaComposite],
+    layouts: &[KernelTuning],
+    c: &Case,
+) {
+    let t = Typed::<F>::of(c);
+    let run = |g: &CudaComposite| {
+        let (o, d) = g
+            .evaluate_vjp(&t.host(c), &t.d_color, t.d_opacity.as_deref())
+            .unwrap_or_else(|e| panic!("{}: {e}", c.name));
+        [o.color, o.opacity, d.sigma, d.delta, d.color, d.background]
+    };
+    let want = run(default);
+    for (g, layout) in others.iter().zip(layouts) {
+        let got = run(g);
+        for (k, (a, b)) in got.iter().zip(&want).enumerate() {
+            let first = a
+                .iter()
+                .zip(b)
+                .position(|(x, y)| DeviceFloat::to_f64(*x).to_bits() != DeviceFloat::to_f64(*y).to_bits());
+            assert!(
+                first.is_none(),
+                "{} {layout:?}: output {k} differs at {first:?}",
+                c.name
+            );
+        }
+    }
+    println!(
+        "{} {}: {} layouts, the same bits",
+        std::any::type_name::<F>(),
+        c.name,
+        layouts.len()
+    );
 }

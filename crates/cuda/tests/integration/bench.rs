@@ -7,13 +7,16 @@
 //! ```
 //!
 //! `FOGRAY_BENCH_CPU=0` leaves out the CPU op (its time, and the check of the GPU's results
-//! against it on the same batch).
+//! against it on the same batch). `FOGRAY_BENCH_TUNINGS=1` also times every staging layout
+//! the kernels are built for ([`KernelTuning`]), each checked to give the default's bits.
 
 use std::time::Instant;
 
 use crate::common::{scales, worst, Case, Typed};
 use fogray_cuda::cudarc::driver::sys::CUevent_flags;
-use fogray_cuda::{device_for_tests, CudaComposite, CudaError, HostGradients, HostOutputs};
+use fogray_cuda::{
+    device_for_tests, CudaComposite, CudaError, DeviceRays, DeviceUpstream, HostGradients, HostOutputs, KernelTuning,
+};
 use rand::Rng;
 
 const RAYS: usize = 1 << 20;
@@ -145,6 +148,86 @@ fn throughput_of_a_million_rays_of_64_samples() -> Result<(), CudaError> {
         assert!(e <= 1e-6, "{what}: {e}");
     }
     let _: &HostOutputs<f32> = &g_out;
+    Ok(())
+}
+
+/// Forward, backward and both, in milliseconds, on `gpu`'s kernels; and the results' bits.
+fn time_layout(
+    gpu: &CudaComposite,
+    x: &DeviceRays<f32>,
+    up: &DeviceUpstream<f32>,
+) -> Result<([f64; 3], Vec<Vec<f32>>), CudaError> {
+    let mut fwd = gpu.forward_buffers(x)?;
+    let mut grads = gpu.gradient_buffers(x)?;
+    let t_fwd = time_ms(gpu, || gpu.launch_forward(x, &mut fwd))?;
+    let t_bwd = time_ms(gpu, || gpu.launch_backward(x, &fwd, up, &mut grads))?;
+    let t_both = time_ms(gpu, || {
+        gpu.launch_forward(x, &mut fwd)?;
+        gpu.launch_backward(x, &fwd, up, &mut grads)
+    })?;
+    let s = gpu.stream();
+    let bits = vec![
+        s.clone_dtoh(&fwd.color)?,
+        s.clone_dtoh(&fwd.opacity)?,
+        s.clone_dtoh(&grads.sigma)?,
+        s.clone_dtoh(&grads.delta)?,
+        s.clone_dtoh(&grads.color)?,
+        s.clone_dtoh(&grads.background)?,
+    ];
+    Ok(([t_fwd, t_bwd, t_both], bits))
+}
+
+#[test]
+#[ignore = "needs a GPU; prints throughput"]
+fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
+    if !std::env::var("FOGRAY_BENCH_TUNINGS").is_ok_and(|v| v == "1") {
+        return Ok(());
+    }
+    let Some(gpu) = device_for_tests()? else { return Ok(()) };
+    println!("staging layouts on {}", gpu.device_name());
+    drop(gpu);
+    let n = RAYS * LEN;
+    let mut rng = crate::common::rng(7);
+    let offsets: Vec<usize> = (0..=RAYS).map(|r| r * LEN).collect();
+    let sigma: Vec<f32> = (0..n).map(|_| rng.gen_range(0.0..5.0)).collect();
+    let delta: Vec<f32> = (0..n).map(|_| rng.gen_range(0.005..0.03)).collect();
+    let color: Vec<f32> = (0..3 * n).map(|_| rng.gen_range(0.0..1.0)).collect();
+    let d_color: Vec<f32> = (0..3 * RAYS).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let host = fogray_cuda::HostRays {
+        offsets: &offsets,
+        sigma: &sigma,
+        delta: &delta,
+        color: &color,
+        background: &[1.0, 1.0, 1.0],
+    };
+    let mut reference: Option<Vec<Vec<f32>>> = None;
+    for span_bytes in [32, 64] {
+        for loads_in_flight in [4, 8, 16] {
+            let tuning = KernelTuning {
+                span_bytes,
+                loads_in_flight,
+            };
+            let g = CudaComposite::with_tuning(0, tuning)?;
+            let x = g.upload(&host)?;
+            let up = g.upload_upstream(&x, &d_color, None)?;
+            let ([f, b, both], bits) = time_layout(&g, &x, &up)?;
+            let regs: Vec<String> = g
+                .kernel_info()?
+                .into_iter()
+                .filter(|(name, _, _)| name.ends_with("f32") && !name.starts_with("reduce"))
+                .map(|(name, r, l)| format!("{name} {r} regs {l} B local"))
+                .collect();
+            println!(
+                "layout span {span_bytes} B, {loads_in_flight} loads: forward {f:.3} ms, backward {b:.3} ms, both {both:.3} ms ({:.0} M samples/s); {}",
+                n as f64 / both / 1e3,
+                regs.join(", ")
+            );
+            match &reference {
+                None => reference = Some(bits),
+                Some(want) => assert!(bits == *want, "layout {tuning:?} gives other bits"),
+            }
+        }
+    }
     Ok(())
 }
 
