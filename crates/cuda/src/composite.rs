@@ -10,7 +10,7 @@ use cudarc::driver::{
 
 use crate::error::CudaError;
 use crate::kernel::{compile_tuned, KernelTuning};
-use crate::packing::{check_packing, residual_len, BLOCK, CHANNELS};
+use crate::packing::{check_packing, residual_len, CHANNELS, WARP};
 
 mod sealed {
     pub trait Sealed {}
@@ -66,6 +66,7 @@ pub struct CudaComposite {
     f64: Kernels,
     name: String,
     capability: (i32, i32),
+    block: usize,
 }
 
 impl std::fmt::Debug for CudaComposite {
@@ -133,7 +134,7 @@ pub struct DeviceGradients<F> {
     pub color: CudaSlice<F>,
     /// `[3]`.
     pub background: CudaSlice<F>,
-    /// Per-block sums of the background gradient, `[blocks, 3]`.
+    /// Per-warp sums of the background gradient, `[warps, 3]`.
     partial: CudaSlice<f64>,
 }
 
@@ -175,16 +176,19 @@ pub struct HostRays<'a, F> {
     pub background: &'a [F],
 }
 
-fn blocks(rays: usize, block: usize) -> u32 {
-    // `check_packing` bounds the block count by i32::MAX; at least one block so that the
-    // background reduction always has its (zero) partial sums.
-    u32::try_from(rays.div_ceil(block).max(1)).unwrap_or(u32::MAX)
+/// The background gradient's partial sums: one per warp of 32 rays, at least one (zeros) so
+/// that the reduction always has something to add.
+fn partials(rays: usize) -> usize {
+    rays.div_ceil(WARP).max(1)
 }
 
-fn config(rays: usize) -> LaunchConfig {
+fn config(rays: usize, block: usize) -> LaunchConfig {
+    // `check_packing` bounds the warp count, hence the block count, by i32::MAX; at least one
+    // block, which writes the (zero) partial sum when there is no ray.
+    let blocks = u32::try_from(rays.div_ceil(block).max(1)).unwrap_or(u32::MAX);
     LaunchConfig {
-        grid_dim: (blocks(rays, BLOCK), 1, 1),
-        block_dim: (BLOCK as u32, 1, 1),
+        grid_dim: (blocks, 1, 1),
+        block_dim: (block as u32, 1, 1),
         shared_mem_bytes: 0,
     }
 }
@@ -241,6 +245,7 @@ impl CudaComposite {
             stream,
             name,
             capability,
+            block: tuning.threads_per_block as usize,
         })
     }
 
@@ -340,7 +345,7 @@ impl CudaComposite {
             delta: s.alloc_zeros(x.samples.max(1))?,
             color: s.alloc_zeros((x.samples * CHANNELS).max(1))?,
             background: s.alloc_zeros(CHANNELS)?,
-            partial: s.alloc_zeros(blocks(x.rays, BLOCK) as usize * CHANNELS)?,
+            partial: s.alloc_zeros(partials(x.rays) * CHANNELS)?,
         })
     }
 
@@ -395,7 +400,7 @@ impl CudaComposite {
         // SAFETY: the arguments are the kernel's, in its order and of its types; every buffer
         // has the length the kernel indexes (checked above and when the buffers were made);
         // `rays` threads do the work, the rest of the last block returns at once.
-        unsafe { launch.launch(config(x.rays)) }?;
+        unsafe { launch.launch(config(x.rays, self.block)) }?;
         Ok(())
     }
 
@@ -427,12 +432,13 @@ impl CudaComposite {
         check_len("colour gradient", (x.samples * CHANNELS).max(1), grads.color.len())?;
         check_len(
             "background partial sums",
-            blocks(x.rays, BLOCK) as usize * CHANNELS,
+            partials(x.rays) * CHANNELS,
             grads.partial.len(),
         )?;
         check_len("dL/dcolor ([R, 3])", (x.rays * CHANNELS).max(1), up.color.len())?;
         let k = self.kernels::<F>();
         let rays = x.rays as u64;
+        let partials = partials(x.rays) as u64;
         let has_opacity = i32::from(up.opacity.is_some());
         // The kernel reads dL/dopacity only when told it is there; any buffer stands in.
         let d_opacity = up.opacity.as_ref().unwrap_or(&up.color);
@@ -451,15 +457,15 @@ impl CudaComposite {
             .arg(&mut grads.sigma)
             .arg(&mut grads.delta)
             .arg(&mut grads.color)
-            .arg(&mut grads.partial);
+            .arg(&mut grads.partial)
+            .arg(&partials);
         // SAFETY: as in `launch_forward`: the kernel's arguments and types, every buffer
-        // checked against the lengths it indexes; the block's threads past `rays` still take
-        // part in the block's reduction (with zeros), then write nothing else.
-        unsafe { launch.launch(config(x.rays)) }?;
-        let blocks = u64::from(blocks(x.rays, BLOCK));
+        // checked against the lengths it indexes; a warp past `partials` writes nothing, one
+        // past `rays` (only when there is no ray) writes its zero partial sum.
+        unsafe { launch.launch(config(x.rays, self.block)) }?;
         let mut reduce = self.stream.launch_builder(&k.reduce);
-        reduce.arg(&grads.partial).arg(&blocks).arg(&mut grads.background);
-        // SAFETY: one block of the kernel's 256 threads reads `blocks * 3` partial sums (the
+        reduce.arg(&grads.partial).arg(&partials).arg(&mut grads.background);
+        // SAFETY: one block of the kernel's 256 threads reads `partials * 3` partial sums (the
         // buffer's length, checked above) and writes 3 values.
         unsafe {
             reduce.launch(LaunchConfig {

@@ -55,7 +55,9 @@ pub enum CudaError {
     #[error("a sample value is outside its domain (sigma and delta finite and >= 0, colour finite)")]
     InvalidSample,
     /// A staging layout the kernels are not built for.
-    #[error("kernel tuning {0:?}: span_bytes must be 32 or 64, loads_in_flight 4, 8 or 16")]
+    #[error(
+        "kernel tuning {0:?}: span_bytes must be 32 or 64, loads_in_flight 4, 8 or 16, threads_per_block 32, 64 or 128"
+    )]
     Tuning(crate::kernel::KernelTuning),
     /// The batch is larger than one launch can cover.
     #[error("{0}")]

@@ -14,6 +14,8 @@ pub struct KernelTuning {
     pub span_bytes: u32,
     /// Loads a lane issues before it stores any of them to shared memory: 4, 8 or 16.
     pub loads_in_flight: u32,
+    /// Threads (rays) per block: 32, 64 or 128.
+    pub threads_per_block: u32,
 }
 
 impl Default for KernelTuning {
@@ -22,13 +24,34 @@ impl Default for KernelTuning {
         KernelTuning {
             span_bytes: 64,
             loads_in_flight: 8,
+            threads_per_block: 128,
         }
     }
 }
 
 impl KernelTuning {
+    /// Every layout the kernels are built for.
+    pub fn every() -> Vec<KernelTuning> {
+        let mut all = Vec::new();
+        for span_bytes in [32, 64] {
+            for loads_in_flight in [4, 8, 16] {
+                for threads_per_block in [32, 64, 128] {
+                    all.push(KernelTuning {
+                        span_bytes,
+                        loads_in_flight,
+                        threads_per_block,
+                    });
+                }
+            }
+        }
+        all
+    }
+
     fn check(&self) -> Result<(), CudaError> {
-        if ![32, 64].contains(&self.span_bytes) || ![4, 8, 16].contains(&self.loads_in_flight) {
+        if ![32, 64].contains(&self.span_bytes)
+            || ![4, 8, 16].contains(&self.loads_in_flight)
+            || ![32, 64, 128].contains(&self.threads_per_block)
+        {
             return Err(CudaError::Tuning(*self));
         }
         Ok(())
@@ -68,6 +91,7 @@ pub fn compile_tuned(capability: (i32, i32), tuning: KernelTuning) -> Result<Ptx
             "--std=c++17".into(),
             format!("-DSPAN_BYTES={}", tuning.span_bytes),
             format!("-DLOADS={}", tuning.loads_in_flight),
+            format!("-DBLOCK={}", tuning.threads_per_block),
         ],
         ..Default::default()
     };

@@ -9,8 +9,9 @@ pub const CHANNELS: usize = 3;
 /// `CHUNK`-th sample of a ray (the kernel source's `CHUNK`; see `kernels/composite.cu`).
 pub(crate) const CHUNK: usize = 8;
 
-/// Threads per block of the forward and backward kernels (the kernel source's `BLOCK`).
-pub(crate) const BLOCK: usize = 128;
+/// Rays per warp: the kernels' smallest block, and the rays of one partial sum of the
+/// background gradient.
+pub(crate) const WARP: usize = 32;
 
 /// The most samples the rays of one warp (32 consecutive rays) may hold: the kernels index a
 /// warp's colours (three values a sample) with 32-bit offsets from its first sample.
@@ -74,19 +75,19 @@ pub fn check_packing(
             got: background,
         });
     }
-    // Every block index of a launch must fit the grid's 2^31 - 1 blocks.
-    if rays.div_ceil(BLOCK) > i32::MAX as usize {
+    // Every block index of a launch must fit the grid's 2^31 - 1 blocks, at the smallest block.
+    if rays.div_ceil(WARP) > i32::MAX as usize {
         return Err(CudaError::TooLarge(format!(
             "{rays} rays is more than one launch covers"
         )));
     }
     // Every warp's samples must be reachable with the kernels' 32-bit offsets.
-    for w in (0..rays).step_by(32) {
-        let held = offsets[(w + 32).min(rays)] - offsets[w];
+    for w in (0..rays).step_by(WARP) {
+        let held = offsets[(w + WARP).min(rays)] - offsets[w];
         if held > WARP_SAMPLES {
             return Err(CudaError::TooLarge(format!(
                 "rays {w}..{} hold {held} samples; 32 consecutive rays may hold at most {WARP_SAMPLES}",
-                (w + 32).min(rays)
+                (w + WARP).min(rays)
             )));
         }
     }

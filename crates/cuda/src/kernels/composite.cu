@@ -21,7 +21,10 @@
 typedef unsigned long long u64;
 
 #define CHUNK 8
+// Threads per block (`KernelTuning` on the host): 32, 64 or 128.
+#ifndef BLOCK
 #define BLOCK 128
+#endif
 #define F32_MAX 3.402823466e38f
 #define F64_MAX 1.7976931348623157e308
 
@@ -313,15 +316,16 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
                                          const T* __restrict__ d_opacity, int has_d_opacity,
                                          const double* __restrict__ chunk_depth, T* __restrict__ g_sigma,
                                          T* __restrict__ g_delta, T* __restrict__ g_color,
-                                         double* __restrict__ bg_partial) {
+                                         double* __restrict__ bg_partial, u64 partials) {
     constexpr int SPAN = Span<T>::len, SPANS = Span<T>::chunks;
-    __shared__ double red[3][BLOCK];
     __shared__ Stage<T> stage[WARPS];
     unsigned lane = threadIdx.x & 31u, wid = threadIdx.x >> 5;
     u64 first = (u64)blockIdx.x * BLOCK + wid * 32;
+    // No block-wide barrier: a warp past the partial sums leaves; one past the rays but not
+    // the partial sums (no ray at all) takes no step and writes zeros.
+    if (first / 32 >= partials) return;
     u64 r = first + lane;
     bool active = r < rays;
-    // A warp with no ray takes no step (and still joins the block's reduction).
     u64 warp_start = first < rays ? offsets[first] : 0;
     u64 start = 0, end = 0, spans = 0;
     double g0 = 0.0, g1 = 0.0, g2 = 0.0, go = 0.0, behind = 0.0;
@@ -374,37 +378,30 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
         gb1 = t_end * g1;
         gb2 = t_end * g2;
     }
-    // The shared background's gradient: a fixed-order tree sum per block (deterministic), the
-    // blocks' sums added by `reduce_background`.
-    unsigned tid = threadIdx.x;
-    red[0][tid] = gb0;
-    red[1][tid] = gb1;
-    red[2][tid] = gb2;
-    __syncthreads();
-    for (unsigned half = BLOCK / 2; half > 0; half >>= 1) {
-        if (tid < half) {
-            red[0][tid] += red[0][tid + half];
-            red[1][tid] += red[1][tid + half];
-            red[2][tid] += red[2][tid + half];
-        }
-        __syncthreads();
+    // The shared background's gradient: a fixed-order tree sum over the warp's 32 rays (the
+    // same bits at any block size), the warps' sums added by `reduce_background`.
+#pragma unroll
+    for (int o = 16; o > 0; o >>= 1) {
+        gb0 += __shfl_down_sync(0xffffffffu, gb0, o);
+        gb1 += __shfl_down_sync(0xffffffffu, gb1, o);
+        gb2 += __shfl_down_sync(0xffffffffu, gb2, o);
     }
-    if (tid == 0) {
-        bg_partial[3 * (u64)blockIdx.x] = red[0][0];
-        bg_partial[3 * (u64)blockIdx.x + 1] = red[1][0];
-        bg_partial[3 * (u64)blockIdx.x + 2] = red[2][0];
+    if (lane == 0) {
+        bg_partial[3 * (first / 32)] = gb0;
+        bg_partial[3 * (first / 32) + 1] = gb1;
+        bg_partial[3 * (first / 32) + 2] = gb2;
     }
 }
 
 #define REDUCE 256
 
 template <typename T>
-__device__ __forceinline__ void reduce_background(const double* __restrict__ bg_partial, u64 blocks,
+__device__ __forceinline__ void reduce_background(const double* __restrict__ bg_partial, u64 partials,
                                                   T* __restrict__ g_background) {
     __shared__ double red[3][REDUCE];
     unsigned tid = threadIdx.x;
     double a0 = 0.0, a1 = 0.0, a2 = 0.0;
-    for (u64 b = tid; b < blocks; b += REDUCE) {
+    for (u64 b = tid; b < partials; b += REDUCE) {
         a0 += bg_partial[3 * b];
         a1 += bg_partial[3 * b + 1];
         a2 += bg_partial[3 * b + 2];
@@ -437,13 +434,13 @@ __device__ __forceinline__ void reduce_background(const double* __restrict__ bg_
     extern "C" __global__ void __launch_bounds__(BLOCK) composite_backward_##SUFFIX(                                 \
         const u64* offsets, u64 rays, const T* sigma, const T* delta, const T* color, const T* background,          \
         const T* d_color, const T* d_opacity, int has_d_opacity, const double* chunk_depth, T* g_sigma,             \
-        T* g_delta, T* g_color, double* bg_partial) {                                                               \
+        T* g_delta, T* g_color, double* bg_partial, u64 partials) {                                                 \
         backward<T>(offsets, rays, sigma, delta, color, background, d_color, d_opacity, has_d_opacity, chunk_depth, \
-                    g_sigma, g_delta, g_color, bg_partial);                                                         \
+                    g_sigma, g_delta, g_color, bg_partial, partials);                                               \
     }                                                                                                               \
     extern "C" __global__ void __launch_bounds__(REDUCE)                                                            \
-        composite_reduce_background_##SUFFIX(const double* bg_partial, u64 blocks, T* g_background) {               \
-        reduce_background<T>(bg_partial, blocks, g_background);                                                     \
+        composite_reduce_background_##SUFFIX(const double* bg_partial, u64 partials, T* g_background) {             \
+        reduce_background<T>(bg_partial, partials, g_background);                                                   \
     }
 
 INSTANTIATE(float, f32)

@@ -223,15 +223,7 @@ fn every_staging_layout_gives_the_same_bits() {
         (0.05 + (k % 13) as f64 * 0.4, 0.01 + (k % 5) as f64 * 0.002)
     });
     cases.push(Case::new("a long ray between short ones", &long, &mut r));
-    let layouts: Vec<KernelTuning> = [32, 64]
-        .into_iter()
-        .flat_map(|span_bytes| {
-            [4, 8, 16].map(|loads_in_flight| KernelTuning {
-                span_bytes,
-                loads_in_flight,
-            })
-        })
-        .collect();
+    let layouts = KernelTuning::every();
     let others: Vec<CudaComposite> = layouts
         .iter()
         .map(|&t| CudaComposite::with_tuning(0, t).unwrap_or_else(|e| panic!("{t:?}: {e}")))

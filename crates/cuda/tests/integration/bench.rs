@@ -201,31 +201,28 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
         background: &[1.0, 1.0, 1.0],
     };
     let mut reference: Option<Vec<Vec<f32>>> = None;
-    for span_bytes in [32, 64] {
-        for loads_in_flight in [4, 8, 16] {
-            let tuning = KernelTuning {
-                span_bytes,
-                loads_in_flight,
-            };
-            let g = CudaComposite::with_tuning(0, tuning)?;
-            let x = g.upload(&host)?;
-            let up = g.upload_upstream(&x, &d_color, None)?;
-            let ([f, b, both], bits) = time_layout(&g, &x, &up)?;
-            let regs: Vec<String> = g
-                .kernel_info()?
-                .into_iter()
-                .filter(|(name, _, _)| name.ends_with("f32") && !name.starts_with("reduce"))
-                .map(|(name, r, l)| format!("{name} {r} regs {l} B local"))
-                .collect();
-            println!(
-                "layout span {span_bytes} B, {loads_in_flight} loads: forward {f:.3} ms, backward {b:.3} ms, both {both:.3} ms ({:.0} M samples/s); {}",
+    for tuning in KernelTuning::every() {
+        let g = CudaComposite::with_tuning(0, tuning)?;
+        let x = g.upload(&host)?;
+        let up = g.upload_upstream(&x, &d_color, None)?;
+        let ([f, b, both], bits) = time_layout(&g, &x, &up)?;
+        let regs: Vec<String> = g
+            .kernel_info()?
+            .into_iter()
+            .filter(|(name, _, _)| name.ends_with("f32") && !name.starts_with("reduce"))
+            .map(|(name, r, l)| format!("{name} {r} regs {l} B local"))
+            .collect();
+        println!(
+                "layout span {} B, {} loads, {} threads: forward {f:.3} ms, backward {b:.3} ms, both {both:.3} ms ({:.0} M samples/s); {}",
+                tuning.span_bytes,
+                tuning.loads_in_flight,
+                tuning.threads_per_block,
                 n as f64 / both / 1e3,
                 regs.join(", ")
             );
-            match &reference {
-                None => reference = Some(bits),
-                Some(want) => assert!(bits == *want, "layout {tuning:?} gives other bits"),
-            }
+        match &reference {
+            None => reference = Some(bits),
+            Some(want) => assert!(bits == *want, "layout {tuning:?} gives other bits"),
         }
     }
     Ok(())
