@@ -50,10 +50,17 @@ pub enum CudaError {
         value: f64,
     },
     /// Some sample value is outside its domain: a density or length negative, NaN or infinite,
-    /// or a colour NaN or infinite (found on the device, which does not say where: the CPU
-    /// op's `evaluate` names the ray and the sample).
+    /// or a colour NaN or infinite (the composite); a NaN coordinate (the grid field) or raw
+    /// value (the activation). Found on the device, which does not say where: the CPU op's
+    /// `evaluate` names the ray and the sample.
     #[error("a sample value is outside its domain (sigma and delta finite and >= 0, colour finite)")]
     InvalidSample,
+    /// A grid whose box or lattice is not one (the message says which axis and why).
+    #[error("grid: {0}")]
+    InvalidGrid(String),
+    /// The activation's density shift is not finite.
+    #[error("density shift {0} (must be finite)")]
+    InvalidShift(f64),
     /// A staging layout the kernels are not built for.
     #[error(
         "kernel tuning {0:?}: span_bytes must be 32 or 64, loads_in_flight 4, 8 or 16, threads_per_block 32, 64 or 128"

@@ -73,6 +73,27 @@ pub fn compile(capability: (i32, i32)) -> Result<Ptx, CudaError> {
 /// [`compile`] with another staging layout than the default.
 pub fn compile_tuned(capability: (i32, i32), tuning: KernelTuning) -> Result<Ptx, CudaError> {
     tuning.check()?;
+    nvrtc(
+        COMPOSITE_SOURCE,
+        capability,
+        vec![
+            format!("-DSPAN_BYTES={}", tuning.span_bytes),
+            format!("-DLOADS={}", tuning.loads_in_flight),
+            format!("-DBLOCK={}", tuning.threads_per_block),
+        ],
+    )
+}
+
+/// The CUDA C source of the grid field's and the activation's kernels.
+pub const GRID_SOURCE: &str = include_str!("kernels/grid.cu");
+
+/// Compiles [`GRID_SOURCE`] to PTX for a device of compute capability `(major, minor)`, as
+/// [`compile`] does the composite's.
+pub fn compile_grid(capability: (i32, i32)) -> Result<Ptx, CudaError> {
+    nvrtc(GRID_SOURCE, capability, Vec::new())
+}
+
+fn nvrtc(source: &str, capability: (i32, i32), defines: Vec<String>) -> Result<Ptx, CudaError> {
     // SAFETY: only tries to open the library by its usual names (cudarc's loader panics when
     // it is missing, so ask first).
     if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
@@ -86,14 +107,15 @@ pub fn compile_tuned(capability: (i32, i32), tuning: KernelTuning) -> Result<Ptx
         prec_div: Some(true),
         prec_sqrt: Some(true),
         use_fast_math: Some(false),
-        options: vec![
-            format!("--gpu-architecture=compute_{major}{minor}"),
-            "--std=c++17".into(),
-            format!("-DSPAN_BYTES={}", tuning.span_bytes),
-            format!("-DLOADS={}", tuning.loads_in_flight),
-            format!("-DBLOCK={}", tuning.threads_per_block),
-        ],
+        options: [
+            vec![
+                format!("--gpu-architecture=compute_{major}{minor}"),
+                "--std=c++17".into(),
+            ],
+            defines,
+        ]
+        .concat(),
         ..Default::default()
     };
-    compile_ptx_with_opts(COMPOSITE_SOURCE, opts).map_err(|e| CudaError::Compile(format!("{e:?}")))
+    compile_ptx_with_opts(source, opts).map_err(|e| CudaError::Compile(format!("{e:?}")))
 }

@@ -57,18 +57,22 @@
 //! [`CudaComposite::gradient_buffers`]) and launch ([`CudaComposite::launch_forward`],
 //! [`CudaComposite::launch_backward`]), which queue work on the stream and return at once.
 
+mod activation;
 mod composite;
 mod error;
+mod grid;
 mod kernel;
 mod packing;
 
+pub use activation::{CudaDensityColor, HostActivated};
 pub use composite::{
     CudaComposite, DeviceFloat, DeviceForward, DeviceGradients, DeviceRays, DeviceUpstream, HostGradients, HostOutputs,
     HostRays,
 };
 pub use cudarc;
 pub use error::CudaError;
-pub use kernel::{compile, compile_tuned, KernelTuning, COMPOSITE_SOURCE};
+pub use grid::{CudaGrid, GridSpec};
+pub use kernel::{compile, compile_grid, compile_tuned, KernelTuning, COMPOSITE_SOURCE, GRID_SOURCE};
 pub use packing::{check_packing, CHANNELS};
 
 /// Opens device 0 for a test or a benchmark, or says why not and returns `None` when there is

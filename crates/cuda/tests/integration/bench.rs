@@ -231,3 +231,75 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
 fn rayon_threads() -> usize {
     std::thread::available_parallelism().map_or(1, usize::from)
 }
+
+/// The grid field's lookup and backward on a 128^3 grid of 4 f32 channels at 8,388,608
+/// positions uniform in its box, with the CPU op's time beside it.
+#[test]
+#[ignore = "needs a GPU; prints throughput"]
+fn throughput_of_the_grid_field() -> Result<(), CudaError> {
+    use fogray_cuda::{CudaGrid, GridSpec};
+    let Some(gpu) = device_for_tests()? else { return Ok(()) };
+    let spec = GridSpec {
+        min: [-1.0; 3],
+        max: [1.0; 3],
+        nodes: [128; 3],
+        channels: 4,
+    };
+    let n = 1usize << 23;
+    let mut rng = crate::common::rng(3);
+    let values: Vec<f32> = (0..spec.values()).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let positions: Vec<f32> = (0..3 * n).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let upstream: Vec<f32> = (0..4 * n).map(|_| rng.gen_range(-1.0..1.0)).collect();
+    let grid = CudaGrid::new(&gpu, spec)?;
+    let s = gpu.stream();
+    let (g, p, u) = (
+        s.clone_htod(&values)?,
+        s.clone_htod(&positions)?,
+        s.clone_htod(&upstream)?,
+    );
+    let mut out = s.alloc_zeros::<f32>(4 * n)?;
+    let mut invalid = s.alloc_zeros::<u32>(1)?;
+    let mut acc = s.alloc_zeros::<f64>(spec.values())?;
+    let mut gg = s.alloc_zeros::<f32>(spec.values())?;
+    let mut gp = s.alloc_zeros::<f32>(3 * n)?;
+    let t_fwd = time_ms(&gpu, || grid.launch_lookup(&g, &p, n, &mut out, &mut invalid))?;
+    let t_bwd = time_ms(&gpu, || {
+        grid.launch_backward(&g, &p, &u, n, &mut acc, &mut gg, Some(&mut gp))
+    })?;
+    println!(
+        "GPU grid lookup, 128^3 x 4 f32, {n} positions: forward {t_fwd:.3} ms ({:.0} M lookups/s), backward (grid and positions) {t_bwd:.3} ms ({:.0} M/s)",
+        n as f64 / t_fwd / 1e3,
+        n as f64 / t_bwd / 1e3
+    );
+    if std::env::var("FOGRAY_BENCH_CPU").is_ok_and(|v| v == "0") {
+        return Ok(());
+    }
+    let field = fogray_ops::GridField::new(
+        fogray_ops::GridBox::new(&spec.min, &spec.max).unwrap(),
+        &[128, 128, 128, 4],
+    )
+    .unwrap();
+    let gv = ndarray::ArrayViewD::from_shape(&[128, 128, 128, 4][..], &values).unwrap();
+    let pv = ndarray::ArrayViewD::from_shape(&[n, 3][..], &positions).unwrap();
+    let uv = ndarray::ArrayViewD::from_shape(&[n, 4][..], &upstream).unwrap();
+    let start = Instant::now();
+    let cpu_out = field.evaluate(&gv, &pv).unwrap();
+    let cpu_fwd = start.elapsed().as_secs_f64() * 1e3;
+    let start = Instant::now();
+    let wanted = fogray_ops::GridWanted {
+        grid: true,
+        positions: true,
+    };
+    let _ = field.vjp(&gv, &pv, &uv, wanted).unwrap();
+    let cpu_bwd = start.elapsed().as_secs_f64() * 1e3;
+    println!(
+        "CPU op ({} threads): forward {cpu_fwd:.0} ms, backward {cpu_bwd:.0} ms",
+        rayon_threads()
+    );
+    let got = s.clone_dtoh(&out)?;
+    assert!(
+        got.iter().zip(cpu_out.iter()).all(|(a, b)| a.to_bits() == b.to_bits()),
+        "forward bits"
+    );
+    Ok(())
+}

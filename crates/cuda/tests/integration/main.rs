@@ -6,3 +6,4 @@ mod agreement;
 mod bench;
 mod common;
 mod compile;
+mod grid;

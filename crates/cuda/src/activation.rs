@@ -1,0 +1,151 @@
+//! The density/colour activation on the device: raw rows `[n, k]` (density first, then
+//! `k - 1` colour channels) to `sigma = softplus(raw_0 + shift)` `[n]` and
+//! `color = sigmoid(raw_1..k)` `[n, k - 1]`, and its backward, with the forms of
+//! `fogray_ops::activation::DensityColor` (see `kernels/grid.cu`).
+
+use std::sync::Arc;
+
+use cudarc::driver::{CudaFunction, CudaStream, PushKernelArg};
+
+use crate::composite::{CudaComposite, DeviceFloat};
+use crate::error::CudaError;
+use crate::grid::{check_rows, launch_config, put, too_many};
+use crate::kernel::compile_grid;
+
+/// The activation's kernels on a [`CudaComposite`]'s device and stream.
+pub struct CudaDensityColor {
+    stream: Arc<CudaStream>,
+    shift: f64,
+    kernels: [(CudaFunction, CudaFunction); 2],
+}
+
+impl std::fmt::Debug for CudaDensityColor {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("CudaDensityColor").field("shift", &self.shift).finish()
+    }
+}
+
+/// The activation's outputs on the host.
+#[derive(Debug, Clone, PartialEq)]
+pub struct HostActivated<F> {
+    /// `[n]`.
+    pub sigma: Vec<F>,
+    /// `[n, k - 1]`, row-major.
+    pub color: Vec<F>,
+}
+
+impl CudaDensityColor {
+    /// Compiles the kernels for `gpu`'s device, with the density's `shift` (finite).
+    pub fn new(gpu: &CudaComposite, shift: f64) -> Result<Self, CudaError> {
+        if !shift.is_finite() {
+            return Err(CudaError::InvalidShift(shift));
+        }
+        let module = gpu.context().load_module(compile_grid(gpu.compute_capability())?)?;
+        let load = |suffix: &str| -> Result<(CudaFunction, CudaFunction), CudaError> {
+            Ok((
+                module.load_function(&format!("density_color_forward_{suffix}"))?,
+                module.load_function(&format!("density_color_backward_{suffix}"))?,
+            ))
+        };
+        Ok(CudaDensityColor {
+            stream: gpu.stream().clone(),
+            shift,
+            kernels: [load("f32")?, load("f64")?],
+        })
+    }
+
+    fn kernels<F: DeviceFloat>(&self) -> &(CudaFunction, CudaFunction) {
+        &self.kernels[usize::from(F::SUFFIX != "f32")]
+    }
+
+    fn rows<F>(raw: &[F], k: usize) -> Result<usize, CudaError> {
+        if k < 2 || raw.len() % k != 0 {
+            return Err(CudaError::Shape {
+                what: "raw values ([n, k], k >= 2: density and at least one colour)",
+                expected: raw.len() / k.max(2) * k.max(2),
+                got: raw.len(),
+            });
+        }
+        let n = raw.len() / k;
+        too_many(n)?;
+        Ok(n)
+    }
+
+    /// The activation of host rows `raw` (`[n, k]`). Errors: shapes, or
+    /// [`CudaError::InvalidSample`] for a NaN raw value.
+    pub fn evaluate<F: DeviceFloat>(&self, raw: &[F], k: usize) -> Result<HostActivated<F>, CudaError> {
+        let n = Self::rows(raw, k)?;
+        let s = &self.stream;
+        let r = put(s, raw)?;
+        let mut sigma = s.alloc_zeros::<F>(n.max(1))?;
+        let mut color = s.alloc_zeros::<F>((n * (k - 1)).max(1))?;
+        let mut invalid = s.alloc_zeros::<u32>(1)?;
+        if n > 0 {
+            let (n64, k64) = (n as u64, k as u64);
+            let mut launch = s.launch_builder(&self.kernels::<F>().0);
+            launch
+                .arg(&r)
+                .arg(&n64)
+                .arg(&k64)
+                .arg(&self.shift)
+                .arg(&mut sigma)
+                .arg(&mut color)
+                .arg(&mut invalid);
+            // SAFETY: the kernel's arguments in its order and types; `raw` holds n k values,
+            // `sigma` n and `color` n (k - 1); threads past `n` return.
+            unsafe { launch.launch(launch_config(n)) }?;
+        }
+        if s.clone_dtoh(&invalid)?[0] != 0 {
+            return Err(CudaError::InvalidSample);
+        }
+        let (mut sigma, mut color) = (s.clone_dtoh(&sigma)?, s.clone_dtoh(&color)?);
+        sigma.truncate(n);
+        color.truncate(n * (k - 1));
+        Ok(HostActivated { sigma, color })
+    }
+
+    /// `dL/draw` (`[n, k]`) for `dL/dsigma` (`[n]`) and `dL/dcolor` (`[n, k - 1]`), each
+    /// optional (absent: zero).
+    pub fn vjp<F: DeviceFloat>(
+        &self,
+        raw: &[F],
+        k: usize,
+        d_sigma: Option<&[F]>,
+        d_color: Option<&[F]>,
+    ) -> Result<Vec<F>, CudaError> {
+        let n = Self::rows(raw, k)?;
+        if let Some(g) = d_sigma {
+            check_rows("dL/dsigma ([n])", n, g.len())?;
+        }
+        if let Some(g) = d_color {
+            check_rows("dL/dcolor ([n, k - 1])", n * (k - 1), g.len())?;
+        }
+        let s = &self.stream;
+        let r = put(s, raw)?;
+        // An absent gradient is not read; any buffer stands in for it.
+        let gs = d_sigma.map(|g| put(s, g)).transpose()?;
+        let gc = d_color.map(|g| put(s, g)).transpose()?;
+        let mut out = s.alloc_zeros::<F>(raw.len().max(1))?;
+        if n > 0 {
+            let (n64, k64) = (n as u64, k as u64);
+            let (has_s, has_c) = (i32::from(gs.is_some()), i32::from(gc.is_some()));
+            let mut launch = s.launch_builder(&self.kernels::<F>().1);
+            launch
+                .arg(&r)
+                .arg(&n64)
+                .arg(&k64)
+                .arg(&self.shift)
+                .arg(gs.as_ref().unwrap_or(&r))
+                .arg(&has_s)
+                .arg(gc.as_ref().unwrap_or(&r))
+                .arg(&has_c)
+                .arg(&mut out);
+            // SAFETY: as in `evaluate`; a gradient is read only when its flag says it is there,
+            // with n (sigma) or n (k - 1) (colour) values (checked above).
+            unsafe { launch.launch(launch_config(n)) }?;
+        }
+        let mut v = s.clone_dtoh(&out)?;
+        v.truncate(raw.len());
+        Ok(v)
+    }
+}
