@@ -5,7 +5,7 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaFunction, CudaStream, PushKernelArg};
+use cudarc::driver::{CudaFunction, CudaSlice, CudaStream, PushKernelArg};
 
 use crate::composite::{CudaComposite, DeviceFloat};
 use crate::error::CudaError;
@@ -69,6 +69,84 @@ impl CudaDensityColor {
         let n = raw.len() / k;
         too_many(n)?;
         Ok(n)
+    }
+
+    /// Launches the activation of `raw` (`[n, k]`) into `sigma` (`[n]`) and `color`
+    /// (`[n, k - 1]`); sets `invalid` (one word, zeroed by the caller) for a NaN raw value.
+    pub fn launch_forward<F: DeviceFloat>(
+        &self,
+        raw: &CudaSlice<F>,
+        n: usize,
+        k: usize,
+        sigma: &mut CudaSlice<F>,
+        color: &mut CudaSlice<F>,
+        invalid: &mut CudaSlice<u32>,
+    ) -> Result<(), CudaError> {
+        if k < 2 {
+            return Err(CudaError::Shape {
+                what: "raw values per row (density and at least one colour)",
+                expected: 2,
+                got: k,
+            });
+        }
+        check_rows("raw values ([n, k])", n * k, raw.len().min(n * k))?;
+        check_rows("sigma ([n])", n, sigma.len().min(n))?;
+        check_rows("colour ([n, k - 1])", n * (k - 1), color.len().min(n * (k - 1)))?;
+        too_many(n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        let (n64, k64) = (n as u64, k as u64);
+        let mut launch = self.stream.launch_builder(&self.kernels::<F>().0);
+        launch
+            .arg(raw)
+            .arg(&n64)
+            .arg(&k64)
+            .arg(&self.shift)
+            .arg(sigma)
+            .arg(color)
+            .arg(invalid);
+        // SAFETY: the kernel's arguments in its order and types; each buffer holds at least the
+        // values the kernel indexes for `n` rows (checked above); threads past `n` return.
+        unsafe { launch.launch(launch_config(n)) }?;
+        Ok(())
+    }
+
+    /// Launches the backward: `d_raw` (`[n, k]`, every value written) from `d_sigma` (`[n]`)
+    /// and `d_color` (`[n, k - 1]`).
+    #[allow(clippy::too_many_arguments)]
+    pub fn launch_backward<F: DeviceFloat>(
+        &self,
+        raw: &CudaSlice<F>,
+        n: usize,
+        k: usize,
+        d_sigma: &CudaSlice<F>,
+        d_color: &CudaSlice<F>,
+        d_raw: &mut CudaSlice<F>,
+    ) -> Result<(), CudaError> {
+        check_rows("raw values ([n, k])", n * k, raw.len().min(n * k))?;
+        check_rows("dL/dsigma ([n])", n, d_sigma.len().min(n))?;
+        check_rows("dL/dcolor ([n, k - 1])", n * (k - 1), d_color.len().min(n * (k - 1)))?;
+        check_rows("dL/draw ([n, k])", n * k, d_raw.len().min(n * k))?;
+        too_many(n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        let (n64, k64, yes) = (n as u64, k as u64, 1i32);
+        let mut launch = self.stream.launch_builder(&self.kernels::<F>().1);
+        launch
+            .arg(raw)
+            .arg(&n64)
+            .arg(&k64)
+            .arg(&self.shift)
+            .arg(d_sigma)
+            .arg(&yes)
+            .arg(d_color)
+            .arg(&yes)
+            .arg(d_raw);
+        // SAFETY: as in `launch_forward`.
+        unsafe { launch.launch(launch_config(n)) }?;
+        Ok(())
     }
 
     /// The activation of host rows `raw` (`[n, k]`). Errors: shapes, or

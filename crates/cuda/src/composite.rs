@@ -92,6 +92,12 @@ pub struct DeviceRays<F> {
 }
 
 impl<F> DeviceRays<F> {
+    /// The per-sample arrays, for kernels of this crate that write them in place: `sigma`,
+    /// `delta`, `color`.
+    pub(crate) fn samples_mut(&mut self) -> (&mut CudaSlice<F>, &mut CudaSlice<F>, &mut CudaSlice<F>) {
+        (&mut self.sigma, &mut self.delta, &mut self.color)
+    }
+
     /// The number of rays.
     pub fn rays(&self) -> usize {
         self.rays
@@ -121,6 +127,13 @@ pub struct DeviceForward<F> {
 pub struct DeviceUpstream<F> {
     color: CudaSlice<F>,
     opacity: Option<CudaSlice<F>>,
+}
+
+impl<F> DeviceUpstream<F> {
+    /// `dL/dC`, for kernels of this crate that write it in place.
+    pub(crate) fn color_mut(&mut self) -> &mut CudaSlice<F> {
+        &mut self.color
+    }
 }
 
 /// The input gradients on the device.

@@ -93,6 +93,14 @@ pub fn compile_grid(capability: (i32, i32)) -> Result<Ptx, CudaError> {
     nvrtc(GRID_SOURCE, capability, Vec::new())
 }
 
+/// The CUDA C source of the training step's own kernels (batch sampling, loss, Adam).
+pub const TRAIN_SOURCE: &str = include_str!("kernels/train.cu");
+
+/// Compiles [`TRAIN_SOURCE`] to PTX for a device of compute capability `(major, minor)`.
+pub fn compile_train(capability: (i32, i32)) -> Result<Ptx, CudaError> {
+    nvrtc(TRAIN_SOURCE, capability, Vec::new())
+}
+
 fn nvrtc(source: &str, capability: (i32, i32), defines: Vec<String>) -> Result<Ptx, CudaError> {
     // SAFETY: only tries to open the library by its usual names (cudarc's loader panics when
     // it is missing, so ask first).

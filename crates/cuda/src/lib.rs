@@ -63,6 +63,7 @@ mod error;
 mod grid;
 mod kernel;
 mod packing;
+mod train;
 
 pub use activation::{CudaDensityColor, HostActivated};
 pub use composite::{
@@ -72,8 +73,11 @@ pub use composite::{
 pub use cudarc;
 pub use error::CudaError;
 pub use grid::{CudaGrid, GridSpec};
-pub use kernel::{compile, compile_grid, compile_tuned, KernelTuning, COMPOSITE_SOURCE, GRID_SOURCE};
+pub use kernel::{
+    compile, compile_grid, compile_train, compile_tuned, KernelTuning, COMPOSITE_SOURCE, GRID_SOURCE, TRAIN_SOURCE,
+};
 pub use packing::{check_packing, CHANNELS};
+pub use train::{DenseGridTrainer, TrainerSettings};
 
 /// Opens device 0 for a test or a benchmark, or says why not and returns `None` when there is
 /// no driver or no device (so that machines without a GPU skip). With `FOGRAY_CUDA_REQUIRED=1`

@@ -1,6 +1,6 @@
 //! The kernels compile with NVRTC (no GPU needed; skipped where libnvrtc does not load).
 
-use fogray_cuda::{compile, compile_grid, compile_tuned, CudaError, KernelTuning};
+use fogray_cuda::{compile, compile_grid, compile_train, compile_tuned, CudaError, KernelTuning};
 
 #[test]
 fn the_kernels_compile_for_hopper_ampere_and_turing() {
@@ -54,12 +54,18 @@ fn every_staging_layout_compiles_and_others_are_refused() {
 }
 
 #[test]
-fn the_grid_kernels_compile() {
+fn the_grid_and_training_kernels_compile() {
     for capability in [(7, 5), (8, 0), (9, 0)] {
-        match compile_grid(capability) {
-            Ok(ptx) => {
-                let src = ptx.to_src();
-                for name in ["grid_forward_f32", "grid_scatter_f64", "density_color_backward_f32"] {
+        match compile_grid(capability).and_then(|g| Ok((g, compile_train(capability)?))) {
+            Ok((grid, train)) => {
+                let src = grid.to_src() + &train.to_src();
+                for name in [
+                    "grid_forward_f32",
+                    "grid_scatter_f64",
+                    "density_color_backward_f32",
+                    "sample_batch",
+                    "adam",
+                ] {
                     assert!(src.contains(name), "{name} missing from the PTX for {capability:?}");
                 }
             }

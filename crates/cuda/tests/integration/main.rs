@@ -7,3 +7,4 @@ mod bench;
 mod common;
 mod compile;
 mod grid;
+mod lego;
