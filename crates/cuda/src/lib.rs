@@ -1,4 +1,7 @@
-//! fogray's fused emission-absorption composite on NVIDIA GPUs.
+//! fogray on NVIDIA GPUs: the fused emission-absorption composite ([`CudaComposite`]), the
+//! dense grid field ([`CudaGrid`]), the density/colour activation ([`CudaDensityColor`]) and a
+//! dense grid's whole training step ([`DenseGridTrainer`]), each kernel tested against the CPU
+//! op of `fogray-ops` (see `docs/cuda.md`). The composite is described below.
 //!
 //! The kernels are CUDA C (`src/kernels/composite.cu`) compiled at run time by NVRTC for the
 //! device found, and the CUDA libraries are loaded when first used (cudarc with dynamic

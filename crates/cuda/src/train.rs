@@ -367,4 +367,23 @@ impl<'g> DenseGridTrainer<'g> {
     pub fn grid_values(&self) -> Result<Vec<f32>, CudaError> {
         Ok(self.gpu.stream().clone_dtoh(&self.params)?)
     }
+
+    /// Replaces the grid's raw values (as [`DenseGridTrainer::grid_values`] gives them; Adam's
+    /// moments are kept). Errors: a length other than the grid's; the grid is unchanged then.
+    pub fn set_grid_values(&mut self, values: &[f32]) -> Result<(), CudaError> {
+        if values.len() != self.params.len() {
+            return Err(CudaError::Shape {
+                what: "grid values ([nodes, nodes, nodes, 4])",
+                expected: self.params.len(),
+                got: values.len(),
+            });
+        }
+        Ok(self.gpu.stream().memcpy_htod(values, &mut self.params)?)
+    }
+
+    /// The gradient of the last step's loss with respect to the grid's raw values (before
+    /// Adam used it), for checks against the CPU ops.
+    pub fn last_gradient(&self) -> Result<Vec<f32>, CudaError> {
+        Ok(self.gpu.stream().clone_dtoh(&self.grad)?)
+    }
 }

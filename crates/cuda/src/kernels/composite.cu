@@ -61,17 +61,17 @@ __device__ __forceinline__ void add_sample(const T* __restrict__ color, u64 k, d
 
 // Both kernels run one thread per ray, and stage their global loads and stores through shared
 // memory a warp at a time, so that they are coalesced: in step j every lane of a warp takes
-// one span of its ray (at most 64 bytes of densities, whole residual chunks; the j-th from the front in
-// the forward, from the back in the backward), the warp copies the 32 spans' densities,
-// lengths and colours into shared memory with consecutive lanes on consecutive elements of a
-// span, and each lane then runs its ray's sums or recurrence on its own span, chunk by chunk.
-// A span of 16 f32 values is 64 bytes, what a DRAM access fetches: with spans of one 8-sample
-// chunk the other half came back for the next step and was often gone from L2 by then. A
-// lane's span is padded to an odd stride (span + 1, 3 span + 1 elements) so that the lanes'
-// reads of their spans do not conflict on banks. A span's start is kept as a 32-bit offset
-// from the warp's first sample (the host refuses a batch whose 32 consecutive rays hold
-// 2^32 / 3 samples or more), which keeps the kernels' registers few enough for several blocks
-// per multiprocessor.
+// one span of its ray (SPAN_BYTES of densities, 64 by default, in whole residual chunks; the
+// j-th span from the front in the forward, from the back in the backward), the warp copies the
+// 32 spans' densities, lengths and colours into shared memory with consecutive lanes on
+// consecutive elements of a span, and each lane then runs its ray's sums or recurrence on its
+// own span, chunk by chunk. 64 bytes is what a DRAM access fetches: with spans of one 8-sample f32
+// chunk (32 bytes) the other half came back for the next step and was often gone from L2 by
+// then. A lane's span is padded to an odd stride (span + 1, 3 span + 1 elements) so that the
+// lanes' reads of their spans do not conflict on banks. A span's start is kept as a 32-bit
+// offset from the warp's first sample (the host refuses a batch whose 32 consecutive rays
+// hold 2^32 / 3 samples or more), which keeps the kernels' registers few enough for several
+// blocks per multiprocessor.
 #define WARPS (BLOCK / 32)
 // The staging layout (`KernelTuning` on the host): bytes of densities in a span, and loads in
 // flight per lane.

@@ -8,3 +8,4 @@ mod common;
 mod compile;
 mod grid;
 mod lego;
+mod train;
