@@ -23,19 +23,44 @@ use plotters::coord::ranged1d::ValueFormatter;
 use plotters::coord::types::RangedCoordf64;
 use plotters::coord::Shift;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::images::ImageError;
 use crate::train::LogEntry;
 
 const FONT: &str = "sans-serif";
-const COLORS: [RGBColor; 6] = [
+/// Twelve colours told apart on white (a report compares up to a dozen configurations); a
+/// thirteenth curve repeats the first colour.
+const COLORS: [RGBColor; 12] = [
     RGBColor(230, 120, 20),
     RGBColor(40, 90, 200),
     RGBColor(40, 160, 70),
     RGBColor(200, 40, 60),
     RGBColor(120, 70, 170),
     RGBColor(90, 90, 90),
+    RGBColor(0, 170, 190),
+    RGBColor(185, 150, 0),
+    RGBColor(230, 100, 170),
+    RGBColor(140, 85, 40),
+    RGBColor(20, 40, 100),
+    RGBColor(130, 195, 60),
 ];
+
+/// The chart's size in pixels; the legend goes in a panel to its right, so that it never
+/// hides a curve.
+const CHART: (u32, u32) = (900, 520);
+/// The legend's font size, and the pixels a character of it takes at most on average.
+const LEGEND_FONT: u32 = 14;
+const LEGEND_CHAR: u32 = 7;
+/// Pixels from one legend entry to the next, and the sample line's length.
+const LEGEND_ROW: i32 = 22;
+const LEGEND_LINE: i32 = 28;
+
+/// The legend panel's width for these labels.
+fn legend_width(curves: &[Curve<'_>]) -> u32 {
+    let chars = curves.iter().map(|c| c.label.chars().count()).max().unwrap_or(0) as u32;
+    2 * 12 + LEGEND_LINE as u32 + 8 + LEGEND_CHAR * chars
+}
 
 /// What the horizontal axis shows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -130,6 +155,9 @@ where
 {
     let err = |e: DrawingAreaErrorKind<DB::ErrorType>| e.to_string();
     root.fill(&WHITE).map_err(err)?;
+    let (root, legend) = root.split_horizontally(CHART.0);
+    draw_legend(&legend, curves, dashed).map_err(err)?;
+    let root = &root;
     let points = || curves.iter().flat_map(|c| c.log.iter()).filter(|e| x.shows(e, metric));
     let t_max = points().map(|e| x.of(e)).fold(0.0, f64::max).max(1e-3) * 1.05;
     let lo = points().map(|e| metric.of(e)).fold(f64::INFINITY, f64::min);
@@ -198,22 +226,35 @@ where
         } else {
             chart.draw_series(LineSeries::new(line, color.stroke_width(2)))
         };
-        // A dashed curve's legend is two dashes, a solid one's a line (relative to the entry).
-        let gap = if dashed.contains(&k) { (8, 13) } else { (20, 20) };
-        drawn.map_err(err)?.label(c.label.clone()).legend(move |p| {
-            EmptyElement::at(p)
-                + PathElement::new(vec![(0, 0), (gap.0, 0)], color.stroke_width(2))
-                + PathElement::new(vec![(gap.1, 0), (20, 0)], color.stroke_width(2))
-        });
+        drawn.map_err(err)?;
     }
-    chart
-        .configure_series_labels()
-        .position(SeriesLabelPosition::LowerRight)
-        .background_style(WHITE.mix(0.85))
-        .border_style(BLACK)
-        .label_font((FONT, 14))
-        .draw()
-        .map_err(err)?;
+    Ok(())
+}
+
+/// The legend, in its own panel: each curve's line (two dashes for a dashed one) and label,
+/// top to bottom in the curves' order.
+fn draw_legend<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    curves: &[Curve<'_>],
+    dashed: &[usize],
+) -> Result<(), DrawingAreaErrorKind<DB::ErrorType>> {
+    // Level with the chart's plotting area (below its caption).
+    let top = 50;
+    for (k, c) in curves.iter().enumerate() {
+        let color = COLORS[k % COLORS.len()];
+        let y = top + LEGEND_ROW * k as i32;
+        let x0 = 12;
+        let segments = if dashed.contains(&k) {
+            vec![(x0, x0 + 11), (x0 + 17, x0 + LEGEND_LINE)]
+        } else {
+            vec![(x0, x0 + LEGEND_LINE)]
+        };
+        for (a, b) in segments {
+            area.draw(&PathElement::new(vec![(a, y), (b, y)], color.stroke_width(2)))?;
+        }
+        let style = TextStyle::from((FONT, LEGEND_FONT).into_font()).pos(Pos::new(HPos::Left, VPos::Center));
+        area.draw(&Text::new(c.label.clone(), (x0 + LEGEND_LINE + 8, y), style))?;
+    }
     Ok(())
 }
 
@@ -247,7 +288,7 @@ pub fn metric_curves(
     if curves.is_empty() {
         return Err(ImageError::Empty);
     }
-    let size = (900, 520);
+    let size = (CHART.0 + legend_width(curves), CHART.1);
     let svg = PathBuf::from(format!("{}.svg", stem.display()));
     let png = PathBuf::from(format!("{}.png", stem.display()));
     let wrap = |path: &Path| {

@@ -8,6 +8,9 @@
 //! cargo build --release -p fogray-cli -p fogray-lego
 //! target/release/fogray-lego --data $FOGRAY_DATA/nerf_synthetic/lego --out reports/lego
 //! ```
+//!
+//! `--replot` redraws the report from the runs already under `--out` (their `fit.json` and
+//! the measuring run's stamp in `report.json`), running nothing.
 
 mod anchors;
 mod configs;
@@ -21,14 +24,19 @@ use clap::Parser;
 use serde::{Deserialize, Serialize};
 
 use configs::Config;
+use fogray::stamp::Stamp;
 use fogray_fit::curves::Anchor;
 
 /// Runs the configurations and writes the report.
 #[derive(Parser)]
 struct Args {
     /// The lego folder (transforms_train.json and its images).
+    #[arg(long, required_unless_present = "replot")]
+    data: Option<PathBuf>,
+    /// Redraw the report from the runs already under --out (each run's fit.json, and the
+    /// stamp of the run that measured them from report.json), running nothing.
     #[arg(long)]
-    data: PathBuf,
+    replot: bool,
     /// Where the report goes (each run's own output under runs/).
     #[arg(long, default_value = "reports/lego")]
     out: PathBuf,
@@ -116,13 +124,13 @@ fn fogray_binary(args: &Args) -> Result<PathBuf> {
     Ok(beside)
 }
 
-fn run_one(fogray: &Path, args: &Args, config: &Config, out: &Path) -> Result<Run> {
+fn run_one(fogray: &Path, data: &Path, args: &Args, config: &Config, out: &Path) -> Result<Run> {
     let seconds = config.seconds * args.budget_scale;
     let mut command = Command::new(fogray);
     command
         .arg("fit")
         .arg("--data")
-        .arg(&args.data)
+        .arg(data)
         .args(["--downscale", &args.downscale.to_string()])
         .args(["--seconds", &seconds.to_string()])
         .arg("--json")
@@ -149,9 +157,32 @@ fn run_one(fogray: &Path, args: &Args, config: &Config, out: &Path) -> Result<Ru
     })
 }
 
+/// A run already made: its `fit.json` under `dir`.
+fn run_read(args: &Args, config: &Config, dir: &Path) -> Result<Run> {
+    let file = dir.join("fit.json");
+    let text = std::fs::read(&file).with_context(|| format!("--replot: reading {}", file.display()))?;
+    let result: FitJson = serde_json::from_slice(&text).with_context(|| format!("--replot: {}", file.display()))?;
+    Ok(Run {
+        config: config.clone(),
+        seconds_budget: config.seconds * args.budget_scale,
+        result,
+    })
+}
+
+/// The stamp of the run that measured what `--replot` redraws, from `report.json`.
+fn measured_stamp(out: &Path) -> Result<Stamp> {
+    #[derive(Deserialize)]
+    struct Saved {
+        stamp: Stamp,
+    }
+    let file = out.join("report.json");
+    let text = std::fs::read(&file).with_context(|| format!("--replot: reading {}", file.display()))?;
+    let saved: Saved = serde_json::from_slice(&text).with_context(|| format!("--replot: {}", file.display()))?;
+    Ok(saved.stamp)
+}
+
 fn main() -> Result<()> {
     let args = Args::parse();
-    let fogray = fogray_binary(&args)?;
     // Read before the runs, so that a bad file costs seconds, not the report's half hour.
     let anchor = args.anchor.as_deref().map(Anchor::read).transpose()?;
     let configs: Vec<Config> = configs::all()
@@ -161,13 +192,27 @@ fn main() -> Result<()> {
     if configs.is_empty() {
         bail!("--only names no configuration (see configs.rs)");
     }
+    if args.replot {
+        let stamp = measured_stamp(&args.out)?;
+        let runs: Vec<Run> = configs
+            .iter()
+            .map(|c| run_read(&args, c, &args.out.join("runs").join(c.name)))
+            .collect::<Result<_>>()?;
+        write::report(&args, &runs, anchor.as_ref(), &stamp)?;
+        eprintln!("fogray-lego: redrew {}", args.out.join("report.md").display());
+        return Ok(());
+    }
+    let Some(data) = args.data.as_deref() else {
+        bail!("--data is needed unless --replot");
+    };
+    let fogray = fogray_binary(&args)?;
     std::fs::create_dir_all(&args.out)?;
     let mut runs = Vec::new();
     for config in &configs {
         let dir = args.out.join("runs").join(config.name);
-        runs.push(run_one(&fogray, &args, config, &dir)?);
+        runs.push(run_one(&fogray, data, &args, config, &dir)?);
     }
-    write::report(&args, &runs, anchor.as_ref())?;
+    write::report(&args, &runs, anchor.as_ref(), &write::stamp(&args))?;
     eprintln!("fogray-lego: wrote {}", args.out.join("report.md").display());
     Ok(())
 }

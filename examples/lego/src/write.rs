@@ -42,7 +42,20 @@ fn cell(v: Option<f64>) -> String {
 }
 
 /// Writes report.md, report.json, psnr-vs-seconds.{png,svg} and the held-out view.
-pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>) -> Result<()> {
+/// The stamp of a run of the configurations now, with the command that makes it.
+pub fn stamp(args: &Args) -> Stamp {
+    let mut command = format!("fogray-lego --data <lego> --downscale {}", args.downscale);
+    if args.budget_scale != 1.0 {
+        command += &format!(" --budget-scale {}", args.budget_scale);
+    }
+    if let Some(file) = &args.anchor {
+        command += &format!(" --anchor {}", file.display());
+    }
+    Stamp::now(&command)
+}
+
+/// Writes report.md, report.json and the plot for `runs`, measured as `stamp` says.
+pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>, stamp: &Stamp) -> Result<()> {
     let out = &args.out;
     let nerfacto = Anchor {
         name: "nerfacto, CPU (the issue's run)".into(),
@@ -81,18 +94,18 @@ pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>) -> Result<()>
     psnr_curves_against(&out.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &dashed)
         .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
 
-    let mut command = format!("fogray-lego --data <lego> --downscale {}", args.downscale);
-    if args.budget_scale != 1.0 {
-        write!(command, " --budget-scale {}", args.budget_scale)?;
-    }
-    if let Some(file) = &args.anchor {
-        write!(command, " --anchor {}", file.display())?;
-    }
-    let stamp = Stamp::now(&command);
     let first = &runs[0].result;
     let mut md = String::new();
     writeln!(md, "# fogray fit on NeRF-synthetic lego\n")?;
     writeln!(md, "{}\n", stamp.markdown())?;
+    if args.replot {
+        writeln!(
+            md,
+            "Tables and plot redrawn on {} from the runs' files by `fogray-lego --replot`; the runs are the \
+             stamp's.\n",
+            Stamp::now("").date
+        )?;
+    }
     writeln!(
         md,
         "Each row is one `fogray fit --data <lego> --downscale {} --seconds S` process with the flags shown \
