@@ -34,8 +34,9 @@ use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, Array4, ArrayView2, IxDyn};
 
-use crate::environment::{add_environment, copy_environment, environment_on_tape};
+use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
+use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
 use crate::shading::{Shading, VIEW_INDEPENDENT_CHANNELS};
@@ -158,13 +159,6 @@ impl<F: Float> DenseGrid<F> {
         let grid = self.params.get(self.grid)?;
         Ok(self.field.evaluate(&grid, &positions.into_dyn())?)
     }
-
-    fn lookup(&self, tape: &mut Tape<F>, grid: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
-        match method {
-            Method::Fused => self.field.apply(tape, grid, positions),
-            Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, positions),
-        }
-    }
 }
 
 impl<F: Float> RadianceField<F> for DenseGrid<F> {
@@ -233,21 +227,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         method: Method,
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
-        let grid = tape.param_from(&self.params, self.grid)?;
-        let environment = environment_on_tape(tape, &self.params)?;
-        let background = TrainingBackground::Shared(background);
-        let shaded = self.shading.composite_inputs(
-            tape,
-            rays,
-            samples,
-            background,
-            environment,
-            method,
-            wanted.depth,
-            0.0,
-            |tape, positions| self.lookup(tape, grid, positions, method),
-        )?;
-        shaded.render(tape, method)
+        self.render_grid(tape, rays, samples, background, method, wanted)
     }
 
     /// The fused method records the composite and the loss as one op
@@ -262,25 +242,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
-        let grid = tape.param_from(&self.params, self.grid)?;
-        let environment = environment_on_tape(tape, &self.params)?;
-        let shaded = self.shading.composite_inputs(
-            tape,
-            rays,
-            samples,
-            background,
-            environment,
-            method,
-            false,
-            self.distortion,
-            |tape, positions| self.lookup(tape, grid, positions, method),
-        )?;
-        let prior = if self.prior.weight() > 0.0 {
-            Some(self.prior.apply(tape, grid)?)
-        } else {
-            None
-        };
-        shaded.training_loss(tape, target, method, prior)
+        self.training_loss_grid(tape, rays, samples, background, target, method)
     }
 
     /// A position outside the box reads raw 0 (density `softplus(shift)`).
@@ -291,5 +253,34 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     /// A position outside the box reads raw 0 (grey).
     fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
         self.shading.base_colors(self.raw_values(positions)?)
+    }
+}
+
+impl<F: Float> GridModel<F> for DenseGrid<F> {
+    fn values(&self) -> (&Params<F>, ParamId) {
+        (&self.params, self.grid)
+    }
+
+    fn shading(&self) -> &Shading {
+        &self.shading
+    }
+
+    fn distortion(&self) -> f64 {
+        self.distortion
+    }
+
+    fn lookup(&self, tape: &mut Tape<F>, grid: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
+        match method {
+            Method::Fused => self.field.apply(tape, grid, positions),
+            Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, positions),
+        }
+    }
+
+    fn prior(&self, tape: &mut Tape<F>, grid: Var) -> Result<Option<Var>, TapeError> {
+        if self.prior.weight() > 0.0 {
+            Ok(Some(self.prior.apply(tape, grid)?))
+        } else {
+            Ok(None)
+        }
     }
 }

@@ -77,6 +77,7 @@ pub mod depth;
 pub mod dispatch;
 pub mod environment;
 pub mod error;
+mod grid_model;
 pub mod images;
 pub mod interrupt;
 pub mod mesh;

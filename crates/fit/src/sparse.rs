@@ -30,8 +30,9 @@ use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView2};
 
-use crate::environment::{add_environment, copy_environment, environment_on_tape};
+use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
+use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
 use crate::shading::Shading;
@@ -176,13 +177,6 @@ impl<F: Float> SparseGrid<F> {
     fn raw_values(&self, positions: ArrayView2<'_, F>) -> Result<ndarray::ArrayD<F>, FitError> {
         let data = self.params.get(self.data)?;
         Ok(self.field.evaluate(&data, &positions.into_dyn())?)
-    }
-
-    fn lookup(&self, tape: &mut Tape<F>, data: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
-        match method {
-            Method::Fused => self.field.apply(tape, data, positions),
-            Method::Taped => fogray_ops::grid::sparse::twin::lookup(tape, &self.field, data, positions),
-        }
     }
 }
 
@@ -363,21 +357,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         method: Method,
         wanted: RenderWanted,
     ) -> Result<CompositeVars, TapeError> {
-        let data = tape.param_from(&self.params, self.data)?;
-        let environment = environment_on_tape(tape, &self.params)?;
-        let background = TrainingBackground::Shared(background);
-        let shaded = self.shading.composite_inputs(
-            tape,
-            rays,
-            samples,
-            background,
-            environment,
-            method,
-            wanted.depth,
-            0.0,
-            |tape, positions| self.lookup(tape, data, positions, method),
-        )?;
-        shaded.render(tape, method)
+        self.render_grid(tape, rays, samples, background, method, wanted)
     }
 
     fn training_loss(
@@ -389,25 +369,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         target: Var,
         method: Method,
     ) -> Result<TrainingLoss, TapeError> {
-        let data = tape.param_from(&self.params, self.data)?;
-        let environment = environment_on_tape(tape, &self.params)?;
-        let shaded = self.shading.composite_inputs(
-            tape,
-            rays,
-            samples,
-            background,
-            environment,
-            method,
-            false,
-            self.distortion,
-            |tape, positions| self.lookup(tape, data, positions, method),
-        )?;
-        let prior = if self.prior.weight() > 0.0 {
-            Some(self.prior.apply(tape, data)?)
-        } else {
-            None
-        };
-        shaded.training_loss(tape, target, method, prior)
+        self.training_loss_grid(tape, rays, samples, background, target, method)
     }
 
     /// A position outside the box or among absent nodes reads raw 0 (density
@@ -420,5 +382,34 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     /// raw 0 (grey).
     fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
         self.shading.base_colors(self.raw_values(positions)?)
+    }
+}
+
+impl<F: Float> GridModel<F> for SparseGrid<F> {
+    fn values(&self) -> (&Params<F>, ParamId) {
+        (&self.params, self.data)
+    }
+
+    fn shading(&self) -> &Shading {
+        &self.shading
+    }
+
+    fn distortion(&self) -> f64 {
+        self.distortion
+    }
+
+    fn lookup(&self, tape: &mut Tape<F>, data: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
+        match method {
+            Method::Fused => self.field.apply(tape, data, positions),
+            Method::Taped => fogray_ops::grid::sparse::twin::lookup(tape, &self.field, data, positions),
+        }
+    }
+
+    fn prior(&self, tape: &mut Tape<F>, data: Var) -> Result<Option<Var>, TapeError> {
+        if self.prior.weight() > 0.0 {
+            Ok(Some(self.prior.apply(tape, data)?))
+        } else {
+            Ok(None)
+        }
     }
 }
