@@ -94,6 +94,21 @@ __device__ __forceinline__ bool position_of(const T* __restrict__ positions, u64
     return !nan;
 }
 
+// The cell of position s, for the backwards: false outside the box or for a NaN coordinate
+// (which the forward has reported).
+template <typename T>
+__device__ __forceinline__ bool cell_of(const Geometry& g, const T* __restrict__ positions, u64 s, u64& node,
+                                        double t[3]) {
+    double p[3];
+    bool nan = false;
+#pragma unroll
+    for (int a = 0; a < 3; ++a) {
+        p[a] = (double)positions[3 * s + a];
+        nan |= p[a] != p[a];
+    }
+    return !nan && locate(g, p, node, t);
+}
+
 template <typename T>
 __device__ __forceinline__ void grid_forward(Geometry g, const T* __restrict__ grid, const T* __restrict__ positions,
                                              u64 n, u64 ch, T* __restrict__ out, unsigned* __restrict__ invalid) {
@@ -127,15 +142,9 @@ __device__ __forceinline__ void grid_scatter(Geometry g, const T* __restrict__ p
                                              u64 n, u64 ch, double* __restrict__ acc) {
     u64 s = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     if (s >= n) return;
-    double p[3], t[3];
+    double t[3];
     u64 node = 0;
-    bool nan = false;
-#pragma unroll
-    for (int a = 0; a < 3; ++a) {
-        p[a] = (double)positions[3 * s + a];
-        nan |= p[a] != p[a];
-    }
-    if (nan || !locate(g, p, node, t)) return;
+    if (!cell_of(g, positions, s, node, t)) return;
     double w[8];
     weights(t, w);
     for (u64 c = 0; c < ch; ++c) {
@@ -165,15 +174,9 @@ __device__ __forceinline__ void grid_position_gradient(Geometry g, const T* __re
     bool any = false;
     for (u64 c = 0; c < ch; ++c) any |= gs[c] != (T)0;
     if (!any) return;
-    double p[3], t[3];
+    double t[3];
     u64 node = 0;
-    bool nan = false;
-#pragma unroll
-    for (int a = 0; a < 3; ++a) {
-        p[a] = (double)positions[3 * s + a];
-        nan |= p[a] != p[a];
-    }
-    if (nan || !locate(g, p, node, t)) return;
+    if (!cell_of(g, positions, s, node, t)) return;
     // g . v_k for each corner, then each axis's derivative weights.
     double gv[8];
 #pragma unroll
