@@ -58,6 +58,9 @@ pub enum CudaError {
     /// A grid whose box or lattice is not one (the message says which axis and why).
     #[error("grid: {0}")]
     InvalidGrid(String),
+    /// A trainer setting out of its range (the message says which).
+    #[error("trainer settings: {0}")]
+    InvalidSettings(String),
     /// The activation's density shift is not finite.
     #[error("density shift {0} (must be finite)")]
     InvalidShift(f64),

@@ -101,8 +101,9 @@ impl<'g> DenseGridTrainer<'g> {
     /// Uploads the training rays (`origins`, unit `directions` and `targets`, each `[R, 3]`)
     /// and a fresh grid (raw 0: density `softplus(shift)`, colour grey).
     ///
-    /// Errors: shapes, an empty ray set, a batch or sample count of 0, a bad grid
-    /// ([`CudaError::InvalidGrid`]), and the device's.
+    /// Errors: shapes, an empty ray set, a batch or sample count of 0
+    /// ([`CudaError::InvalidSettings`]), a bad grid ([`CudaError::InvalidGrid`]), and the
+    /// device's.
     pub fn new(
         gpu: &'g CudaComposite,
         settings: TrainerSettings,
@@ -128,9 +129,10 @@ impl<'g> DenseGridTrainer<'g> {
             }
         }
         if settings.batch == 0 || settings.samples_per_ray == 0 {
-            return Err(CudaError::InvalidGrid(
-                "batch and samples per ray must be at least 1".into(),
-            ));
+            return Err(CudaError::InvalidSettings(format!(
+                "{} rays a step and {} samples a ray (each at least 1)",
+                settings.batch, settings.samples_per_ray
+            )));
         }
         let spec = GridSpec {
             min: settings.scene_box.0,

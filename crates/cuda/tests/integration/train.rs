@@ -214,7 +214,7 @@ fn the_trainer_refuses_bad_input() {
     let no_batch = TrainerSettings { batch: 0, ..s };
     assert!(matches!(
         DenseGridTrainer::new(&gpu, no_batch, &o, &d, &t),
-        Err(CudaError::InvalidGrid(_))
+        Err(CudaError::InvalidSettings(_))
     ));
     let one_node = TrainerSettings { nodes: 1, ..s };
     assert!(matches!(
