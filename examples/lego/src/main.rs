@@ -9,8 +9,8 @@
 //! target/release/fogray-lego --data $FOGRAY_DATA/nerf_synthetic/lego --out reports/lego
 //! ```
 //!
-//! `--replot` redraws the report from the runs already under `--out` (their `fit.json` and
-//! the measuring run's stamp in `report.json`), running nothing.
+//! `--replot` redraws the report from the runs its `report.json` keeps (with the measuring
+//! run's stamp), running nothing.
 
 mod anchors;
 mod configs;
@@ -33,8 +33,8 @@ struct Args {
     /// The lego folder (transforms_train.json and its images).
     #[arg(long, required_unless_present = "replot")]
     data: Option<PathBuf>,
-    /// Redraw the report from the runs already under --out (each run's fit.json, and the
-    /// stamp of the run that measured them from report.json), running nothing.
+    /// Redraw the report from the runs --out/report.json keeps (with the stamp of the run that
+    /// measured them), running nothing.
     #[arg(long)]
     replot: bool,
     /// Where the report goes (each run's own output under runs/).
@@ -157,28 +157,64 @@ fn run_one(fogray: &Path, data: &Path, args: &Args, config: &Config, out: &Path)
     })
 }
 
-/// A run already made: its `fit.json` under `dir`.
-fn run_read(args: &Args, config: &Config, dir: &Path) -> Result<Run> {
-    let file = dir.join("fit.json");
-    let text = std::fs::read(&file).with_context(|| format!("--replot: reading {}", file.display()))?;
-    let result: FitJson = serde_json::from_slice(&text).with_context(|| format!("--replot: {}", file.display()))?;
-    Ok(Run {
-        config: config.clone(),
-        seconds_budget: config.seconds * args.budget_scale,
-        result,
-    })
+/// A run as `report.json` keeps it.
+#[derive(Deserialize)]
+struct SavedRun {
+    config: SavedConfig,
+    seconds_budget: f64,
+    result: FitJson,
 }
 
-/// The stamp of the run that measured what `--replot` redraws, from `report.json`.
-fn measured_stamp(out: &Path) -> Result<Stamp> {
-    #[derive(Deserialize)]
-    struct Saved {
-        stamp: Stamp,
-    }
+#[derive(Deserialize)]
+struct SavedConfig {
+    name: String,
+    flags: String,
+}
+
+#[derive(Deserialize)]
+struct Saved {
+    stamp: Stamp,
+    runs: Vec<SavedRun>,
+}
+
+/// The runs `report.json` under `out` keeps, each with its configuration (which must still
+/// have the flags it ran with), and the stamp of the run that measured them.
+fn saved_runs(out: &Path, only: &[String]) -> Result<(Stamp, Vec<Run>)> {
     let file = out.join("report.json");
     let text = std::fs::read(&file).with_context(|| format!("--replot: reading {}", file.display()))?;
     let saved: Saved = serde_json::from_slice(&text).with_context(|| format!("--replot: {}", file.display()))?;
-    Ok(saved.stamp)
+    let configs = configs::all();
+    let mut runs = Vec::new();
+    for run in saved.runs {
+        if !(only.is_empty() || only.contains(&run.config.name)) {
+            continue;
+        }
+        let Some(config) = configs.iter().find(|c| c.name == run.config.name) else {
+            bail!(
+                "{}: run {} is no configuration of configs.rs",
+                file.display(),
+                run.config.name
+            );
+        };
+        if config.flags != run.config.flags {
+            bail!(
+                "{}: {} ran with `{}`, configs.rs now gives `{}`: run it again",
+                file.display(),
+                config.name,
+                run.config.flags,
+                config.flags
+            );
+        }
+        runs.push(Run {
+            config: config.clone(),
+            seconds_budget: run.seconds_budget,
+            result: run.result,
+        });
+    }
+    if runs.is_empty() {
+        bail!("{}: no run to redraw", file.display());
+    }
+    Ok((saved.stamp, runs))
 }
 
 fn main() -> Result<()> {
@@ -193,11 +229,7 @@ fn main() -> Result<()> {
         bail!("--only names no configuration (see configs.rs)");
     }
     if args.replot {
-        let stamp = measured_stamp(&args.out)?;
-        let runs: Vec<Run> = configs
-            .iter()
-            .map(|c| run_read(&args, c, &args.out.join("runs").join(c.name)))
-            .collect::<Result<_>>()?;
+        let (stamp, runs) = saved_runs(&args.out, &args.only)?;
         write::report(&args, &runs, anchor.as_ref(), &stamp)?;
         eprintln!("fogray-lego: redrew {}", args.out.join("report.md").display());
         return Ok(());

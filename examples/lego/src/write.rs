@@ -2,6 +2,7 @@
 //! held-out view beside its photograph.
 
 use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use fogray::stamp::Stamp;
@@ -165,20 +166,7 @@ pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>, stamp: &Stamp
     writeln!(md, "![held-out PSNR against training seconds](psnr-vs-seconds.png)\n")?;
     // The held-out view of the defaults' run, as fogray fit --out wrote it.
     if let Some(run) = runs.iter().rev().find(|r| r.config.flags.is_empty()) {
-        let dir = out.join("runs").join(run.config.name).join("test");
-        let mut views: Vec<_> = std::fs::read_dir(&dir)
-            .with_context(|| format!("{}", dir.display()))?
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            // The view itself, not its depth map.
-            .filter(|p| !p.to_string_lossy().ends_with("-depth.png"))
-            .collect();
-        views.sort();
-        if let Some(view) = views.first() {
-            let name = format!(
-                "held-out-{}",
-                view.file_name().map_or("view".into(), |n| n.to_string_lossy())
-            );
-            std::fs::copy(view, out.join(&name))?;
+        if let Some(name) = held_out_view(out, run.config.name)? {
             writeln!(
                 md,
                 "A held-out view after the {} s run `{}`: photograph, render, error (x4):\n\n![held-out view]({name})\n",
@@ -234,4 +222,38 @@ fn against_outside(
     }
     writeln!(md)?;
     Ok(())
+}
+
+/// The held-out view the report shows, as a file under `out`: the first of the run's views
+/// (copied there), or, where the run's folder is gone (a `--replot` elsewhere), the view an
+/// earlier report copied.
+fn held_out_view(out: &Path, run: &str) -> Result<Option<String>> {
+    let dir = out.join("runs").join(run).join("test");
+    let pngs = |dir: &Path, keep: &dyn Fn(&str) -> bool| -> Result<Vec<PathBuf>> {
+        let mut found: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("{}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.file_name().is_some_and(|n| keep(&n.to_string_lossy())))
+            .collect();
+        found.sort();
+        Ok(found)
+    };
+    if !dir.is_dir() {
+        let earlier = pngs(out, &|n| n.starts_with("held-out-") && n.ends_with(".png"))?;
+        return Ok(earlier
+            .first()
+            .and_then(|p| p.file_name())
+            .map(|n| n.to_string_lossy().into_owned()));
+    }
+    // The view itself, not its depth map.
+    let views = pngs(&dir, &|n| n.ends_with(".png") && !n.ends_with("-depth.png"))?;
+    let Some(view) = views.first() else {
+        return Ok(None);
+    };
+    let name = format!(
+        "held-out-{}",
+        view.file_name().map_or("view".into(), |n| n.to_string_lossy())
+    );
+    std::fs::copy(view, out.join(&name))?;
+    Ok(Some(name))
 }

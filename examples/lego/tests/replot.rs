@@ -1,5 +1,6 @@
-//! `fogray-lego --replot` redraws the committed lego report from its runs' files alone: the
-//! same report.json (stamp and runs, as the measuring run wrote it) and the same table rows.
+//! `fogray-lego --replot` redraws the committed lego report from its report.json alone (the
+//! runs' folders are not committed): the same report.json (stamp and runs, as the measuring
+//! run wrote it) and the same report.md but for the line that says it was redrawn.
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
@@ -8,47 +9,59 @@ fn report_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../reports/lego")
 }
 
-fn table_rows(md: &str) -> Vec<&str> {
-    md.lines().filter(|l| l.starts_with("| ")).collect()
+fn without_redrawn_line(md: &str) -> Vec<&str> {
+    md.lines()
+        .filter(|l| !l.starts_with("Tables and plot redrawn"))
+        .collect()
+}
+
+fn replot(out: &Path, anchor: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_fogray-lego"))
+        .args(["--replot", "--out"])
+        .arg(out)
+        .arg("--anchor")
+        .arg(anchor)
+        .output()
+        .unwrap()
 }
 
 #[test]
 fn replot_gives_back_the_measured_report() {
     let from = report_dir();
+    let anchor = from.join("anchor-pytorch.json");
     let out = std::env::temp_dir().join(format!("fogray-lego-replot-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&out);
     std::fs::create_dir_all(&out).unwrap();
     std::fs::copy(from.join("report.json"), out.join("report.json")).unwrap();
-    for run in std::fs::read_dir(from.join("runs")).unwrap() {
-        let run = run.unwrap().path();
-        let dir = out.join("runs").join(run.file_name().unwrap());
-        // The held-out views are left behind: the report then names none.
-        std::fs::create_dir_all(dir.join("test")).unwrap();
-        std::fs::copy(run.join("fit.json"), dir.join("fit.json")).unwrap();
-    }
-    let status = Command::new(env!("CARGO_BIN_EXE_fogray-lego"))
-        .args(["--replot", "--out"])
-        .arg(&out)
-        .arg("--anchor")
-        .arg(from.join("anchor-pytorch.json"))
-        .status()
-        .unwrap();
-    assert!(status.success());
-    let json = |dir: &Path| std::fs::read_to_string(dir.join("report.json")).unwrap();
-    assert_eq!(json(&out), json(&from), "report.json");
-    let md = |dir: &Path| std::fs::read_to_string(dir.join("report.md")).unwrap();
-    let (got, want) = (md(&out), md(&from));
-    assert!(!table_rows(&want).is_empty());
-    assert_eq!(table_rows(&got), table_rows(&want));
+    std::fs::copy(from.join("held-out-r_0.png"), out.join("held-out-r_0.png")).unwrap();
+    let output = replot(&out, &anchor);
+    assert!(output.status.success(), "{}", String::from_utf8_lossy(&output.stderr));
+    let read = |dir: &Path, file: &str| std::fs::read_to_string(dir.join(file)).unwrap();
+    assert_eq!(read(&out, "report.json"), read(&from, "report.json"));
+    let (got, want) = (read(&out, "report.md"), read(&from, "report.md"));
+    assert!(
+        want.lines().filter(|l| l.starts_with("| ")).count() > 10,
+        "the report has its tables"
+    );
+    assert_eq!(without_redrawn_line(&got), without_redrawn_line(&want));
+    assert!(got.lines().any(|l| l.starts_with("Tables and plot redrawn")));
     assert!(out.join("psnr-vs-seconds.png").is_file());
-    // A replot without the runs' files is an error naming the file.
-    std::fs::remove_file(out.join("runs/sparse-128/fit.json")).unwrap();
-    let output = Command::new(env!("CARGO_BIN_EXE_fogray-lego"))
-        .args(["--replot", "--out"])
-        .arg(&out)
-        .output()
-        .unwrap();
+
+    // A report.json whose run no longer matches its configuration is refused, naming both.
+    let json = read(&out, "report.json").replacen(
+        "--model dense --grid 64 --sh-degree 0",
+        "--model dense --grid 32 --sh-degree 0",
+        1,
+    );
+    std::fs::write(out.join("report.json"), json).unwrap();
+    let output = replot(&out, &anchor);
     assert!(!output.status.success());
-    assert!(String::from_utf8_lossy(&output.stderr).contains("sparse-128/fit.json"));
+    let err = String::from_utf8_lossy(&output.stderr);
+    assert!(err.contains("dense-64-sh0") && err.contains("--grid 32"), "{err}");
+    // And a missing one is named.
+    std::fs::remove_file(out.join("report.json")).unwrap();
+    let output = replot(&out, &anchor);
+    assert!(!output.status.success());
+    assert!(String::from_utf8_lossy(&output.stderr).contains("report.json"));
     std::fs::remove_dir_all(&out).unwrap();
 }
