@@ -19,7 +19,8 @@ pub struct KernelTuning {
 }
 
 impl Default for KernelTuning {
-    /// The layout measured fastest on an H100 (the benchmark's comparison of layouts).
+    /// The layout chosen from the benchmark's comparison of layouts on an H100
+    /// (`reports/cuda/composite-layouts.log`; within noise of the fastest there).
     fn default() -> Self {
         KernelTuning {
             span_bytes: 64,
