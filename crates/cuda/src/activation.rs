@@ -7,9 +7,9 @@ use std::sync::Arc;
 
 use cudarc::driver::{CudaFunction, CudaSlice, CudaStream, PushKernelArg};
 
+use crate::buffers::{check_len, launch_config, put, too_many};
 use crate::composite::{CudaComposite, DeviceFloat};
 use crate::error::CudaError;
-use crate::grid::{check_rows, launch_config, put, too_many};
 use crate::kernel::compile_grid;
 
 /// The activation's kernels on a [`CudaComposite`]'s device and stream.
@@ -89,9 +89,9 @@ impl CudaDensityColor {
                 got: k,
             });
         }
-        check_rows("raw values ([n, k])", n * k, raw.len().min(n * k))?;
-        check_rows("sigma ([n])", n, sigma.len().min(n))?;
-        check_rows("colour ([n, k - 1])", n * (k - 1), color.len().min(n * (k - 1)))?;
+        check_len("raw values ([n, k])", n * k, raw.len().min(n * k))?;
+        check_len("sigma ([n])", n, sigma.len().min(n))?;
+        check_len("colour ([n, k - 1])", n * (k - 1), color.len().min(n * (k - 1)))?;
         too_many(n)?;
         if n == 0 {
             return Ok(());
@@ -113,38 +113,45 @@ impl CudaDensityColor {
     }
 
     /// Launches the backward: `d_raw` (`[n, k]`, every value written) from `d_sigma` (`[n]`)
-    /// and `d_color` (`[n, k - 1]`).
+    /// and `d_color` (`[n, k - 1]`), each optional (absent: zero).
     #[allow(clippy::too_many_arguments)]
     pub fn launch_backward<F: DeviceFloat>(
         &self,
         raw: &CudaSlice<F>,
         n: usize,
         k: usize,
-        d_sigma: &CudaSlice<F>,
-        d_color: &CudaSlice<F>,
+        d_sigma: Option<&CudaSlice<F>>,
+        d_color: Option<&CudaSlice<F>>,
         d_raw: &mut CudaSlice<F>,
     ) -> Result<(), CudaError> {
-        check_rows("raw values ([n, k])", n * k, raw.len().min(n * k))?;
-        check_rows("dL/dsigma ([n])", n, d_sigma.len().min(n))?;
-        check_rows("dL/dcolor ([n, k - 1])", n * (k - 1), d_color.len().min(n * (k - 1)))?;
-        check_rows("dL/draw ([n, k])", n * k, d_raw.len().min(n * k))?;
+        check_len("raw values ([n, k])", n * k, raw.len().min(n * k))?;
+        if let Some(g) = d_sigma {
+            check_len("dL/dsigma ([n])", n, g.len().min(n))?;
+        }
+        if let Some(g) = d_color {
+            check_len("dL/dcolor ([n, k - 1])", n * (k - 1), g.len().min(n * (k - 1)))?;
+        }
+        check_len("dL/draw ([n, k])", n * k, d_raw.len().min(n * k))?;
         too_many(n)?;
         if n == 0 {
             return Ok(());
         }
-        let (n64, k64, yes) = (n as u64, k as u64, 1i32);
+        let (n64, k64) = (n as u64, k as u64);
+        let (has_s, has_c) = (i32::from(d_sigma.is_some()), i32::from(d_color.is_some()));
         let mut launch = self.stream.launch_builder(&self.kernels::<F>().1);
         launch
             .arg(raw)
             .arg(&n64)
             .arg(&k64)
             .arg(&self.shift)
-            .arg(d_sigma)
-            .arg(&yes)
-            .arg(d_color)
-            .arg(&yes)
+            // An absent gradient is not read; any buffer stands in for it.
+            .arg(d_sigma.unwrap_or(raw))
+            .arg(&has_s)
+            .arg(d_color.unwrap_or(raw))
+            .arg(&has_c)
             .arg(d_raw);
-        // SAFETY: as in `launch_forward`.
+        // SAFETY: as in `launch_forward`; a gradient is read only when its flag says it is
+        // there, with n (sigma) or n (k - 1) (colour) values (checked above).
         unsafe { launch.launch(launch_config(n)) }?;
         Ok(())
     }
@@ -158,21 +165,7 @@ impl CudaDensityColor {
         let mut sigma = s.alloc_zeros::<F>(n.max(1))?;
         let mut color = s.alloc_zeros::<F>((n * (k - 1)).max(1))?;
         let mut invalid = s.alloc_zeros::<u32>(1)?;
-        if n > 0 {
-            let (n64, k64) = (n as u64, k as u64);
-            let mut launch = s.launch_builder(&self.kernels::<F>().0);
-            launch
-                .arg(&r)
-                .arg(&n64)
-                .arg(&k64)
-                .arg(&self.shift)
-                .arg(&mut sigma)
-                .arg(&mut color)
-                .arg(&mut invalid);
-            // SAFETY: the kernel's arguments in its order and types; `raw` holds n k values,
-            // `sigma` n and `color` n (k - 1); threads past `n` return.
-            unsafe { launch.launch(launch_config(n)) }?;
-        }
+        self.launch_forward(&r, n, k, &mut sigma, &mut color, &mut invalid)?;
         if s.clone_dtoh(&invalid)?[0] != 0 {
             return Err(CudaError::InvalidSample);
         }
@@ -193,35 +186,17 @@ impl CudaDensityColor {
     ) -> Result<Vec<F>, CudaError> {
         let n = Self::rows(raw, k)?;
         if let Some(g) = d_sigma {
-            check_rows("dL/dsigma ([n])", n, g.len())?;
+            check_len("dL/dsigma ([n])", n, g.len())?;
         }
         if let Some(g) = d_color {
-            check_rows("dL/dcolor ([n, k - 1])", n * (k - 1), g.len())?;
+            check_len("dL/dcolor ([n, k - 1])", n * (k - 1), g.len())?;
         }
         let s = &self.stream;
         let r = put(s, raw)?;
-        // An absent gradient is not read; any buffer stands in for it.
         let gs = d_sigma.map(|g| put(s, g)).transpose()?;
         let gc = d_color.map(|g| put(s, g)).transpose()?;
         let mut out = s.alloc_zeros::<F>(raw.len().max(1))?;
-        if n > 0 {
-            let (n64, k64) = (n as u64, k as u64);
-            let (has_s, has_c) = (i32::from(gs.is_some()), i32::from(gc.is_some()));
-            let mut launch = s.launch_builder(&self.kernels::<F>().1);
-            launch
-                .arg(&r)
-                .arg(&n64)
-                .arg(&k64)
-                .arg(&self.shift)
-                .arg(gs.as_ref().unwrap_or(&r))
-                .arg(&has_s)
-                .arg(gc.as_ref().unwrap_or(&r))
-                .arg(&has_c)
-                .arg(&mut out);
-            // SAFETY: as in `evaluate`; a gradient is read only when its flag says it is there,
-            // with n (sigma) or n (k - 1) (colour) values (checked above).
-            unsafe { launch.launch(launch_config(n)) }?;
-        }
+        self.launch_backward(&r, n, k, gs.as_ref(), gc.as_ref(), &mut out)?;
         let mut v = s.clone_dtoh(&out)?;
         v.truncate(raw.len());
         Ok(v)

@@ -8,6 +8,7 @@ use cudarc::driver::{
     ValidAsZeroBits,
 };
 
+use crate::buffers::{check_len, put};
 use crate::error::CudaError;
 use crate::kernel::{compile_tuned, KernelTuning};
 use crate::packing::{check_packing, residual_len, CHANNELS, WARP};
@@ -206,14 +207,6 @@ fn config(rays: usize, block: usize) -> LaunchConfig {
     }
 }
 
-fn check_len(what: &'static str, expected: usize, got: usize) -> Result<(), CudaError> {
-    if expected == got {
-        Ok(())
-    } else {
-        Err(CudaError::Shape { what, expected, got })
-    }
-}
-
 impl CudaComposite {
     /// Opens device `ordinal` and compiles the kernels for it with NVRTC.
     ///
@@ -318,24 +311,14 @@ impl CudaComposite {
         }
         let offsets: Vec<u64> = x.offsets.iter().map(|&o| o as u64).collect();
         Ok(DeviceRays {
-            offsets: self.put(&offsets)?,
-            sigma: self.put(x.sigma)?,
-            delta: self.put(x.delta)?,
-            color: self.put(x.color)?,
-            background: self.put(x.background)?,
+            offsets: put(&self.stream, &offsets)?,
+            sigma: put(&self.stream, x.sigma)?,
+            delta: put(&self.stream, x.delta)?,
+            color: put(&self.stream, x.color)?,
+            background: put(&self.stream, x.background)?,
             rays,
             samples: x.sigma.len(),
         })
-    }
-
-    /// A copy of `v` on the device; an empty `v` gets one zero element, as the driver refuses
-    /// zero-length allocations (the kernels never read it).
-    fn put<T: DeviceRepr + Default + Clone>(&self, v: &[T]) -> Result<CudaSlice<T>, CudaError> {
-        if v.is_empty() {
-            Ok(self.stream.clone_htod(&[T::default()])?)
-        } else {
-            Ok(self.stream.clone_htod(v)?)
-        }
     }
 
     /// Output buffers for the forward of `x`.
@@ -374,8 +357,8 @@ impl CudaComposite {
             check_len("dL/dopacity ([R])", x.rays, g.len())?;
         }
         Ok(DeviceUpstream {
-            color: self.put(d_color)?,
-            opacity: d_opacity.map(|g| self.put(g)).transpose()?,
+            color: put(&self.stream, d_color)?,
+            opacity: d_opacity.map(|g| put(&self.stream, g)).transpose()?,
         })
     }
 

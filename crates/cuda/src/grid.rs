@@ -4,13 +4,12 @@
 
 use std::sync::Arc;
 
-use cudarc::driver::{CudaFunction, CudaSlice, CudaStream, DeviceRepr, LaunchConfig, PushKernelArg};
+use cudarc::driver::{CudaFunction, CudaSlice, CudaStream, DeviceRepr, PushKernelArg};
 
+use crate::buffers::{check_len, launch_config, put, too_many};
 use crate::composite::{CudaComposite, DeviceFloat};
 use crate::error::CudaError;
 use crate::kernel::compile_grid;
-
-const THREADS: u32 = 256;
 
 /// The box and lattice as the kernels take them (`Geometry` in `kernels/grid.cu`).
 #[repr(C)]
@@ -101,30 +100,6 @@ impl std::fmt::Debug for CudaGrid {
     }
 }
 
-pub(crate) fn launch_config(n: usize) -> LaunchConfig {
-    let blocks = u32::try_from(n.div_ceil(THREADS as usize).max(1)).unwrap_or(u32::MAX);
-    LaunchConfig {
-        grid_dim: (blocks, 1, 1),
-        block_dim: (THREADS, 1, 1),
-        shared_mem_bytes: 0,
-    }
-}
-
-pub(crate) fn check_rows(what: &'static str, expected: usize, got: usize) -> Result<(), CudaError> {
-    if expected == got {
-        Ok(())
-    } else {
-        Err(CudaError::Shape { what, expected, got })
-    }
-}
-
-pub(crate) fn too_many(n: usize) -> Result<(), CudaError> {
-    if n.div_ceil(THREADS as usize) > i32::MAX as usize {
-        return Err(CudaError::TooLarge(format!("{n} rows is more than one launch covers")));
-    }
-    Ok(())
-}
-
 impl CudaGrid {
     /// Compiles the grid kernels for `gpu`'s device; launches go to its stream.
     ///
@@ -174,9 +149,9 @@ impl CudaGrid {
         invalid: &mut CudaSlice<u32>,
     ) -> Result<(), CudaError> {
         let ch = self.spec.channels;
-        check_rows("grid values", self.spec.values(), grid.len())?;
-        check_rows("positions ([n, 3])", 3 * n, positions.len().min(3 * n))?;
-        check_rows("lookup output ([n, C])", n * ch, out.len().min(n * ch))?;
+        check_len("grid values", self.spec.values(), grid.len())?;
+        check_len("positions ([n, 3])", 3 * n, positions.len().min(3 * n))?;
+        check_len("lookup output ([n, C])", n * ch, out.len().min(n * ch))?;
         too_many(n)?;
         if n == 0 {
             return Ok(());
@@ -214,11 +189,11 @@ impl CudaGrid {
     ) -> Result<(), CudaError> {
         let ch = self.spec.channels;
         let values = self.spec.values();
-        check_rows("grid values", values, grid.len())?;
-        check_rows("grid gradient", values, grad_grid.len())?;
-        check_rows("grid gradient accumulator", values, acc.len())?;
-        check_rows("positions ([n, 3])", 3 * n, positions.len().min(3 * n))?;
-        check_rows("upstream ([n, C])", n * ch, upstream.len().min(n * ch))?;
+        check_len("grid values", values, grid.len())?;
+        check_len("grid gradient", values, grad_grid.len())?;
+        check_len("grid gradient accumulator", values, acc.len())?;
+        check_len("positions ([n, 3])", 3 * n, positions.len().min(3 * n))?;
+        check_len("upstream ([n, C])", n * ch, upstream.len().min(n * ch))?;
         too_many(n.max(values))?;
         let (n64, ch64, len) = (n as u64, ch as u64, values as u64);
         let k = self.kernels::<F>();
@@ -240,7 +215,7 @@ impl CudaGrid {
         // SAFETY: both buffers hold `len` values (checked above).
         unsafe { round.launch(launch_config(values)) }?;
         if let Some(out) = grad_positions {
-            check_rows("position gradient ([n, 3])", 3 * n, out.len().min(3 * n))?;
+            check_len("position gradient ([n, 3])", 3 * n, out.len().min(3 * n))?;
             if n > 0 {
                 let mut pos = self.stream.launch_builder(&k.position_gradient);
                 pos.arg(&self.geometry)
@@ -282,7 +257,7 @@ impl CudaGrid {
         upstream: &[F],
     ) -> Result<(Vec<F>, Vec<F>), CudaError> {
         let n = self.rows(grid, positions)?;
-        check_rows("upstream ([n, C])", n * self.spec.channels, upstream.len())?;
+        check_len("upstream ([n, C])", n * self.spec.channels, upstream.len())?;
         let s = &self.stream;
         let (g, p, u) = (put(s, grid)?, put(s, positions)?, put(s, upstream)?);
         let mut acc = s.alloc_zeros::<f64>(grid.len())?;
@@ -295,7 +270,7 @@ impl CudaGrid {
     }
 
     fn rows<F>(&self, grid: &[F], positions: &[F]) -> Result<usize, CudaError> {
-        check_rows("grid values", self.spec.values(), grid.len())?;
+        check_len("grid values", self.spec.values(), grid.len())?;
         if positions.len() % 3 != 0 {
             return Err(CudaError::Shape {
                 what: "positions ([n, 3])",
@@ -304,14 +279,5 @@ impl CudaGrid {
             });
         }
         Ok(positions.len() / 3)
-    }
-}
-
-/// A copy of `v` on the device (one zero for an empty `v`: the driver refuses empty buffers).
-pub(crate) fn put<T: DeviceRepr + Default + Clone>(s: &Arc<CudaStream>, v: &[T]) -> Result<CudaSlice<T>, CudaError> {
-    if v.is_empty() {
-        Ok(s.clone_htod(&[T::default()])?)
-    } else {
-        Ok(s.clone_htod(v)?)
     }
 }

@@ -18,6 +18,11 @@ pub struct KernelTuning {
     pub threads_per_block: u32,
 }
 
+/// The values of each [`KernelTuning`] field the kernels are built for.
+const SPAN_BYTES: [u32; 2] = [32, 64];
+const LOADS_IN_FLIGHT: [u32; 3] = [4, 8, 16];
+const THREADS_PER_BLOCK: [u32; 3] = [32, 64, 128];
+
 impl Default for KernelTuning {
     /// The layout chosen from the benchmark's comparison of layouts on an H100
     /// (`reports/cuda/composite-layouts.log`; within noise of the fastest there).
@@ -34,9 +39,9 @@ impl KernelTuning {
     /// Every layout the kernels are built for.
     pub fn every() -> Vec<KernelTuning> {
         let mut all = Vec::new();
-        for span_bytes in [32, 64] {
-            for loads_in_flight in [4, 8, 16] {
-                for threads_per_block in [32, 64, 128] {
+        for span_bytes in SPAN_BYTES {
+            for loads_in_flight in LOADS_IN_FLIGHT {
+                for threads_per_block in THREADS_PER_BLOCK {
                     all.push(KernelTuning {
                         span_bytes,
                         loads_in_flight,
@@ -49,9 +54,9 @@ impl KernelTuning {
     }
 
     fn check(&self) -> Result<(), CudaError> {
-        if ![32, 64].contains(&self.span_bytes)
-            || ![4, 8, 16].contains(&self.loads_in_flight)
-            || ![32, 64, 128].contains(&self.threads_per_block)
+        if !SPAN_BYTES.contains(&self.span_bytes)
+            || !LOADS_IN_FLIGHT.contains(&self.loads_in_flight)
+            || !THREADS_PER_BLOCK.contains(&self.threads_per_block)
         {
             return Err(CudaError::Tuning(*self));
         }

@@ -61,6 +61,7 @@
 //! [`CudaComposite::launch_backward`]), which queue work on the stream and return at once.
 
 mod activation;
+mod buffers;
 mod composite;
 mod error;
 mod grid;

@@ -12,9 +12,10 @@
 use cudarc::driver::{CudaFunction, CudaSlice, DeviceRepr, PushKernelArg};
 
 use crate::activation::CudaDensityColor;
+use crate::buffers::launch_config;
 use crate::composite::{CudaComposite, DeviceForward, DeviceGradients, DeviceRays, DeviceUpstream, HostRays};
 use crate::error::CudaError;
-use crate::grid::{launch_config, CudaGrid, GridSpec};
+use crate::grid::{CudaGrid, GridSpec};
 use crate::kernel::compile_train;
 
 /// The box as the sampling kernels take it.
@@ -95,7 +96,8 @@ impl std::fmt::Debug for DenseGridTrainer<'_> {
     }
 }
 
-const CHANNELS: usize = 4;
+/// Values a node of the trained grid holds: density, then RGB.
+const NODE_CHANNELS: usize = 4;
 
 impl<'g> DenseGridTrainer<'g> {
     /// Uploads the training rays (`origins`, unit `directions` and `targets`, each `[R, 3]`)
@@ -138,7 +140,7 @@ impl<'g> DenseGridTrainer<'g> {
             min: settings.scene_box.0,
             max: settings.scene_box.1,
             nodes: [settings.nodes; 3],
-            channels: CHANNELS,
+            channels: NODE_CHANNELS,
         };
         let grid = CudaGrid::new(gpu, spec)?;
         let activation = CudaDensityColor::new(gpu, settings.shift)?;
@@ -184,8 +186,8 @@ impl<'g> DenseGridTrainer<'g> {
             m: s.alloc_zeros(values)?,
             v: s.alloc_zeros(values)?,
             positions: s.alloc_zeros(3 * n)?,
-            raw: s.alloc_zeros(CHANNELS * n)?,
-            d_raw: s.alloc_zeros(CHANNELS * n)?,
+            raw: s.alloc_zeros(NODE_CHANNELS * n)?,
+            d_raw: s.alloc_zeros(NODE_CHANNELS * n)?,
             picked: s.alloc_zeros(settings.batch)?,
             batch_rays,
             forward,
@@ -210,7 +212,7 @@ impl<'g> DenseGridTrainer<'g> {
             .launch_lookup(&self.params, &self.positions, n, &mut self.raw, &mut self.invalid)?;
         let (sigma, _, color) = self.batch_rays.samples_mut();
         self.activation
-            .launch_forward(&self.raw, n, CHANNELS, sigma, color, &mut self.invalid)?;
+            .launch_forward(&self.raw, n, NODE_CHANNELS, sigma, color, &mut self.invalid)?;
         self.gpu.launch_forward(&self.batch_rays, &mut self.forward)
     }
 
@@ -259,9 +261,9 @@ impl<'g> DenseGridTrainer<'g> {
         self.activation.launch_backward(
             &self.raw,
             n,
-            CHANNELS,
-            &self.gradients.sigma,
-            &self.gradients.color,
+            NODE_CHANNELS,
+            Some(&self.gradients.sigma),
+            Some(&self.gradients.color),
             &mut self.d_raw,
         )?;
         self.grid.launch_backward(
