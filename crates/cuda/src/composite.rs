@@ -131,9 +131,10 @@ pub struct DeviceUpstream<F> {
 }
 
 impl<F> DeviceUpstream<F> {
-    /// `dL/dC`, for kernels of this crate that write it in place.
-    pub(crate) fn color_mut(&mut self) -> &mut CudaSlice<F> {
-        &mut self.color
+    /// `dL/dC` and `dL/dopacity`, for kernels of this crate that write both in place (the
+    /// opacity's is `None` when the upstream was made without one).
+    pub(crate) fn both_mut(&mut self) -> (&mut CudaSlice<F>, Option<&mut CudaSlice<F>>) {
+        (&mut self.color, self.opacity.as_mut())
     }
 }
 

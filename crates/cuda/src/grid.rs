@@ -78,6 +78,7 @@ impl GridSpec {
     }
 }
 
+#[derive(Clone)]
 struct GridKernels {
     forward: CudaFunction,
     scatter: CudaFunction,
@@ -122,6 +123,19 @@ impl CudaGrid {
             geometry,
             f32: load("f32")?,
             f64: load("f64")?,
+        })
+    }
+
+    /// The same kernels for another box or lattice (nothing compiled again).
+    ///
+    /// Errors: [`CudaError::InvalidGrid`] for a box or lattice that is not one.
+    pub fn for_spec(&self, spec: GridSpec) -> Result<Self, CudaError> {
+        Ok(CudaGrid {
+            stream: self.stream.clone(),
+            spec,
+            geometry: spec.geometry()?,
+            f32: self.f32.clone(),
+            f64: self.f64.clone(),
         })
     }
 

@@ -1,6 +1,7 @@
 //! fogray on NVIDIA GPUs: the fused emission-absorption composite ([`CudaComposite`]), the
-//! dense grid field ([`CudaGrid`]), the density/colour activation ([`CudaDensityColor`]) and a
-//! dense grid's whole training step ([`DenseGridTrainer`]), each kernel tested against the CPU
+//! dense grid field ([`CudaGrid`]), the density/colour activation ([`CudaDensityColor`]) and
+//! its view-dependent form through spherical harmonics ([`CudaShDensityColor`]), and a dense
+//! grid's whole training step ([`DenseGridTrainer`]), each kernel tested against the CPU
 //! op of `fogray-ops` (see `docs/cuda.md`). The composite is described below.
 //!
 //! The kernels are CUDA C (`src/kernels/composite.cu`) compiled at run time by NVRTC for the
@@ -67,6 +68,7 @@ mod error;
 mod grid;
 mod kernel;
 mod packing;
+mod sh;
 mod train;
 
 pub use activation::{CudaDensityColor, HostActivated};
@@ -81,7 +83,8 @@ pub use kernel::{
     compile, compile_grid, compile_train, compile_tuned, KernelTuning, COMPOSITE_SOURCE, GRID_SOURCE, TRAIN_SOURCE,
 };
 pub use packing::{check_packing, CHANNELS};
-pub use train::{DenseGridTrainer, TrainerSettings};
+pub use sh::{CudaShDensityColor, MAX_SH_DEGREE};
+pub use train::{DenseGridTrainer, OccupancySettings, StepPhases, TrainerSettings, TrainingRays};
 
 /// Opens device 0 for a test or a benchmark, or says why not and returns `None` when there is
 /// no driver or no device (so that machines without a GPU skip). With `FOGRAY_CUDA_REQUIRED=1`

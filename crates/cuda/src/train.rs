@@ -1,22 +1,26 @@
 //! A whole training step of a dense grid radiance field on the device: rays in, loss and
-//! updated grid out. The model is the dense grid of `fogray-fit` without its extras: `4`
-//! channels a node (density, then RGB), density `softplus(raw + shift)`, colour
-//! `sigmoid(raw)` from every direction alike, a fixed number of samples a ray spread evenly
-//! between where it enters and leaves the box (at a random offset each step), the composite
-//! over one background, the mean squared error, and Adam with bias-corrected moments.
+//! updated grid out. The model is the dense grid of `fogray-fit`: density
+//! `softplus(raw + shift)`, colour `sigmoid(raw)` from every direction alike or through
+//! spherical harmonics of degree 1 to 3 ([`TrainerSettings::sh_degree`]), a fixed number of
+//! samples a ray spread evenly between where it enters and leaves the box (at a random offset
+//! each step), the composite over the dataset's background or, for pictures with alpha, over a
+//! random colour per ray ([`TrainerSettings::random_background`]), the mean squared error, and
+//! Adam with bias-corrected moments; [`DenseGridTrainer::resample`] grows the grid coarse to
+//! fine.
 //!
 //! Every op of the step is a kernel of this crate checked against the CPU op
-//! ([`CudaGrid`], [`CudaDensityColor`], [`CudaComposite`]); the step's own kernels
-//! (`kernels/train.cu`) draw the batch, take the loss and update the grid.
+//! ([`CudaGrid`], [`CudaDensityColor`], [`CudaShDensityColor`], [`CudaComposite`]); the step's
+//! own kernels (`kernels/train.cu`) draw the batch, take the loss and update the grid.
 
 use cudarc::driver::{CudaFunction, CudaSlice, DeviceRepr, PushKernelArg};
 
 use crate::activation::CudaDensityColor;
-use crate::buffers::launch_config;
+use crate::buffers::{check_len, launch_config, put};
 use crate::composite::{CudaComposite, DeviceForward, DeviceGradients, DeviceRays, DeviceUpstream, HostRays};
 use crate::error::CudaError;
 use crate::grid::{CudaGrid, GridSpec};
 use crate::kernel::compile_train;
+use crate::sh::{CudaShDensityColor, MAX_SH_DEGREE};
 
 /// The box as the sampling kernels take it.
 #[repr(C)]
@@ -28,6 +32,148 @@ struct DeviceBox {
 
 // SAFETY: a plain `#[repr(C)]` struct of f64, laid out as the kernels' `Box`.
 unsafe impl DeviceRepr for DeviceBox {}
+
+/// A colour as the loss kernel takes it (`Rgb`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+struct DeviceRgb([f64; 3]);
+
+// SAFETY: a plain `#[repr(C)]` array of f64, laid out as the kernels' `Rgb`.
+unsafe impl DeviceRepr for DeviceRgb {}
+
+/// The occupancy grid's cells as the sampling kernels take them (`Cells`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy)]
+struct DeviceCells {
+    min: [f64; 3],
+    scale: [f64; 3],
+    cells: u64,
+}
+
+// SAFETY: a plain `#[repr(C)]` struct of 8-byte numbers, laid out as the kernels' `Cells`.
+unsafe impl DeviceRepr for DeviceCells {}
+
+/// An occupancy grid over the box that the samples skip where it is empty, as `fogray fit`'s:
+/// each cell keeps a density estimate, `max(estimate * decay, fresh)` at every refresh, where
+/// `fresh` is the larger density at the cell's centre and at a random point in it; a cell is
+/// occupied while its estimate exceeds `density`. Every cell is occupied until the first
+/// refresh.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OccupancySettings {
+    /// Cells per axis.
+    pub cells: usize,
+    /// The density above which a cell is occupied.
+    pub density: f64,
+    /// Refresh every this many steps (the first after as many).
+    pub every: u64,
+    /// The estimate's decay per refresh, in [0, 1].
+    pub decay: f64,
+}
+
+/// Where a step's time goes, in seconds, as [`DenseGridTrainer::step_timed`] measures it (the
+/// stream waited on after each phase, so that each phase's kernels are timed alone).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StepPhases {
+    /// The occupancy grid's refresh (0 on the steps without one).
+    pub occupancy: f64,
+    /// Drawing the batch and placing its samples.
+    pub sampling: f64,
+    /// The grid's lookup at the samples.
+    pub lookup: f64,
+    /// Density and colour from the raw values.
+    pub shading: f64,
+    /// The composite.
+    pub composite: f64,
+    /// The loss and its gradient.
+    pub loss: f64,
+    /// The composite's backward.
+    pub composite_backward: f64,
+    /// The distortion loss and its gradient (0 without it).
+    pub distortion: f64,
+    /// The shading's backward.
+    pub shading_backward: f64,
+    /// The grid's backward (zeroing, scatter, rounding).
+    pub grid_backward: f64,
+    /// Adam over the grid.
+    pub adam: f64,
+}
+
+impl StepPhases {
+    /// The step's whole time.
+    pub fn total(&self) -> f64 {
+        self.occupancy
+            + self.sampling
+            + self.lookup
+            + self.shading
+            + self.composite
+            + self.loss
+            + self.composite_backward
+            + self.distortion
+            + self.shading_backward
+            + self.grid_backward
+            + self.adam
+    }
+}
+
+impl std::ops::AddAssign for StepPhases {
+    fn add_assign(&mut self, o: StepPhases) {
+        self.occupancy += o.occupancy;
+        self.sampling += o.sampling;
+        self.lookup += o.lookup;
+        self.shading += o.shading;
+        self.composite += o.composite;
+        self.loss += o.loss;
+        self.composite_backward += o.composite_backward;
+        self.distortion += o.distortion;
+        self.shading_backward += o.shading_backward;
+        self.grid_backward += o.grid_backward;
+        self.adam += o.adam;
+    }
+}
+
+/// Times the phases of a step when on: waits for the stream at each lap.
+struct PhaseClock {
+    on: bool,
+    at: std::time::Instant,
+    phases: StepPhases,
+}
+
+impl PhaseClock {
+    fn new(on: bool) -> Self {
+        PhaseClock {
+            on,
+            at: std::time::Instant::now(),
+            phases: StepPhases::default(),
+        }
+    }
+
+    /// Adds the time since the last lap to the phase `slot` picks.
+    fn lap(&mut self, gpu: &CudaComposite, slot: fn(&mut StepPhases) -> &mut f64) -> Result<(), CudaError> {
+        if self.on {
+            gpu.stream().synchronize()?;
+            let now = std::time::Instant::now();
+            *slot(&mut self.phases) += (now - self.at).as_secs_f64();
+            self.at = now;
+        }
+        Ok(())
+    }
+}
+
+/// The training pixels, each `[R, ...]` in the same order.
+#[derive(Debug, Clone, Copy)]
+pub struct TrainingRays<'a> {
+    /// Ray origins `[R, 3]`.
+    pub origins: &'a [f32],
+    /// Unit ray directions `[R, 3]`.
+    pub directions: &'a [f32],
+    /// The pixels' colours `[R, 3]`, composited over [`TrainerSettings::background`] where
+    /// their picture had alpha.
+    pub colors: &'a [f32],
+    /// The pixels' opacities `[R]` (1 for a picture without alpha), if any picture had alpha:
+    /// with [`TrainerSettings::random_background`], each training ray is composited over a
+    /// random colour and its target recomposited over the same colour.
+    pub alpha: Option<&'a [f32]>,
+}
 
 /// How a [`DenseGridTrainer`] fits.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,8 +188,21 @@ pub struct TrainerSettings {
     pub batch: usize,
     /// The density's shift: raw 0 is density `softplus(shift)`.
     pub shift: f64,
-    /// The background colour behind every ray.
+    /// Colour through spherical harmonics of this degree (1 to 3: `1 + 3 (degree + 1)^2`
+    /// values a node), or 0: one colour from every direction (4 values a node).
+    pub sh_degree: usize,
+    /// The background colour behind every ray (and behind the targets' transparent pixels).
     pub background: [f32; 3],
+    /// With the rays' alpha given: train each ray over a uniform random colour of its own,
+    /// so that the grid cannot paint the background into the scene.
+    pub random_background: bool,
+    /// The weight of mip-NeRF 360's distortion loss (the mean over the batch's rays of
+    /// `sum_ij w_i w_j |t_i - t_j| + (1/3) sum_i w_i^2 delta_i`, distances along the ray) in the
+    /// objective; 0: none.
+    pub distortion: f64,
+    /// Skip the samples in empty cells of an occupancy grid (training and renders), or keep
+    /// every sample.
+    pub occupancy: Option<OccupancySettings>,
     /// Seed of the batches.
     pub seed: u64,
 }
@@ -51,8 +210,70 @@ pub struct TrainerSettings {
 struct TrainKernels {
     sample_batch: CudaFunction,
     sample_range: CudaFunction,
-    squared_error: CudaFunction,
+    photometric_loss: CudaFunction,
+    lattice: CudaFunction,
+    occupancy_points: CudaFunction,
+    occupancy_update: CudaFunction,
+    distortion: CudaFunction,
     adam: CudaFunction,
+}
+
+/// The occupancy grid on the device.
+struct OccupancyState {
+    settings: OccupancySettings,
+    cells: DeviceCells,
+    /// One byte a cell, nonzero where occupied.
+    occupied: CudaSlice<u8>,
+    estimate: CudaSlice<f32>,
+    /// The refresh's points `[2 cells^3, 3]` and their raw values `[2 cells^3, channels]`.
+    points: CudaSlice<f32>,
+    raw: CudaSlice<f32>,
+    refreshes: u64,
+}
+
+/// How raw values become density and colour.
+enum Shading {
+    /// `4` values a node: density, then RGB.
+    Plain(CudaDensityColor),
+    /// Density, then each channel's spherical-harmonics coefficients.
+    Harmonics(CudaShDensityColor),
+}
+
+impl Shading {
+    fn channels(&self) -> usize {
+        match self {
+            Shading::Plain(_) => VIEW_INDEPENDENT_CHANNELS,
+            Shading::Harmonics(sh) => sh.channels(),
+        }
+    }
+}
+
+/// The grid's parameters and Adam's state for them.
+struct GridState {
+    grid: CudaGrid,
+    params: CudaSlice<f32>,
+    grad: CudaSlice<f32>,
+    acc: CudaSlice<f64>,
+    m: CudaSlice<f32>,
+    v: CudaSlice<f32>,
+    /// Adam steps on these moments (the bias correction's `t`).
+    adam_steps: u64,
+}
+
+impl GridState {
+    /// A grid of `spec` with zero values and fresh moments, on `grid`'s kernels.
+    fn zeros(stream: &std::sync::Arc<cudarc::driver::CudaStream>, grid: CudaGrid) -> Result<Self, CudaError> {
+        let values = grid.spec().values();
+        Ok(GridState {
+            grid,
+            params: stream.alloc_zeros(values)?,
+            grad: stream.alloc_zeros(values)?,
+            acc: stream.alloc_zeros(values)?,
+            m: stream.alloc_zeros(values)?,
+            v: stream.alloc_zeros(values)?,
+            adam_steps: 0,
+        })
+    }
 }
 
 /// The device state of a dense grid fit: the training rays, the grid and its Adam moments,
@@ -60,20 +281,30 @@ struct TrainKernels {
 pub struct DenseGridTrainer<'g> {
     gpu: &'g CudaComposite,
     settings: TrainerSettings,
-    grid: CudaGrid,
-    activation: CudaDensityColor,
+    state: GridState,
+    shading: Shading,
     kernels: TrainKernels,
     scene: DeviceBox,
     rays: usize,
     origins: CudaSlice<f32>,
     directions: CudaSlice<f32>,
     targets: CudaSlice<f32>,
-    params: CudaSlice<f32>,
-    grad: CudaSlice<f32>,
-    acc: CudaSlice<f64>,
-    m: CudaSlice<f32>,
-    v: CudaSlice<f32>,
+    /// The targets' opacities (one zero where there are none).
+    alpha: CudaSlice<f32>,
+    /// Whether the loss draws a random background per ray.
+    random: bool,
     positions: CudaSlice<f32>,
+    /// Each sample's view direction `[n, 3]` (with spherical harmonics; else one zero).
+    sample_dirs: CudaSlice<f32>,
+    /// Each sample's midpoint along its ray `[n]`.
+    ts: CudaSlice<f32>,
+    /// The distortion loss's weights, prefix sums and optical depths `[n]` each (with the
+    /// loss; else one zero each), and the sum of its values since it was last read.
+    distortion_scratch: [CudaSlice<f64>; 3],
+    distortion_sum: CudaSlice<f64>,
+    occupancy: Option<OccupancyState>,
+    /// Stands in for the occupancy bytes where there is no occupancy grid (never read).
+    no_cells: CudaSlice<u8>,
     raw: CudaSlice<f32>,
     d_raw: CudaSlice<f32>,
     picked: CudaSlice<u64>,
@@ -96,32 +327,37 @@ impl std::fmt::Debug for DenseGridTrainer<'_> {
     }
 }
 
-/// Values a node of the trained grid holds: density, then RGB.
-const NODE_CHANNELS: usize = 4;
+/// No occupancy grid: every sample kept.
+const NO_CELLS: DeviceCells = DeviceCells {
+    min: [0.0; 3],
+    scale: [0.0; 3],
+    cells: 0,
+};
+
+/// Values a node holds without spherical harmonics: density, then RGB.
+const VIEW_INDEPENDENT_CHANNELS: usize = 4;
 
 impl<'g> DenseGridTrainer<'g> {
-    /// Uploads the training rays (`origins`, unit `directions` and `targets`, each `[R, 3]`)
-    /// and a fresh grid (raw 0: density `softplus(shift)`, colour grey).
+    /// Uploads the training rays and a fresh grid (raw 0: density `softplus(shift)`, colour
+    /// grey).
     ///
-    /// Errors: shapes, an empty ray set, a batch or sample count of 0
-    /// ([`CudaError::InvalidSettings`]), a bad grid ([`CudaError::InvalidGrid`]), and the
-    /// device's.
-    pub fn new(
-        gpu: &'g CudaComposite,
-        settings: TrainerSettings,
-        origins: &[f32],
-        directions: &[f32],
-        targets: &[f32],
-    ) -> Result<Self, CudaError> {
-        let rays = origins.len() / 3;
-        if rays == 0 || origins.len() != 3 * rays {
+    /// Errors: shapes, an empty ray set ([`CudaError::Shape`]); a batch or sample count of 0,
+    /// a degree above 3 ([`CudaError::InvalidSettings`]); a bad grid
+    /// ([`CudaError::InvalidGrid`]); a background colour that is not finite
+    /// ([`CudaError::InvalidBackground`]); and the device's.
+    pub fn new(gpu: &'g CudaComposite, settings: TrainerSettings, data: TrainingRays<'_>) -> Result<Self, CudaError> {
+        let rays = data.origins.len() / 3;
+        if rays == 0 || data.origins.len() != 3 * rays {
             return Err(CudaError::Shape {
                 what: "ray origins ([R, 3], R >= 1)",
                 expected: 3 * rays.max(1),
-                got: origins.len(),
+                got: data.origins.len(),
             });
         }
-        for (what, v) in [("ray directions ([R, 3])", directions), ("targets ([R, 3])", targets)] {
+        for (what, v) in [
+            ("ray directions ([R, 3])", data.directions),
+            ("colours ([R, 3])", data.colors),
+        ] {
             if v.len() != 3 * rays {
                 return Err(CudaError::Shape {
                     what,
@@ -130,64 +366,131 @@ impl<'g> DenseGridTrainer<'g> {
                 });
             }
         }
+        if let Some(a) = data.alpha {
+            check_len("opacities ([R])", rays, a.len())?;
+        }
         if settings.batch == 0 || settings.samples_per_ray == 0 {
             return Err(CudaError::InvalidSettings(format!(
                 "{} rays a step and {} samples a ray (each at least 1)",
                 settings.batch, settings.samples_per_ray
             )));
         }
+        if settings.sh_degree > MAX_SH_DEGREE {
+            return Err(CudaError::InvalidSettings(format!(
+                "spherical harmonics of degree {} (at most {MAX_SH_DEGREE})",
+                settings.sh_degree
+            )));
+        }
+        if let Some((channel, &v)) = settings.background.iter().enumerate().find(|(_, v)| !v.is_finite()) {
+            return Err(CudaError::InvalidBackground {
+                channel,
+                value: f64::from(v),
+            });
+        }
+        if !(settings.distortion.is_finite() && settings.distortion >= 0.0) {
+            return Err(CudaError::InvalidSettings(format!(
+                "distortion weight {} (finite, at least 0)",
+                settings.distortion
+            )));
+        }
+        if let Some(o) = settings.occupancy {
+            if o.cells == 0 || o.every == 0 || !(o.density.is_finite() && (0.0..=1.0).contains(&o.decay)) {
+                return Err(CudaError::InvalidSettings(format!(
+                    "occupancy {o:?}: at least one cell and one step between refreshes, a finite density, a decay in [0, 1]"
+                )));
+            }
+        }
+        let shading = match settings.sh_degree {
+            0 => Shading::Plain(CudaDensityColor::new(gpu, settings.shift)?),
+            d => Shading::Harmonics(CudaShDensityColor::new(gpu, settings.shift, d)?),
+        };
         let spec = GridSpec {
             min: settings.scene_box.0,
             max: settings.scene_box.1,
             nodes: [settings.nodes; 3],
-            channels: NODE_CHANNELS,
+            channels: shading.channels(),
         };
         let grid = CudaGrid::new(gpu, spec)?;
-        let activation = CudaDensityColor::new(gpu, settings.shift)?;
         let module = gpu.context().load_module(compile_train(gpu.compute_capability())?)?;
         let kernels = TrainKernels {
             sample_batch: module.load_function("sample_batch")?,
             sample_range: module.load_function("sample_range")?,
-            squared_error: module.load_function("squared_error")?,
+            photometric_loss: module.load_function("photometric_loss")?,
+            lattice: module.load_function("lattice")?,
+            occupancy_points: module.load_function("occupancy_points")?,
+            occupancy_update: module.load_function("occupancy_update")?,
+            distortion: module.load_function("distortion")?,
             adam: module.load_function("adam")?,
         };
         let s = gpu.stream();
-        let values = spec.values();
         let n = settings.batch * settings.samples_per_ray;
         let offsets: Vec<usize> = (0..=settings.batch).map(|b| b * settings.samples_per_ray).collect();
         let zeros = vec![0.0f32; 3 * n];
+        // The batch is composited over black; the loss and the render add the background.
         let batch_rays = gpu.upload(&HostRays {
             offsets: &offsets,
             sigma: &zeros[..n],
             delta: &zeros[..n],
             color: &zeros,
-            background: &settings.background,
+            background: &[0.0; 3],
         })?;
         let forward = gpu.forward_buffers(&batch_rays)?;
-        let upstream = gpu.upload_upstream(&batch_rays, &zeros[..3 * settings.batch], None)?;
+        let upstream = gpu.upload_upstream(
+            &batch_rays,
+            &zeros[..3 * settings.batch],
+            Some(&zeros[..settings.batch]),
+        )?;
         let gradients = gpu.gradient_buffers(&batch_rays)?;
+        let channels = shading.channels();
+        let with_dirs = matches!(shading, Shading::Harmonics(_));
+        let occupancy = match settings.occupancy {
+            None => None,
+            Some(o) => {
+                let count = o.cells.pow(3);
+                let (lo, hi) = settings.scene_box;
+                Some(OccupancyState {
+                    settings: o,
+                    cells: DeviceCells {
+                        min: lo,
+                        scale: std::array::from_fn(|a| o.cells as f64 / (hi[a] - lo[a])),
+                        cells: o.cells as u64,
+                    },
+                    occupied: s.clone_htod(&vec![1u8; count])?,
+                    estimate: s.alloc_zeros(count)?,
+                    points: s.alloc_zeros(6 * count)?,
+                    raw: s.alloc_zeros(2 * count * channels)?,
+                    refreshes: 0,
+                })
+            }
+        };
         Ok(DenseGridTrainer {
             gpu,
             settings,
-            grid,
-            activation,
+            state: GridState::zeros(s, grid)?,
+            shading,
             kernels,
             scene: DeviceBox {
                 min: settings.scene_box.0,
                 max: settings.scene_box.1,
             },
             rays,
-            origins: s.clone_htod(origins)?,
-            directions: s.clone_htod(directions)?,
-            targets: s.clone_htod(targets)?,
-            params: s.alloc_zeros(values)?,
-            grad: s.alloc_zeros(values)?,
-            acc: s.alloc_zeros(values)?,
-            m: s.alloc_zeros(values)?,
-            v: s.alloc_zeros(values)?,
+            origins: s.clone_htod(data.origins)?,
+            directions: s.clone_htod(data.directions)?,
+            targets: s.clone_htod(data.colors)?,
+            alpha: put(s, data.alpha.unwrap_or(&[]))?,
+            random: settings.random_background && data.alpha.is_some(),
             positions: s.alloc_zeros(3 * n)?,
-            raw: s.alloc_zeros(NODE_CHANNELS * n)?,
-            d_raw: s.alloc_zeros(NODE_CHANNELS * n)?,
+            sample_dirs: s.alloc_zeros(if with_dirs { 3 * n } else { 1 })?,
+            ts: s.alloc_zeros(n)?,
+            distortion_scratch: {
+                let len = if settings.distortion > 0.0 { n } else { 1 };
+                [s.alloc_zeros(len)?, s.alloc_zeros(len)?, s.alloc_zeros(len)?]
+            },
+            distortion_sum: s.alloc_zeros(1)?,
+            occupancy,
+            no_cells: s.alloc_zeros(1)?,
+            raw: s.alloc_zeros(channels * n)?,
+            d_raw: s.alloc_zeros(channels * n)?,
             picked: s.alloc_zeros(settings.batch)?,
             batch_rays,
             forward,
@@ -204,26 +507,116 @@ impl<'g> DenseGridTrainer<'g> {
         self.steps
     }
 
-    /// Looks up, activates and composites the batch whose positions and step lengths are in
-    /// place.
-    fn render_batch(&mut self) -> Result<(), CudaError> {
+    /// Nodes per axis of the grid now.
+    pub fn nodes(&self) -> usize {
+        self.state.grid.spec().nodes[0]
+    }
+
+    /// Values a node holds: density, then 3 colour values or `3 (degree + 1)^2`
+    /// spherical-harmonics coefficients.
+    pub fn channels(&self) -> usize {
+        self.shading.channels()
+    }
+
+    /// Refreshes the occupancy grid from the grid's densities now (`step` does every
+    /// [`OccupancySettings::every`] steps); nothing without one.
+    pub fn refresh_occupancy(&mut self) -> Result<(), CudaError> {
+        let Some(o) = &mut self.occupancy else { return Ok(()) };
+        let s = self.gpu.stream();
+        let count = o.settings.cells.pow(3);
+        let (seed, refresh) = (self.settings.seed, o.refreshes);
+        let mut launch = s.launch_builder(&self.kernels.occupancy_points);
+        launch.arg(&o.cells).arg(&seed).arg(&refresh).arg(&mut o.points);
+        // SAFETY: `points` holds `2 cells^3` positions.
+        unsafe { launch.launch(launch_config(count)) }?;
+        let st = &self.state;
+        st.grid
+            .launch_lookup(&st.params, &o.points, 2 * count, &mut o.raw, &mut self.invalid)?;
+        let (channels, count64) = (self.shading.channels() as u64, count as u64);
+        let mut launch = s.launch_builder(&self.kernels.occupancy_update);
+        launch
+            .arg(&o.raw)
+            .arg(&channels)
+            .arg(&count64)
+            .arg(&self.settings.shift)
+            .arg(&o.settings.decay)
+            .arg(&o.settings.density)
+            .arg(&mut o.estimate)
+            .arg(&mut o.occupied);
+        // SAFETY: `raw` holds `2 cells^3` rows of `channels`, the estimate and the bytes
+        // `cells^3`.
+        unsafe { launch.launch(launch_config(count)) }?;
+        o.refreshes += 1;
+        Ok(())
+    }
+
+    /// The occupancy grid's cells (`[cells, cells, cells]` row-major, 1 where occupied), if
+    /// there is one.
+    pub fn occupancy(&self) -> Result<Option<Vec<u8>>, CudaError> {
+        match &self.occupancy {
+            Some(o) => Ok(Some(self.gpu.stream().clone_dtoh(&o.occupied)?)),
+            None => Ok(None),
+        }
+    }
+
+    /// Whether the sampling kernels write each sample's direction (for spherical harmonics).
+    fn with_dirs(&self) -> u64 {
+        u64::from(matches!(self.shading, Shading::Harmonics(_)))
+    }
+
+    /// Looks up, activates and composites the batch whose positions, step lengths (and
+    /// directions) are in place.
+    fn render_batch(&mut self, clock: &mut PhaseClock) -> Result<(), CudaError> {
         let n = self.settings.batch * self.settings.samples_per_ray;
-        self.grid
-            .launch_lookup(&self.params, &self.positions, n, &mut self.raw, &mut self.invalid)?;
+        let st = &self.state;
+        st.grid
+            .launch_lookup(&st.params, &self.positions, n, &mut self.raw, &mut self.invalid)?;
+        clock.lap(self.gpu, |p| &mut p.lookup)?;
         let (sigma, _, color) = self.batch_rays.samples_mut();
-        self.activation
-            .launch_forward(&self.raw, n, NODE_CHANNELS, sigma, color, &mut self.invalid)?;
-        self.gpu.launch_forward(&self.batch_rays, &mut self.forward)
+        match &self.shading {
+            Shading::Plain(act) => {
+                act.launch_forward(&self.raw, n, VIEW_INDEPENDENT_CHANNELS, sigma, color, &mut self.invalid)?
+            }
+            Shading::Harmonics(sh) => {
+                sh.launch_forward(&self.raw, &self.sample_dirs, n, sigma, color, &mut self.invalid)?
+            }
+        }
+        clock.lap(self.gpu, |p| &mut p.shading)?;
+        self.gpu.launch_forward(&self.batch_rays, &mut self.forward)?;
+        clock.lap(self.gpu, |p| &mut p.composite)
     }
 
     /// One training step at learning rate `lr` (queued on the stream; nothing waits). The
     /// batch's squared error is added to what [`DenseGridTrainer::take_mean_squared_error`]
     /// reads.
     pub fn step(&mut self, lr: f64) -> Result<(), CudaError> {
+        self.step_with(lr, &mut PhaseClock::new(false))
+    }
+
+    /// [`DenseGridTrainer::step`], waiting for the device after each phase to time it: the
+    /// same step (the same batch and update), slower by the waits.
+    pub fn step_timed(&mut self, lr: f64) -> Result<StepPhases, CudaError> {
+        self.wait()?;
+        let mut clock = PhaseClock::new(true);
+        self.step_with(lr, &mut clock)?;
+        Ok(clock.phases)
+    }
+
+    fn step_with(&mut self, lr: f64, clock: &mut PhaseClock) -> Result<(), CudaError> {
         let st = self.settings;
+        if let Some(o) = st.occupancy {
+            if self.steps > 0 && self.steps % o.every == 0 {
+                self.refresh_occupancy()?;
+            }
+        }
+        clock.lap(self.gpu, |p| &mut p.occupancy)?;
         let (batch, samples) = (st.batch as u64, st.samples_per_ray as u64);
-        let (rays, seed, step) = (self.rays as u64, st.seed, self.steps);
+        let (rays, seed, step, with_dirs) = (self.rays as u64, st.seed, self.steps, self.with_dirs());
         {
+            let (cells, occupied) = match &self.occupancy {
+                Some(o) => (o.cells, &o.occupied),
+                None => (NO_CELLS, &self.no_cells),
+            };
             let (_, delta, _) = self.batch_rays.samples_mut();
             let mut launch = self.gpu.stream().launch_builder(&self.kernels.sample_batch);
             launch
@@ -237,56 +630,116 @@ impl<'g> DenseGridTrainer<'g> {
                 .arg(&self.scene)
                 .arg(&mut self.positions)
                 .arg(delta)
-                .arg(&mut self.picked);
+                .arg(&mut self.ts)
+                .arg(&mut self.picked)
+                .arg(&with_dirs)
+                .arg(&mut self.sample_dirs)
+                .arg(&cells)
+                .arg(occupied);
             // SAFETY: the kernel's arguments in its order and types; `rays` rays in the ray
-            // buffers, `batch * samples` samples in the batch buffers, `batch` picks.
-            unsafe { launch.launch(launch_config(st.batch)) }?;
+            // buffers, `batch * samples` samples in the batch buffers (and their directions
+            // when `with_dirs`), `batch` picks; a thread a sample.
+            unsafe { launch.launch(launch_config(st.batch * st.samples_per_ray)) }?;
         }
-        self.render_batch()?;
+        clock.lap(self.gpu, |p| &mut p.sampling)?;
+        self.render_batch(clock)?;
         {
-            let mut launch = self.gpu.stream().launch_builder(&self.kernels.squared_error);
+            let random = u64::from(self.random);
+            let background = DeviceRgb(st.background.map(f64::from));
+            let (d_color, d_opacity) = match self.upstream.both_mut() {
+                (c, Some(o)) => (c, o),
+                // Made with an opacity gradient in `new`.
+                (_, None) => return Err(CudaError::InvalidSettings("no opacity upstream".into())),
+            };
+            let mut launch = self.gpu.stream().launch_builder(&self.kernels.photometric_loss);
             launch
                 .arg(&self.forward.color)
+                .arg(&self.forward.opacity)
                 .arg(&self.targets)
+                .arg(&self.alpha)
+                .arg(&random)
                 .arg(&self.picked)
                 .arg(&batch)
-                .arg(self.upstream.color_mut())
+                .arg(&seed)
+                .arg(&step)
+                .arg(&background)
+                .arg(d_color)
+                .arg(d_opacity)
                 .arg(&mut self.sse);
-            // SAFETY: `batch` rays' colours and gradients, picks below `rays`.
+            // SAFETY: `batch` rays' colours, opacities and gradients; picks below `rays`;
+            // the opacities of `rays` pixels are read only when `random` (then given).
             unsafe { launch.launch(launch_config(st.batch)) }?;
         }
+        clock.lap(self.gpu, |p| &mut p.loss)?;
         self.gpu
             .launch_backward(&self.batch_rays, &self.forward, &self.upstream, &mut self.gradients)?;
+        clock.lap(self.gpu, |p| &mut p.composite_backward)?;
+        if st.distortion > 0.0 {
+            let c = st.distortion / st.batch as f64;
+            let (sigma, delta, _) = self.batch_rays.samples_mut();
+            let [w, a, depth] = &mut self.distortion_scratch;
+            let mut launch = self.gpu.stream().launch_builder(&self.kernels.distortion);
+            launch
+                .arg(&*sigma)
+                .arg(&*delta)
+                .arg(&self.ts)
+                .arg(&batch)
+                .arg(&samples)
+                .arg(&c)
+                .arg(w)
+                .arg(a)
+                .arg(depth)
+                .arg(&mut self.gradients.sigma)
+                .arg(&mut self.distortion_sum);
+            // SAFETY: `batch * samples` samples in each per-sample buffer (the scratch ones are
+            // that long when the weight is above 0); a thread a ray.
+            unsafe { launch.launch(launch_config(st.batch)) }?;
+        }
+        clock.lap(self.gpu, |p| &mut p.distortion)?;
         let n = st.batch * st.samples_per_ray;
-        self.activation.launch_backward(
-            &self.raw,
-            n,
-            NODE_CHANNELS,
-            Some(&self.gradients.sigma),
-            Some(&self.gradients.color),
-            &mut self.d_raw,
-        )?;
-        self.grid.launch_backward(
-            &self.params,
+        match &self.shading {
+            Shading::Plain(act) => act.launch_backward(
+                &self.raw,
+                n,
+                VIEW_INDEPENDENT_CHANNELS,
+                Some(&self.gradients.sigma),
+                Some(&self.gradients.color),
+                &mut self.d_raw,
+            )?,
+            Shading::Harmonics(sh) => sh.launch_backward(
+                &self.raw,
+                &self.sample_dirs,
+                n,
+                &self.gradients.sigma,
+                &self.gradients.color,
+                &mut self.d_raw,
+            )?,
+        }
+        clock.lap(self.gpu, |p| &mut p.shading_backward)?;
+        let state = &mut self.state;
+        state.grid.launch_backward(
+            &state.params,
             &self.positions,
             &self.d_raw,
             n,
-            &mut self.acc,
-            &mut self.grad,
+            &mut state.acc,
+            &mut state.grad,
             None,
         )?;
+        clock.lap(self.gpu, |p| &mut p.grid_backward)?;
         self.steps += 1;
-        let t = self.steps as i32;
+        state.adam_steps += 1;
+        let t = i32::try_from(state.adam_steps).unwrap_or(i32::MAX);
         let (beta1, beta2, eps) = (0.9f64, 0.999f64, 1e-8f64);
         let (c1, c2) = (1.0 - beta1.powi(t), 1.0 - beta2.powi(t));
-        let values = self.params.len();
+        let values = state.params.len();
         let len = values as u64;
         let mut launch = self.gpu.stream().launch_builder(&self.kernels.adam);
         launch
-            .arg(&mut self.params)
-            .arg(&self.grad)
-            .arg(&mut self.m)
-            .arg(&mut self.v)
+            .arg(&mut state.params)
+            .arg(&state.grad)
+            .arg(&mut state.m)
+            .arg(&mut state.v)
             .arg(&len)
             .arg(&lr)
             .arg(&beta1)
@@ -296,6 +749,34 @@ impl<'g> DenseGridTrainer<'g> {
             .arg(&c2);
         // SAFETY: four buffers of the grid's `values` values.
         unsafe { launch.launch(launch_config(values)) }?;
+        clock.lap(self.gpu, |p| &mut p.adam)
+    }
+
+    /// Grows (or shrinks) the grid to `nodes` per axis over the same box: each new node takes
+    /// the current field's trilinear value at its position (the lookup kernel at the nodes of
+    /// the new lattice), and Adam starts afresh, as `fogray fit`'s coarse-to-fine growth does.
+    ///
+    /// Errors: [`CudaError::InvalidGrid`] for fewer than 2 nodes (the trainer is unchanged
+    /// then), and the device's.
+    pub fn resample(&mut self, nodes: usize) -> Result<(), CudaError> {
+        let spec = GridSpec {
+            nodes: [nodes; 3],
+            ..*self.state.grid.spec()
+        };
+        let grid = self.state.grid.for_spec(spec)?;
+        let s = self.gpu.stream().clone();
+        let mut next = GridState::zeros(&s, grid)?;
+        let count = nodes.pow(3);
+        let mut at = s.alloc_zeros::<f32>(3 * count)?;
+        let nodes64 = nodes as u64;
+        let mut launch = s.launch_builder(&self.kernels.lattice);
+        launch.arg(&self.scene).arg(&nodes64).arg(&mut at);
+        // SAFETY: `at` holds `nodes^3` positions.
+        unsafe { launch.launch(launch_config(count)) }?;
+        let old = &self.state;
+        old.grid
+            .launch_lookup(&old.params, &at, count, &mut next.params, &mut self.invalid)?;
+        self.state = next;
         Ok(())
     }
 
@@ -319,8 +800,17 @@ impl<'g> DenseGridTrainer<'g> {
         Ok(if values > 0.0 { sse / values } else { 0.0 })
     }
 
-    /// Renders rays (`origins`, unit `directions`, `[R, 3]`) with samples at the centres of
-    /// their steps: colours `[R, 3]`.
+    /// Waits for the steps queued, and returns the mean over them of the weighted distortion
+    /// loss since the last call (0 if none or without the loss).
+    pub fn take_distortion_loss(&mut self, steps: u64) -> Result<f64, CudaError> {
+        let s = self.gpu.stream();
+        let sum = s.clone_dtoh(&self.distortion_sum)?[0];
+        s.memset_zeros(&mut self.distortion_sum)?;
+        Ok(if steps > 0 { sum / steps as f64 } else { 0.0 })
+    }
+
+    /// Renders rays (`origins`, unit `directions`, `[R, 3]`) over the settings' background
+    /// with samples at the centres of their steps: colours `[R, 3]`.
     pub fn render(&mut self, origins: &[f32], directions: &[f32]) -> Result<Vec<f32>, CudaError> {
         let rays = origins.len() / 3;
         if origins.len() != 3 * rays || directions.len() != origins.len() {
@@ -331,14 +821,19 @@ impl<'g> DenseGridTrainer<'g> {
             });
         }
         let s = self.gpu.stream().clone();
-        let (o, d) = (s.clone_htod(origins)?, s.clone_htod(directions)?);
+        let (o, d) = (put(&s, origins)?, put(&s, directions)?);
         let st = self.settings;
+        let with_dirs = self.with_dirs();
         let mut colors = Vec::with_capacity(3 * rays);
         let mut first = 0;
         while first < rays {
             let count = st.batch.min(rays - first);
             let (first64, count64, samples) = (first as u64, count as u64, st.samples_per_ray as u64);
             {
+                let (cells, occupied) = match &self.occupancy {
+                    Some(o) => (o.cells, &o.occupied),
+                    None => (NO_CELLS, &self.no_cells),
+                };
                 let (_, delta, _) = self.batch_rays.samples_mut();
                 // The batch's rays past `count` keep step length 0: they add nothing.
                 s.memset_zeros(delta)?;
@@ -351,14 +846,25 @@ impl<'g> DenseGridTrainer<'g> {
                     .arg(&samples)
                     .arg(&self.scene)
                     .arg(&mut self.positions)
-                    .arg(delta);
+                    .arg(delta)
+                    .arg(&mut self.ts)
+                    .arg(&with_dirs)
+                    .arg(&mut self.sample_dirs)
+                    .arg(&cells)
+                    .arg(occupied);
                 // SAFETY: rays first..first + count exist; the batch buffers hold `batch >=
-                // count` rays of samples.
-                unsafe { launch.launch(launch_config(count)) }?;
+                // count` rays of samples; a thread a sample.
+                unsafe { launch.launch(launch_config(count * st.samples_per_ray)) }?;
             }
-            self.render_batch()?;
-            let out = s.clone_dtoh(&self.forward.color)?;
-            colors.extend_from_slice(&out[..3 * count]);
+            self.render_batch(&mut PhaseClock::new(false))?;
+            let color0 = s.clone_dtoh(&self.forward.color)?;
+            let opacity = s.clone_dtoh(&self.forward.opacity)?;
+            for r in 0..count {
+                let seen = 1.0 - f64::from(opacity[r]);
+                for c in 0..3 {
+                    colors.push((f64::from(color0[3 * r + c]) + seen * f64::from(st.background[c])) as f32);
+                }
+            }
             first += count;
         }
         if s.clone_dtoh(&self.invalid)?[0] != 0 {
@@ -367,27 +873,28 @@ impl<'g> DenseGridTrainer<'g> {
         Ok(colors)
     }
 
-    /// The grid's raw values, `[nodes, nodes, nodes, 4]` row-major (density, then RGB).
+    /// The grid's raw values, `[nodes, nodes, nodes, channels]` row-major (density, then the
+    /// colour's values).
     pub fn grid_values(&self) -> Result<Vec<f32>, CudaError> {
-        Ok(self.gpu.stream().clone_dtoh(&self.params)?)
+        Ok(self.gpu.stream().clone_dtoh(&self.state.params)?)
     }
 
     /// Replaces the grid's raw values (as [`DenseGridTrainer::grid_values`] gives them; Adam's
     /// moments are kept). Errors: a length other than the grid's; the grid is unchanged then.
     pub fn set_grid_values(&mut self, values: &[f32]) -> Result<(), CudaError> {
-        if values.len() != self.params.len() {
+        if values.len() != self.state.params.len() {
             return Err(CudaError::Shape {
-                what: "grid values ([nodes, nodes, nodes, 4])",
-                expected: self.params.len(),
+                what: "grid values ([nodes, nodes, nodes, channels])",
+                expected: self.state.params.len(),
                 got: values.len(),
             });
         }
-        Ok(self.gpu.stream().memcpy_htod(values, &mut self.params)?)
+        Ok(self.gpu.stream().memcpy_htod(values, &mut self.state.params)?)
     }
 
     /// The gradient of the last step's loss with respect to the grid's raw values (before
     /// Adam used it), for checks against the CPU ops.
     pub fn last_gradient(&self) -> Result<Vec<f32>, CudaError> {
-        Ok(self.gpu.stream().clone_dtoh(&self.grad)?)
+        Ok(self.gpu.stream().clone_dtoh(&self.state.grad)?)
     }
 }

@@ -247,6 +247,86 @@ __device__ __forceinline__ void density_color_backward(const T* __restrict__ raw
     }
 }
 
+// The real spherical-harmonics basis of degree 0 to 3 at unit direction (x, y, z), in the
+// order, normalisation and signs of `fogray_ops::sh::basis` (Plenoxels' and 3D Gaussian
+// splatting's); a lower degree uses a prefix.
+__device__ __forceinline__ void sh_basis(double x, double y, double z, double Y[16]) {
+    const double C0 = 0.28209479177387814, C1 = 0.4886025119029199;
+    const double C2[5] = {1.0925484305920792, -1.0925484305920792, 0.31539156525252005, -1.0925484305920792,
+                          0.5462742152960396};
+    const double C3[7] = {-0.5900435899266435, 2.890611442640554,  -0.4570457994644658, 0.3731763325901154,
+                          -0.4570457994644658, 1.445305721320277, -0.5900435899266435};
+    double xx = x * x, yy = y * y, zz = z * z;
+    Y[0] = C0;
+    Y[1] = -C1 * y;
+    Y[2] = C1 * z;
+    Y[3] = -C1 * x;
+    Y[4] = C2[0] * (x * y);
+    Y[5] = C2[1] * (y * z);
+    Y[6] = C2[2] * (2.0 * zz - xx - yy);
+    Y[7] = C2[3] * (x * z);
+    Y[8] = C2[4] * (xx - yy);
+    Y[9] = C3[0] * y * (3.0 * xx - yy);
+    Y[10] = C3[1] * (x * y) * z;
+    Y[11] = C3[2] * y * (4.0 * zz - xx - yy);
+    Y[12] = C3[3] * z * (2.0 * zz - 3.0 * xx - 3.0 * yy);
+    Y[13] = C3[4] * x * (4.0 * zz - xx - yy);
+    Y[14] = C3[5] * z * (xx - yy);
+    Y[15] = C3[6] * x * (xx - 3.0 * yy);
+}
+
+// The activation of a row of `1 + 3 B` raw values seen along direction `dir` (`[n, 3]`, one
+// per row): the density `softplus(raw_0 + shift)` of `density_color_forward`, and the colour
+// `sigmoid(sum_b raw[1 + c B + b] Y_b(d))` of `fogray_ops::ShColor` (channel-major
+// coefficients); in f64, each value rounded once.
+template <typename T>
+__device__ __forceinline__ void sh_density_color_forward(const T* __restrict__ raw, const T* __restrict__ dirs,
+                                                         u64 n, u64 basis, double shift, T* __restrict__ sigma,
+                                                         T* __restrict__ color, unsigned* __restrict__ invalid) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    const T* row = raw + i * (1 + 3 * basis);
+    double Y[16];
+    double x = (double)dirs[3 * i], y = (double)dirs[3 * i + 1], z = (double)dirs[3 * i + 2];
+    sh_basis(x, y, z, Y);
+    bool nan = (x != x) | (y != y) | (z != z);
+    double d0 = (double)row[0];
+    nan |= d0 != d0;
+    sigma[i] = (T)softplus(d0 + shift);
+#pragma unroll
+    for (int c = 0; c < 3; ++c) {
+        double sum = 0.0;
+        for (u64 b = 0; b < basis; ++b) sum += (double)row[1 + c * basis + b] * Y[b];
+        nan |= sum != sum;
+        color[3 * i + c] = (T)sigmoid(sum);
+    }
+    if (nan) atomicOr(invalid, 1u);
+}
+
+// Its backward: `d_raw_0 = d_sigma sigmoid(raw_0 + shift)`, and
+// `d_raw[1 + c B + b] = d_color_c sigmoid'(x_c) Y_b(d)` with `x_c` recomputed from the inputs.
+template <typename T>
+__device__ __forceinline__ void sh_density_color_backward(const T* __restrict__ raw, const T* __restrict__ dirs,
+                                                          u64 n, u64 basis, double shift,
+                                                          const T* __restrict__ d_sigma,
+                                                          const T* __restrict__ d_color, T* __restrict__ d_raw) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    u64 k = 1 + 3 * basis;
+    const T* row = raw + i * k;
+    T* o = d_raw + i * k;
+    double Y[16];
+    sh_basis((double)dirs[3 * i], (double)dirs[3 * i + 1], (double)dirs[3 * i + 2], Y);
+    o[0] = (T)((double)d_sigma[i] * sigmoid((double)row[0] + shift));
+#pragma unroll
+    for (int c = 0; c < 3; ++c) {
+        double sum = 0.0;
+        for (u64 b = 0; b < basis; ++b) sum += (double)row[1 + c * basis + b] * Y[b];
+        double s = (double)d_color[3 * i + c] * sigmoid_slope(sum);
+        for (u64 b = 0; b < basis; ++b) o[1 + c * basis + b] = (T)(s * Y[b]);
+    }
+}
+
 #define INSTANTIATE(T, SUFFIX)                                                                                      \
     extern "C" __global__ void grid_forward_##SUFFIX(Geometry g, const T* grid, const T* positions, u64 n, u64 ch,   \
                                                      T* out, unsigned* invalid) {                                   \
@@ -271,6 +351,16 @@ __device__ __forceinline__ void density_color_backward(const T* __restrict__ raw
                                                                const T* d_sigma, int has_d_sigma, const T* d_color, \
                                                                int has_d_color, T* d_raw) {                         \
         density_color_backward<T>(raw, n, k, shift, d_sigma, has_d_sigma, d_color, has_d_color, d_raw);             \
+    }                                                                                                               \
+    extern "C" __global__ void sh_density_color_forward_##SUFFIX(const T* raw, const T* dirs, u64 n, u64 basis,    \
+                                                                 double shift, T* sigma, T* color,                  \
+                                                                 unsigned* invalid) {                               \
+        sh_density_color_forward<T>(raw, dirs, n, basis, shift, sigma, color, invalid);                             \
+    }                                                                                                               \
+    extern "C" __global__ void sh_density_color_backward_##SUFFIX(const T* raw, const T* dirs, u64 n, u64 basis,   \
+                                                                  double shift, const T* d_sigma, const T* d_color, \
+                                                                  T* d_raw) {                                       \
+        sh_density_color_backward<T>(raw, dirs, n, basis, shift, d_sigma, d_color, d_raw);                          \
     }
 
 INSTANTIATE(float, f32)

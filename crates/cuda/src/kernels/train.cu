@@ -3,6 +3,7 @@
 // NVRTC (see `src/kernel.rs`), so it includes no header. f32 data.
 
 typedef unsigned long long u64;
+typedef long long i64;
 
 struct Box {
     double min[3];
@@ -20,12 +21,39 @@ __device__ __forceinline__ u64 mix(u64 x) {
 // A uniform double in [0, 1) from 53 bits of a hash.
 __device__ __forceinline__ double unit(u64 h) { return (double)(h >> 11) * (1.0 / 9007199254740992.0); }
 
-// Ray r's `samples` samples between where it enters and leaves the box, at the centres of
-// equal steps shifted by `offset` in [0, 1) of a step (0.5: the centres): positions and step
-// lengths. A ray that misses the box gets steps of length 0 (nothing), at its origin.
-__device__ __forceinline__ void sample_ray(const float* __restrict__ origins, const float* __restrict__ dirs, u64 r,
-                                           Box box, u64 samples, double offset, float* __restrict__ positions,
-                                           float* __restrict__ delta) {
+// The occupancy grid: `cells` per axis over the box (0: none, every sample kept), one byte a
+// cell (nonzero: occupied), and `scale = cells / (max - min)` per axis.
+struct Cells {
+    double min[3];
+    double scale[3];
+    u64 cells;
+};
+
+// Whether the sample at `p` (its f32 coordinates) lies in an occupied cell.
+__device__ __forceinline__ bool occupied(const Cells& g, const unsigned char* __restrict__ occ, const float p[3]) {
+    if (g.cells == 0) return true;
+    u64 cell = 0;
+#pragma unroll
+    for (int a = 0; a < 3; ++a) {
+        double u = __dmul_rn((double)p[a] - g.min[a], g.scale[a]);
+        i64 i = (i64)floor(u);
+        i = i < 0 ? 0 : (i >= (i64)g.cells ? (i64)g.cells - 1 : i);
+        cell = cell * g.cells + (u64)i;
+    }
+    return occ[cell] != 0;
+}
+
+// Sample k of ray r's `samples` samples between where it enters and leaves the box, at the
+// centres of equal steps shifted by `offset` in [0, 1) of a step (0.5: the centres): its
+// position and step length (and, with `write_dirs`, its view direction, the ray's). A ray that
+// misses the box gets steps of length 0 (nothing), at its origin. One thread a sample: each
+// finds its ray's chord itself, which costs less than leaving the device idle with a thread a
+// ray.
+__device__ __forceinline__ void sample_one(const float* __restrict__ origins, const float* __restrict__ dirs, u64 r,
+                                           Box box, u64 samples, u64 k, double offset, float* __restrict__ position,
+                                           float* __restrict__ delta, float* __restrict__ t_out, u64 write_dirs,
+                                           float* __restrict__ dir_out, Cells cells,
+                                           const unsigned char* __restrict__ occ) {
     double o[3], d[3];
     double t0 = 0.0, t1 = 1e300;
 #pragma unroll
@@ -46,49 +74,190 @@ __device__ __forceinline__ void sample_ray(const float* __restrict__ origins, co
     }
     bool hit = t1 > t0;
     double step = hit ? (t1 - t0) / (double)samples : 0.0;
-    for (u64 k = 0; k < samples; ++k) {
-        double t = t0 + ((double)k + offset) * step;
+    double t = t0 + ((double)k + offset) * step;
+    float p[3];
 #pragma unroll
-        for (int a = 0; a < 3; ++a) positions[3 * k + a] = (float)(o[a] + t * d[a]);
-        delta[k] = (float)step;
+    for (int a = 0; a < 3; ++a) p[a] = (float)(o[a] + t * d[a]);
+    // A sample in an empty cell is skipped: no length (it adds nothing and gets no gradient)
+    // and a position past the box (the lookup reads no node for it).
+    bool keep = occupied(cells, occ, p);
+#pragma unroll
+    for (int a = 0; a < 3; ++a) position[a] = keep ? p[a] : __int_as_float(0x7f800000);
+    *delta = keep ? (float)step : 0.0f;
+    // The midpoint's distance along the ray (for the distortion loss).
+    *t_out = (float)t;
+    if (write_dirs) {
+#pragma unroll
+        for (int a = 0; a < 3; ++a) dir_out[a] = dirs[3 * r + a];
     }
+}
+
+// The hash of batch ray b at `step`: it picks the ray, its samples' offset and its random
+// background.
+__device__ __forceinline__ u64 batch_hash(u64 seed, u64 step, u64 b) {
+    return mix(seed ^ mix(step * 0x100000001b3ull + b));
 }
 
 // Batch ray b takes ray picked[b] = hash(seed, step, b) mod rays, with a random offset of its
-// samples (stratified sampling: every point of a ray is sampled over the steps).
+// samples (stratified sampling: every point of a ray is sampled over the steps). One thread a
+// sample of the `batch * samples`.
 extern "C" __global__ void sample_batch(const float* origins, const float* dirs, u64 rays, u64 batch, u64 samples,
-                                        u64 seed, u64 step, Box box, float* positions, float* delta, u64* picked) {
-    u64 b = (u64)blockIdx.x * blockDim.x + threadIdx.x;
-    if (b >= batch) return;
-    u64 h = mix(seed ^ mix(step * 0x100000001b3ull + b));
+                                        u64 seed, u64 step, Box box, float* positions, float* delta, float* ts,
+                                        u64* picked, u64 write_dirs, float* sample_dirs, Cells cells,
+                                        const unsigned char* occ) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= batch * samples) return;
+    u64 b = i / samples, k = i % samples;
+    u64 h = batch_hash(seed, step, b);
     u64 r = h % rays;
-    picked[b] = r;
-    sample_ray(origins, dirs, r, box, samples, unit(mix(h)), positions + 3 * b * samples, delta + b * samples);
+    if (k == 0) picked[b] = r;
+    sample_one(origins, dirs, r, box, samples, k, unit(mix(h)), positions + 3 * i, delta + i, ts + i, write_dirs,
+               sample_dirs + (write_dirs ? 3 * i : 0), cells, occ);
 }
 
-// Rays first .. first + count, sampled at the centres of their steps (for rendering).
+// Rays first .. first + count, sampled at the centres of their steps (for rendering); one
+// thread a sample of the `count * samples`.
 extern "C" __global__ void sample_range(const float* origins, const float* dirs, u64 first, u64 count, u64 samples,
-                                        Box box, float* positions, float* delta) {
-    u64 b = (u64)blockIdx.x * blockDim.x + threadIdx.x;
-    if (b >= count) return;
-    sample_ray(origins, dirs, first + b, box, samples, 0.5, positions + 3 * b * samples, delta + b * samples);
+                                        Box box, float* positions, float* delta, float* ts, u64 write_dirs,
+                                        float* sample_dirs, Cells cells, const unsigned char* occ) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= count * samples) return;
+    u64 b = i / samples, k = i % samples;
+    sample_one(origins, dirs, first + b, box, samples, k, 0.5, positions + 3 * i, delta + i, ts + i, write_dirs,
+               sample_dirs + (write_dirs ? 3 * i : 0), cells, occ);
 }
 
-// L = sum over the batch's rays and channels of (C - target)^2 / (3 batch): dL/dC, and the
-// sum of squares (added to `sse`, zeroed by the host) for the record.
-extern "C" __global__ void squared_error(const float* color, const float* targets, const u64* picked, u64 batch,
-                                         float* d_color, double* sse) {
+struct Rgb {
+    double c[3];
+};
+
+// L = sum over the batch's rays and channels of (C - target)^2 / (3 batch), where the batch was
+// composited over black: `color0` and `opacity` are its colour and opacity, and the ray's
+// colour over its background `bg` is `C = color0 + (1 - opacity) bg`. The background is
+// `background` (the colour the targets were composited over), or with `random`, a uniform
+// colour drawn from the ray's hash, the target then recomposited over it from its opacity
+// `alpha` (`target + (bg - background) (1 - alpha)`). Writes dL/dcolor0 = dL/dC and
+// dL/dopacity = -sum_c dL/dC_c bg_c, and adds the sum of squares to `sse` (zeroed by the host).
+extern "C" __global__ void photometric_loss(const float* color0, const float* opacity, const float* targets,
+                                            const float* alpha, u64 random, const u64* picked, u64 batch,
+                                            u64 seed, u64 step, Rgb background, float* d_color,
+                                            float* d_opacity, double* sse) {
     u64 b = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     if (b >= batch) return;
-    double sum = 0.0;
+    u64 r = picked[b];
+    u64 h = batch_hash(seed, step, b);
+    double seen = 1.0 - (double)opacity[b];
+    double unseen = random ? 1.0 - (double)alpha[r] : 0.0;
+    double sum = 0.0, d_seen = 0.0;
     double scale = 2.0 / (3.0 * (double)batch);
 #pragma unroll
     for (int c = 0; c < 3; ++c) {
-        double diff = (double)color[3 * b + c] - (double)targets[3 * picked[b] + c];
-        d_color[3 * b + c] = (float)(scale * diff);
+        double bg = random ? unit(mix(h + 1 + (u64)c)) : background.c[c];
+        double target = (double)targets[3 * r + c] + (bg - background.c[c]) * unseen;
+        double diff = (double)color0[3 * b + c] + seen * bg - target;
+        double g = scale * diff;
+        d_color[3 * b + c] = (float)g;
+        d_seen += g * bg;
         sum += diff * diff;
     }
+    d_opacity[b] = (float)(-d_seen);
     atomicAdd(sse, sum);
+}
+
+// The nodes of a `nodes`^3 lattice over the box, row-major (the first axis slowest), as
+// positions `[nodes^3, 3]`: node i sits at `min + i (max - min) / (nodes - 1)`, the last on
+// the max face exactly.
+extern "C" __global__ void lattice(Box box, u64 nodes, float* positions) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= nodes * nodes * nodes) return;
+    u64 idx[3] = {i / (nodes * nodes), (i / nodes) % nodes, i % nodes};
+#pragma unroll
+    for (int a = 0; a < 3; ++a) {
+        double span = box.max[a] - box.min[a];
+        double p = idx[a] + 1 == nodes ? box.max[a]
+                                       : __dadd_rn(box.min[a], __dmul_rn((double)idx[a], span / (double)(nodes - 1)));
+        positions[3 * i + a] = (float)p;
+    }
+}
+
+// The distortion loss of mip-NeRF 360 (`fogray_ops::distortion`) of each batch ray, its
+// samples `samples` apart in the buffers, times `c` (the loss's weight over the batch's ray
+// count): its gradient with respect to the densities is added to `d_sigma`, and its value to
+// `loss` (zeroed by the host). One thread a ray, in two passes over its samples with the CPU
+// op's numerics: front to back, the weights `w` from the running optical depth and
+// `A_i = A_{i-1} + S_{<i} (t_i - t_{i-1})`; back to front, `B_i = B_{i+1} + S_{>i} (t_{i+1} - t_i)`,
+// `g_i = c (2 A_i + 2 B_i + (2/3) w_i delta_i)` and
+// `dL/dsigma_j = delta_j T_{j+1} (g_j - R_{j+1})`, `R_j = R_{j+1} + alpha_j (g_j - R_{j+1})`.
+// `w`, `A` and the optical depth after each sample are kept in the f64 scratch buffers
+// (`[batch samples]` each) between the passes.
+extern "C" __global__ void distortion(const float* sigma, const float* delta, const float* ts, u64 batch,
+                                      u64 samples, double c, double* w_s, double* a_s, double* depth_s,
+                                      float* d_sigma, double* loss) {
+    u64 b = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (b >= batch) return;
+    u64 first = b * samples, end = first + samples;
+    double depth = 0.0, S = 0.0, A = 0.0, sum = 0.0;
+    for (u64 k = first; k < end; ++k) {
+        double tau = (double)sigma[k] * (double)delta[k];
+        double w = exp(-depth) * -expm1(-tau);
+        if (k > first) A += S * ((double)ts[k] - (double)ts[k - 1]);
+        sum += 2.0 * w * A + w * w * (double)delta[k] / 3.0;
+        S += w;
+        depth += tau;
+        w_s[k] = w;
+        a_s[k] = A;
+        depth_s[k] = depth;
+    }
+    double S_after = 0.0, B = 0.0, R = 0.0;
+    for (u64 k = end; k-- > first;) {
+        if (k + 1 < end) {
+            S_after += w_s[k + 1];
+            B += S_after * ((double)ts[k + 1] - (double)ts[k]);
+        }
+        double w = w_s[k];
+        double dk = (double)delta[k];
+        double g = c * (2.0 * a_s[k] + 2.0 * B + (2.0 / 3.0) * w * dk);
+        double tau = (double)sigma[k] * dk;
+        double alpha = -expm1(-tau);
+        d_sigma[k] = (float)((double)d_sigma[k] + dk * exp(-depth_s[k]) * (g - R));
+        R += alpha * (g - R);
+    }
+    atomicAdd(loss, c * sum);
+}
+
+// The points at which a refresh reads each cell's density: its centre (row 2 i) and a point
+// drawn uniformly in it by the hash of (seed, refresh, i) (row 2 i + 1), as positions.
+extern "C" __global__ void occupancy_points(Cells g, u64 seed, u64 refresh, float* positions) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    u64 n = g.cells * g.cells * g.cells;
+    if (i >= n) return;
+    u64 idx[3] = {i / (g.cells * g.cells), (i / g.cells) % g.cells, i % g.cells};
+    u64 h = mix(seed ^ mix(0x5bd1e995ull * (refresh + 1) + i));
+#pragma unroll
+    for (int a = 0; a < 3; ++a) {
+        // Rounded step by step (no fused multiply-add), so that the host can recompute them.
+        double side = 1.0 / g.scale[a];
+        double centre = __dadd_rn((double)idx[a], 0.5), random = __dadd_rn((double)idx[a], unit(mix(h + (u64)a)));
+        positions[6 * i + a] = (float)__dadd_rn(g.min[a], __dmul_rn(centre, side));
+        positions[6 * i + 3 + a] = (float)__dadd_rn(g.min[a], __dmul_rn(random, side));
+    }
+}
+
+// softplus(x) = max(x, 0) + ln(1 + exp(-|x|)), as the activation computes it.
+__device__ __forceinline__ double softplus(double x) { return fmax(x, 0.0) + log1p(exp(-fabs(x))); }
+
+// A refresh: each cell's estimate becomes max(estimate * decay, the larger density of its two
+// points) (raw rows `[2 cells^3, channels]` from the lookup at `occupancy_points`), and the
+// cell is occupied while its estimate exceeds `threshold`.
+extern "C" __global__ void occupancy_update(const float* raw, u64 channels, u64 n, double shift, double decay,
+                                            double threshold, float* estimate, unsigned char* occ) {
+    u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
+    if (i >= n) return;
+    double fresh = fmax(softplus((double)raw[2 * i * channels] + shift),
+                        softplus((double)raw[(2 * i + 1) * channels] + shift));
+    double e = fmax((double)estimate[i] * decay, fresh);
+    estimate[i] = (float)e;
+    occ[i] = (float)e > threshold ? 1 : 0;
 }
 
 // Adam with bias-corrected moments: `c1 = 1 - beta1^t`, `c2 = 1 - beta2^t`.

@@ -63,7 +63,12 @@ fn the_grid_and_training_kernels_compile() {
                     "grid_forward_f32",
                     "grid_scatter_f64",
                     "density_color_backward_f32",
+                    "sh_density_color_forward_f32",
+                    "sh_density_color_backward_f64",
                     "sample_batch",
+                    "sample_range",
+                    "photometric_loss",
+                    "lattice",
                     "adam",
                 ] {
                     assert!(src.contains(name), "{name} missing from the PTX for {capability:?}");

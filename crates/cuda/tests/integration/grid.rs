@@ -1,11 +1,11 @@
-//! The GPU grid field and activation against the CPU ops (`fogray_ops::GridField`,
-//! `fogray_ops::DensityColor`), element by element, in f32 (to 1e-6) and f64 (to 1e-12) of
+//! The GPU grid field and activations against the CPU ops (`fogray_ops::GridField`,
+//! `fogray_ops::DensityColor`, `fogray_ops::ShColor`), element by element, in f32 (to 1e-6) and f64 (to 1e-12) of
 //! the size of the terms each value is made of, on random positions and the hard ones: on
 //! inner cell faces, on the max faces, at corners, outside every face, at infinities. Skipped,
 //! with a message, where there is no CUDA driver or device.
 
-use fogray_cuda::{device_for_tests, CudaDensityColor, CudaError, CudaGrid, DeviceFloat, GridSpec};
-use fogray_ops::{ActivatedGrads, DensityColor, GridBox, GridField, GridWanted};
+use fogray_cuda::{device_for_tests, CudaDensityColor, CudaError, CudaGrid, CudaShDensityColor, DeviceFloat, GridSpec};
+use fogray_ops::{ActivatedGrads, DensityColor, GridBox, GridField, GridWanted, ShColor};
 use fogray_tape::Float;
 use ndarray::{ArrayView2, ArrayViewD};
 use rand::Rng;
@@ -280,4 +280,112 @@ fn the_activation_agrees_with_the_cpu_op() {
         check_activation::<f32>(&act, shift, 1e-6);
         check_activation::<f64>(&act, shift, 1e-12);
     }
+}
+
+/// Unit directions: random ones, the axes both ways, and the diagonals.
+fn unit_directions(n: usize) -> Vec<f64> {
+    let mut r = rng(29);
+    let mut d = Vec::new();
+    for a in 0..3 {
+        for sign in [1.0, -1.0] {
+            d.extend((0..3).map(|b| if a == b { sign } else { 0.0 }));
+        }
+    }
+    let k = 1.0 / 3f64.sqrt();
+    d.extend([k, k, k, -k, k, -k]);
+    while d.len() < 3 * n {
+        let v: [f64; 3] = std::array::from_fn(|_| r.gen_range(-1.0..1.0));
+        let len = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+        if len > 1e-3 {
+            d.extend(v.iter().map(|x| x / len));
+        }
+    }
+    d.truncate(3 * n);
+    d
+}
+
+fn check_sh<F: Float + DeviceFloat>(gpu: &fogray_cuda::CudaComposite, degree: usize, shift: f64, tol: f64) {
+    let sh = CudaShDensityColor::new(gpu, shift, degree).unwrap();
+    let k = sh.channels();
+    assert_eq!(k, 1 + 3 * (degree + 1) * (degree + 1));
+    let n = 3000;
+    let mut r = rng(31 + degree as u64);
+    // Sums across the sigmoid's range and its saturated tails; densities from -800 to 800.
+    let mut raw: Vec<f64> = (0..n * k).map(|_| r.gen_range(-30.0..30.0)).collect();
+    for (i, v) in [0.0, 50.0, -800.0, 1e-8, -1e-8, 700.0, -700.0, 800.0]
+        .into_iter()
+        .enumerate()
+    {
+        raw[i * k] = v;
+        raw[i * k + 1] = v;
+    }
+    let dirs = unit_directions(n);
+    let (rf, df) = (cast::<F>(&raw), cast::<F>(&dirs));
+    let rv = ArrayView2::from_shape((n, k), &rf).unwrap();
+    let dv = ArrayView2::from_shape((n, 3), &df).unwrap();
+    let density = DensityColor::new(shift).unwrap();
+    let colour = ShColor::new(degree).unwrap();
+    let cpu_sigma = density.density(rv).unwrap();
+    let cpu_color = colour.evaluate(rv.slice(ndarray::s![.., 1..]), dv).unwrap();
+    let out = sh.evaluate(&rf, &df).unwrap();
+    let rel = |v: &[F]| -> Vec<f64> { v.iter().map(|x| DeviceFloat::to_f64(*x).abs()).collect() };
+    let floor = if F::SUFFIX == "f32" { 1e-37 } else { 1e-307 };
+    let cs = cpu_sigma.as_slice().unwrap();
+    let cc = cpu_color.as_slice().unwrap();
+    let (e_s, at_s) = worst(&out.sigma, cs, &rel(cs), floor);
+    let (e_c, at_c) = worst(&out.color, cc, &rel(cc), floor);
+    let gs: Vec<F> = cast(&(0..n).map(|_| r.gen_range(-1.0..1.0)).collect::<Vec<_>>());
+    let gc: Vec<F> = cast(&(0..3 * n).map(|_| r.gen_range(-1.0..1.0)).collect::<Vec<_>>());
+    let gcv = ArrayView2::from_shape((n, 3), &gc).unwrap();
+    // The CPU gradient: the density's column from the activation (no colour upstream), the
+    // coefficients' from the spherical harmonics.
+    let mut cpu_g = density
+        .vjp(
+            rv,
+            &ActivatedGrads {
+                sigma: Some(ndarray::ArrayView1::from(&gs[..])),
+                color: None,
+            },
+        )
+        .unwrap();
+    let coeffs = colour.vjp(rv.slice(ndarray::s![.., 1..]), dv, gcv).unwrap();
+    cpu_g.slice_mut(ndarray::s![.., 1..]).assign(&coeffs);
+    let gpu_g = sh.vjp(&rf, &df, &gs, &gc).unwrap();
+    let cg = cpu_g.as_slice().unwrap();
+    let (e_g, at_g) = worst(&gpu_g, cg, &rel(cg), floor);
+    println!(
+        "{} spherical harmonics degree {degree} (shift {shift}), {n} rows: max relative error sigma {e_s:.2e}@{at_s}, colour {e_c:.2e}@{at_c}, raw gradient {e_g:.2e}@{at_g}",
+        std::any::type_name::<F>()
+    );
+    assert!(e_s <= tol && e_c <= tol && e_g <= tol, "{e_s} {e_c} {e_g}");
+}
+
+#[test]
+fn the_spherical_harmonics_activation_agrees_with_the_cpu_ops() {
+    let Some(gpu) = device_for_tests().unwrap() else { return };
+    for degree in 0..=3 {
+        check_sh::<f32>(&gpu, degree, -4.0, 1e-6);
+        check_sh::<f64>(&gpu, degree, -4.0, 1e-12);
+    }
+    check_sh::<f64>(&gpu, 1, 0.0, 1e-12);
+    assert!(matches!(
+        CudaShDensityColor::new(&gpu, 0.0, 4),
+        Err(CudaError::InvalidSettings(_))
+    ));
+    assert!(matches!(
+        CudaShDensityColor::new(&gpu, f64::NAN, 1),
+        Err(CudaError::InvalidShift(_))
+    ));
+    // A NaN coefficient is reported.
+    let sh = CudaShDensityColor::new(&gpu, 0.0, 1).unwrap();
+    let mut raw = vec![0.5f32; 13];
+    raw[7] = f32::NAN;
+    assert!(matches!(
+        sh.evaluate(&raw, &[0.0, 0.0, 1.0]),
+        Err(CudaError::InvalidSample)
+    ));
+    assert!(matches!(
+        sh.evaluate(&raw[..12], &[0.0, 0.0, 1.0]),
+        Err(CudaError::Shape { .. })
+    ));
 }

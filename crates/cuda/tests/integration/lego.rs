@@ -8,19 +8,29 @@
 //!     --test integration lego -- --ignored --nocapture
 //! ```
 //!
-//! `FOGRAY_GPU_FITS` lists the fits to run, `nodes:samples:batch:seconds` separated by commas
-//! (default `128:256:8192:10`).
+//! `FOGRAY_GPU_FITS` lists the fits to run, separated by commas, each
+//! `nodes:samples:batch:seconds[:sh_degree[:grow[:random_background[:occupancy[:distortion]]]]]`
+//! (default `128:256:8192:10:1:1:1:1:0.01`): with `grow` 1 the grid starts at a quarter of `nodes` and
+//! doubles at 10 % and 30 % of the budget, as `fogray fit`'s does; `random_background` 1
+//! trains each ray over a random colour (lego has alpha); `occupancy` 1 skips the samples in
+//! empty cells of an occupancy grid as `fogray fit`'s (a cell per voxel of the final grid, up
+//! to 128 per axis, occupied while a step of half the final voxel through it stops 1 % of the
+//! light, refreshed every 16 steps); `distortion` is the distortion loss's weight (0: none). The learning rate is `fogray fit`'s: 0.4 until 60 %
+//! of the budget, then down geometrically to 0.04.
 
 use std::path::Path;
 use std::time::Instant;
 
-use fogray_cuda::{device_for_tests, CudaError, DenseGridTrainer, TrainerSettings};
+use fogray_cuda::{
+    device_for_tests, CudaError, DenseGridTrainer, OccupancySettings, StepPhases, TrainerSettings, TrainingRays,
+};
 use fogray_data::{load, Frame, LoadOptions};
 use ndarray::Array3;
 
-/// Origins, directions and colours `[R, 3]` of every pixel of `frames`, row-major per frame.
-fn rays(frames: &[Frame]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
-    let (mut o, mut d, mut c) = (Vec::new(), Vec::new(), Vec::new());
+/// Origins, directions and colours `[R, 3]` and opacities `[R]` of every pixel of `frames`,
+/// row-major per frame (opacity 1 where a picture has no alpha).
+fn rays(frames: &[Frame]) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
+    let (mut o, mut d, mut c, mut alpha) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for f in frames {
         let k = f.camera.intrinsics();
         let centre = f.camera.centre();
@@ -32,10 +42,11 @@ fn rays(frames: &[Frame]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
                     d.push(dir[a] as f32);
                     c.push(f.picture.color[[row, col, a]]);
                 }
+                alpha.push(f.picture.alpha.as_ref().map_or(1.0, |a| a[[row, col]]));
             }
         }
     }
-    (o, d, c)
+    (o, d, c, alpha)
 }
 
 fn held_out_psnr(trainer: &mut DenseGridTrainer<'_>, test: &[Frame], o: &[f32], d: &[f32]) -> Result<f64, CudaError> {
@@ -77,25 +88,56 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
     let scene = load(&lego, &options).unwrap_or_else(|e| panic!("{e}"));
     let names: Vec<&str> = scene.test.iter().map(|f| f.name.as_str()).collect();
     println!("lego: {} training views, held out {names:?}", scene.train.len());
-    let (o, d, c) = rays(&scene.train);
-    let (to, td, _) = rays(&scene.test);
-    let fits = std::env::var("FOGRAY_GPU_FITS").unwrap_or_else(|_| "128:256:8192:10".into());
+    let (o, d, c, alpha) = rays(&scene.train);
+    let (to, td, _, _) = rays(&scene.test);
+    let data = TrainingRays {
+        origins: &o,
+        directions: &d,
+        colors: &c,
+        alpha: Some(&alpha),
+    };
+    let fits = std::env::var("FOGRAY_GPU_FITS").unwrap_or_else(|_| "128:256:8192:10:1:1:1:1:0.01".into());
     for fit in fits.split(',') {
         let v: Vec<f64> = fit
             .split(':')
-            .map(|x| x.parse().expect("nodes:samples:batch:seconds"))
+            .map(|x| x.parse().expect("see FOGRAY_GPU_FITS in the module docs"))
             .collect();
         let (nodes, samples, batch, seconds) = (v[0] as usize, v[1] as usize, v[2] as usize, v[3]);
+        let flag = |i: usize| v.get(i).copied().unwrap_or(0.0);
+        let (sh_degree, grow, random_background) = (flag(4) as usize, flag(5) == 1.0, flag(6) == 1.0);
+        let distortion = flag(8);
+        let (lo, hi) = scene.scene_box;
+        // Half the final grid's node spacing along the box's shortest side.
+        let half_voxel = (0..3)
+            .map(|a| (hi[a] - lo[a]) / (nodes - 1) as f64 / 2.0)
+            .fold(f64::INFINITY, f64::min);
+        let occupancy = (flag(7) == 1.0).then(|| OccupancySettings {
+            cells: (nodes - 1).min(128),
+            density: -(0.99f64.ln()) / half_voxel,
+            every: 16,
+            decay: 0.95,
+        });
+        // fogray fit's growth: a quarter, a half, then all of the nodes per axis.
+        let stages = if grow {
+            vec![(0.0, nodes.div_ceil(4)), (0.1, nodes.div_ceil(2)), (0.3, nodes)]
+        } else {
+            vec![(0.0, nodes)]
+        };
         let settings = TrainerSettings {
             scene_box: scene.scene_box,
-            nodes,
+            nodes: stages[0].1,
             samples_per_ray: samples,
             batch,
             shift: -4.0,
+            sh_degree,
             background: [1.0; 3],
+            random_background,
+            distortion,
+            occupancy,
             seed: 0,
         };
-        let mut trainer = DenseGridTrainer::new(&gpu, settings, &o, &d, &c)?;
+        let mut trainer = DenseGridTrainer::new(&gpu, settings, data)?;
+        let mut stage = 1;
         // fogray fit's schedule: --lr 0.4 until 60 % of the budget, then down geometrically to 0.04.
         let lr_at = |t: f64| {
             let f = (t / seconds - 0.6).max(0.0) / 0.4;
@@ -119,6 +161,10 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
                 if t >= stop {
                     break;
                 }
+                if stage < stages.len() && t >= stages[stage].0 * seconds {
+                    trainer.resample(stages[stage].1)?;
+                    stage += 1;
+                }
                 for _ in 0..10 {
                     trainer.step(lr_at(t))?;
                 }
@@ -130,11 +176,30 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
             let mse = trainer.take_mean_squared_error(since)?;
             since = 0;
             let psnr = held_out_psnr(&mut trainer, &scene.test, &to, &td)?;
+            let occupied = trainer.occupancy()?.map_or(String::new(), |cells| {
+                let kept = cells.iter().filter(|&&c| c != 0).count();
+                format!(", {:.1} % of cells occupied", 100.0 * kept as f64 / cells.len() as f64)
+            });
             println!(
-                "lego GPU fit {nodes}^3, {samples} samples a ray, {batch} rays a step: {trained:.2} s, {} steps, held-out PSNR {psnr:.2} dB (training MSE {mse:.5})",
+                "lego GPU fit {nodes}^3 (grown: {grow}), SH degree {sh_degree}, random background {random_background}, occupancy {}, distortion {distortion}, {samples} samples a ray, {batch} rays a step: {trained:.2} s, {} steps, held-out PSNR {psnr:.2} dB (training MSE {mse:.5}){occupied}",
+                occupancy.is_some(),
                 trainer.steps()
             );
         }
+        // Where a step's time goes at the end of the fit (steps waited on phase by phase,
+        // after the last evaluation: they change nothing above).
+        let mut sum = StepPhases::default();
+        let timed = 32;
+        for _ in 0..timed {
+            sum += trainer.step_timed(lr_at(seconds))?;
+        }
+        let ms = |v: f64| format!("{:.3}", 1e3 * v / timed as f64);
+        println!(
+            "  step split over {timed} steps at {}^3, ms: occupancy {} sampling {} lookup {} shading {} composite {} loss {} composite backward {} distortion {} shading backward {} grid backward {} adam {} (total {})",
+            trainer.nodes(), ms(sum.occupancy), ms(sum.sampling), ms(sum.lookup), ms(sum.shading), ms(sum.composite),
+            ms(sum.loss), ms(sum.composite_backward), ms(sum.distortion), ms(sum.shading_backward),
+            ms(sum.grid_backward), ms(sum.adam), ms(sum.total())
+        );
     }
     Ok(())
 }
