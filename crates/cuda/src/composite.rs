@@ -99,6 +99,16 @@ impl<F> DeviceRays<F> {
         (&mut self.sigma, &mut self.delta, &mut self.color)
     }
 
+    /// Every buffer of the batch at once, for kernels of this crate that pack the samples on
+    /// the device (within the buffers' `samples`) or read them.
+    pub(crate) fn parts_mut(&mut self) -> RaysMut<'_, F> {
+        RaysMut {
+            offsets: &mut self.offsets,
+            sigma: &mut self.sigma,
+            delta: &mut self.delta,
+        }
+    }
+
     /// The number of rays.
     pub fn rays(&self) -> usize {
         self.rays
@@ -108,6 +118,16 @@ impl<F> DeviceRays<F> {
     pub fn samples(&self) -> usize {
         self.samples
     }
+}
+
+/// The packing and the per-sample buffers of a [`DeviceRays`], borrowed together.
+pub(crate) struct RaysMut<'a, F> {
+    /// `[R + 1]`.
+    pub offsets: &'a mut CudaSlice<u64>,
+    /// `[n]`.
+    pub sigma: &'a mut CudaSlice<F>,
+    /// `[n]`.
+    pub delta: &'a mut CudaSlice<F>,
 }
 
 /// The forward's outputs on the device, and its residual for the backward.

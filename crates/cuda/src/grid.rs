@@ -187,6 +187,39 @@ impl CudaGrid {
         Ok(())
     }
 
+    /// Launches the scatter of `upstream = dL/dout` (`[n, C]`) at `positions` (`[n, 3]`) into
+    /// the f64 accumulator `acc` (the spec's values), adding to what it holds: the grid
+    /// gradient's sum before [`CudaGrid::launch_backward`] rounds it (for callers that zero
+    /// and round it themselves, as a training step's optimiser does).
+    pub fn launch_scatter<F: DeviceFloat>(
+        &self,
+        positions: &CudaSlice<F>,
+        upstream: &CudaSlice<F>,
+        n: usize,
+        acc: &mut CudaSlice<f64>,
+    ) -> Result<(), CudaError> {
+        let ch = self.spec.channels;
+        check_len("grid gradient accumulator", self.spec.values(), acc.len())?;
+        check_len("positions ([n, 3])", 3 * n, positions.len().min(3 * n))?;
+        check_len("upstream ([n, C])", n * ch, upstream.len().min(n * ch))?;
+        too_many(n)?;
+        if n == 0 {
+            return Ok(());
+        }
+        let (n64, ch64) = (n as u64, ch as u64);
+        let mut scatter = self.stream.launch_builder(&self.kernels::<F>().scatter);
+        scatter
+            .arg(&self.geometry)
+            .arg(positions)
+            .arg(upstream)
+            .arg(&n64)
+            .arg(&ch64)
+            .arg(acc);
+        // SAFETY: as in `launch_lookup`; `acc` holds the spec's values.
+        unsafe { scatter.launch(launch_config(n)) }?;
+        Ok(())
+    }
+
     /// Launches the backward: into `grad_grid` (the spec's values, every one written) through
     /// the f64 accumulator `acc` (the spec's values), and, if given, `grad_positions` (`[n,
     /// 3]`), for `upstream = dL/dout` (`[n, C]`).
@@ -212,18 +245,7 @@ impl CudaGrid {
         let (n64, ch64, len) = (n as u64, ch as u64, values as u64);
         let k = self.kernels::<F>();
         self.stream.memset_zeros(acc)?;
-        if n > 0 {
-            let mut scatter = self.stream.launch_builder(&k.scatter);
-            scatter
-                .arg(&self.geometry)
-                .arg(positions)
-                .arg(upstream)
-                .arg(&n64)
-                .arg(&ch64)
-                .arg(&mut *acc);
-            // SAFETY: as in `launch_lookup`; `acc` holds the spec's values.
-            unsafe { scatter.launch(launch_config(n)) }?;
-        }
+        self.launch_scatter(positions, upstream, n, acc)?;
         let mut round = self.stream.launch_builder(&k.round);
         round.arg(&*acc).arg(&len).arg(grad_grid);
         // SAFETY: both buffers hold `len` values (checked above).

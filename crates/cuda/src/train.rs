@@ -12,7 +12,7 @@
 //! ([`CudaGrid`], [`CudaDensityColor`], [`CudaShDensityColor`], [`CudaComposite`]); the step's
 //! own kernels (`kernels/train.cu`) draw the batch, take the loss and update the grid.
 
-use cudarc::driver::{CudaFunction, CudaSlice, DeviceRepr, PushKernelArg};
+use cudarc::driver::{CudaFunction, CudaSlice, DeviceRepr, LaunchConfig, PushKernelArg};
 
 use crate::activation::CudaDensityColor;
 use crate::buffers::{check_len, launch_config, put};
@@ -215,7 +215,22 @@ struct TrainKernels {
     occupancy_points: CudaFunction,
     occupancy_update: CudaFunction,
     distortion: CudaFunction,
+    count_kept: CudaFunction,
+    scan_offsets: CudaFunction,
+    compact: CudaFunction,
     adam: CudaFunction,
+}
+
+/// Where the sampling kernels write every sample of the batch, before the samples of nonzero
+/// length are packed into the buffers the rest of the step reads.
+struct Staging {
+    positions: CudaSlice<f32>,
+    delta: CudaSlice<f32>,
+    ts: CudaSlice<f32>,
+    /// `[n, 3]` with spherical harmonics, else one zero.
+    dirs: CudaSlice<f32>,
+    /// Each ray's kept samples.
+    counts: CudaSlice<u64>,
 }
 
 /// The occupancy grid on the device.
@@ -293,6 +308,10 @@ pub struct DenseGridTrainer<'g> {
     alpha: CudaSlice<f32>,
     /// Whether the loss draws a random background per ray.
     random: bool,
+    staging: Staging,
+    /// The samples kept this batch (of nonzero length), packed ray by ray: the first `kept`
+    /// values of `positions`, the batch's `delta`, `ts` and `sample_dirs`.
+    kept: usize,
     positions: CudaSlice<f32>,
     /// Each sample's view direction `[n, 3]` (with spherical harmonics; else one zero).
     sample_dirs: CudaSlice<f32>,
@@ -326,6 +345,9 @@ impl std::fmt::Debug for DenseGridTrainer<'_> {
             .finish()
     }
 }
+
+/// Threads a block of the compaction kernels (`COMPACT_THREADS` in `kernels/train.cu`).
+const COMPACT_THREADS: u32 = 256;
 
 /// No occupancy grid: every sample kept.
 const NO_CELLS: DeviceCells = DeviceCells {
@@ -420,6 +442,9 @@ impl<'g> DenseGridTrainer<'g> {
             occupancy_points: module.load_function("occupancy_points")?,
             occupancy_update: module.load_function("occupancy_update")?,
             distortion: module.load_function("distortion")?,
+            count_kept: module.load_function("count_kept")?,
+            scan_offsets: module.load_function("scan_offsets")?,
+            compact: module.load_function("compact")?,
             adam: module.load_function("adam")?,
         };
         let s = gpu.stream();
@@ -479,6 +504,14 @@ impl<'g> DenseGridTrainer<'g> {
             targets: s.clone_htod(data.colors)?,
             alpha: put(s, data.alpha.unwrap_or(&[]))?,
             random: settings.random_background && data.alpha.is_some(),
+            staging: Staging {
+                positions: s.alloc_zeros(3 * n)?,
+                delta: s.alloc_zeros(n)?,
+                ts: s.alloc_zeros(n)?,
+                dirs: s.alloc_zeros(if with_dirs { 3 * n } else { 1 })?,
+                counts: s.alloc_zeros(settings.batch)?,
+            },
+            kept: 0,
             positions: s.alloc_zeros(3 * n)?,
             sample_dirs: s.alloc_zeros(if with_dirs { 3 * n } else { 1 })?,
             ts: s.alloc_zeros(n)?,
@@ -564,10 +597,63 @@ impl<'g> DenseGridTrainer<'g> {
         u64::from(matches!(self.shading, Shading::Harmonics(_)))
     }
 
+    /// Packs the staged samples of nonzero length ray by ray into the step's buffers and the
+    /// batch's offsets, and reads how many there are (the one wait of a step: the kernels
+    /// after it are launched for that many).
+    fn compact_samples(&mut self) -> Result<(), CudaError> {
+        let st = self.settings;
+        let (batch, samples, with_dirs) = (st.batch as u64, st.samples_per_ray as u64, self.with_dirs());
+        let s = self.gpu.stream().clone();
+        let blocks = LaunchConfig {
+            grid_dim: (u32::try_from(st.batch).unwrap_or(u32::MAX), 1, 1),
+            block_dim: (COMPACT_THREADS, 1, 1),
+            shared_mem_bytes: 0,
+        };
+        let g = &mut self.staging;
+        let mut launch = s.launch_builder(&self.kernels.count_kept);
+        launch.arg(&g.delta).arg(&samples).arg(&mut g.counts);
+        // SAFETY: a block a ray of the batch, over its `samples` staged lengths; `counts`
+        // holds `batch` values.
+        unsafe { launch.launch(blocks) }?;
+        let parts = self.batch_rays.parts_mut();
+        let mut launch = s.launch_builder(&self.kernels.scan_offsets);
+        launch.arg(&g.counts).arg(&batch).arg(&mut *parts.offsets);
+        // SAFETY: one block of 1024 threads reads `batch` counts and writes `batch + 1`
+        // offsets (the packing's length).
+        unsafe {
+            launch.launch(LaunchConfig {
+                grid_dim: (1, 1, 1),
+                block_dim: (1024, 1, 1),
+                shared_mem_bytes: 0,
+            })
+        }?;
+        let total = s.clone_dtoh(&parts.offsets.slice(st.batch..))?[0];
+        let (offsets, delta) = (&*parts.offsets, parts.delta);
+        let mut launch = s.launch_builder(&self.kernels.compact);
+        launch
+            .arg(&g.positions)
+            .arg(&g.delta)
+            .arg(&g.ts)
+            .arg(&g.dirs)
+            .arg(&with_dirs)
+            .arg(&samples)
+            .arg(offsets)
+            .arg(&mut self.positions)
+            .arg(delta)
+            .arg(&mut self.ts)
+            .arg(&mut self.sample_dirs);
+        // SAFETY: a block a ray; the compact buffers hold the batch's `batch * samples`
+        // samples, of which it writes the `total` kept (the directions only `with_dirs`,
+        // when both direction buffers hold `3 n`).
+        unsafe { launch.launch(blocks) }?;
+        self.kept = usize::try_from(total).unwrap_or(usize::MAX);
+        Ok(())
+    }
+
     /// Looks up, activates and composites the batch whose positions, step lengths (and
     /// directions) are in place.
     fn render_batch(&mut self, clock: &mut PhaseClock) -> Result<(), CudaError> {
-        let n = self.settings.batch * self.settings.samples_per_ray;
+        let n = self.kept;
         let st = &self.state;
         st.grid
             .launch_lookup(&st.params, &self.positions, n, &mut self.raw, &mut self.invalid)?;
@@ -617,7 +703,7 @@ impl<'g> DenseGridTrainer<'g> {
                 Some(o) => (o.cells, &o.occupied),
                 None => (NO_CELLS, &self.no_cells),
             };
-            let (_, delta, _) = self.batch_rays.samples_mut();
+            let g = &mut self.staging;
             let mut launch = self.gpu.stream().launch_builder(&self.kernels.sample_batch);
             launch
                 .arg(&self.origins)
@@ -628,12 +714,12 @@ impl<'g> DenseGridTrainer<'g> {
                 .arg(&seed)
                 .arg(&step)
                 .arg(&self.scene)
-                .arg(&mut self.positions)
-                .arg(delta)
-                .arg(&mut self.ts)
+                .arg(&mut g.positions)
+                .arg(&mut g.delta)
+                .arg(&mut g.ts)
                 .arg(&mut self.picked)
                 .arg(&with_dirs)
-                .arg(&mut self.sample_dirs)
+                .arg(&mut g.dirs)
                 .arg(&cells)
                 .arg(occupied);
             // SAFETY: the kernel's arguments in its order and types; `rays` rays in the ray
@@ -641,6 +727,7 @@ impl<'g> DenseGridTrainer<'g> {
             // when `with_dirs`), `batch` picks; a thread a sample.
             unsafe { launch.launch(launch_config(st.batch * st.samples_per_ray)) }?;
         }
+        self.compact_samples()?;
         clock.lap(self.gpu, |p| &mut p.sampling)?;
         self.render_batch(clock)?;
         {
@@ -676,27 +763,28 @@ impl<'g> DenseGridTrainer<'g> {
         clock.lap(self.gpu, |p| &mut p.composite_backward)?;
         if st.distortion > 0.0 {
             let c = st.distortion / st.batch as f64;
-            let (sigma, delta, _) = self.batch_rays.samples_mut();
+            let parts = self.batch_rays.parts_mut();
             let [w, a, depth] = &mut self.distortion_scratch;
             let mut launch = self.gpu.stream().launch_builder(&self.kernels.distortion);
             launch
-                .arg(&*sigma)
-                .arg(&*delta)
+                .arg(&*parts.sigma)
+                .arg(&*parts.delta)
                 .arg(&self.ts)
+                .arg(&*parts.offsets)
                 .arg(&batch)
-                .arg(&samples)
                 .arg(&c)
                 .arg(w)
                 .arg(a)
                 .arg(depth)
                 .arg(&mut self.gradients.sigma)
                 .arg(&mut self.distortion_sum);
-            // SAFETY: `batch * samples` samples in each per-sample buffer (the scratch ones are
-            // that long when the weight is above 0); a thread a ray.
+            // SAFETY: the packing's samples (at most `batch * samples`) in each per-sample
+            // buffer (the scratch ones are that long when the weight is above 0); a thread a
+            // ray.
             unsafe { launch.launch(launch_config(st.batch)) }?;
         }
         clock.lap(self.gpu, |p| &mut p.distortion)?;
-        let n = st.batch * st.samples_per_ray;
+        let n = self.kept;
         match &self.shading {
             Shading::Plain(act) => act.launch_backward(
                 &self.raw,
@@ -717,15 +805,9 @@ impl<'g> DenseGridTrainer<'g> {
         }
         clock.lap(self.gpu, |p| &mut p.shading_backward)?;
         let state = &mut self.state;
-        state.grid.launch_backward(
-            &state.params,
-            &self.positions,
-            &self.d_raw,
-            n,
-            &mut state.acc,
-            &mut state.grad,
-            None,
-        )?;
+        state
+            .grid
+            .launch_scatter(&self.positions, &self.d_raw, n, &mut state.acc)?;
         clock.lap(self.gpu, |p| &mut p.grid_backward)?;
         self.steps += 1;
         state.adam_steps += 1;
@@ -737,7 +819,8 @@ impl<'g> DenseGridTrainer<'g> {
         let mut launch = self.gpu.stream().launch_builder(&self.kernels.adam);
         launch
             .arg(&mut state.params)
-            .arg(&state.grad)
+            .arg(&mut state.acc)
+            .arg(&mut state.grad)
             .arg(&mut state.m)
             .arg(&mut state.v)
             .arg(&len)
@@ -747,7 +830,7 @@ impl<'g> DenseGridTrainer<'g> {
             .arg(&eps)
             .arg(&c1)
             .arg(&c2);
-        // SAFETY: four buffers of the grid's `values` values.
+        // SAFETY: five buffers of the grid's `values` values.
         unsafe { launch.launch(launch_config(values)) }?;
         clock.lap(self.gpu, |p| &mut p.adam)
     }
@@ -834,9 +917,9 @@ impl<'g> DenseGridTrainer<'g> {
                     Some(o) => (o.cells, &o.occupied),
                     None => (NO_CELLS, &self.no_cells),
                 };
-                let (_, delta, _) = self.batch_rays.samples_mut();
+                let g = &mut self.staging;
                 // The batch's rays past `count` keep step length 0: they add nothing.
-                s.memset_zeros(delta)?;
+                s.memset_zeros(&mut g.delta)?;
                 let mut launch = s.launch_builder(&self.kernels.sample_range);
                 launch
                     .arg(&o)
@@ -845,17 +928,18 @@ impl<'g> DenseGridTrainer<'g> {
                     .arg(&count64)
                     .arg(&samples)
                     .arg(&self.scene)
-                    .arg(&mut self.positions)
-                    .arg(delta)
-                    .arg(&mut self.ts)
+                    .arg(&mut g.positions)
+                    .arg(&mut g.delta)
+                    .arg(&mut g.ts)
                     .arg(&with_dirs)
-                    .arg(&mut self.sample_dirs)
+                    .arg(&mut g.dirs)
                     .arg(&cells)
                     .arg(occupied);
                 // SAFETY: rays first..first + count exist; the batch buffers hold `batch >=
                 // count` rays of samples; a thread a sample.
                 unsafe { launch.launch(launch_config(count * st.samples_per_ray)) }?;
             }
+            self.compact_samples()?;
             self.render_batch(&mut PhaseClock::new(false))?;
             let color0 = s.clone_dtoh(&self.forward.color)?;
             let opacity = s.clone_dtoh(&self.forward.opacity)?;

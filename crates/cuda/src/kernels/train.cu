@@ -127,6 +127,101 @@ extern "C" __global__ void sample_range(const float* origins, const float* dirs,
                sample_dirs + (write_dirs ? 3 * i : 0), cells, occ);
 }
 
+// Compaction: the samples of nonzero length (those in occupied cells of rays that cross the
+// box) are packed ray by ray, in order, so that everything after the sampling runs on them
+// alone. One block of COMPACT_THREADS threads a ray, over its `samples` samples in chunks.
+#define COMPACT_THREADS 256
+
+// The rank of this thread's `flag` among the chunk's (an exclusive count of the flags before
+// it) and the chunk's count, by warp ballots and the warps' counts in shared memory.
+__device__ __forceinline__ unsigned chunk_rank(bool flag, unsigned& count) {
+    __shared__ unsigned warp_counts[COMPACT_THREADS / 32];
+    unsigned lane = threadIdx.x % 32, warp = threadIdx.x / 32;
+    unsigned ballot = __ballot_sync(0xffffffffu, flag);
+    unsigned rank = __popc(ballot & ((1u << lane) - 1u));
+    if (lane == 0) warp_counts[warp] = __popc(ballot);
+    __syncthreads();
+    unsigned before = 0;
+    count = 0;
+    for (unsigned w = 0; w < COMPACT_THREADS / 32; ++w) {
+        if (w < warp) before += warp_counts[w];
+        count += warp_counts[w];
+    }
+    __syncthreads();
+    return before + rank;
+}
+
+// counts[b] = ray b's samples of nonzero length.
+extern "C" __global__ void __launch_bounds__(COMPACT_THREADS)
+    count_kept(const float* delta, u64 samples, u64* counts) {
+    u64 b = blockIdx.x;
+    unsigned total = 0;
+    for (u64 c = 0; c < samples; c += COMPACT_THREADS) {
+        u64 k = c + threadIdx.x;
+        bool keep = k < samples && delta[b * samples + k] > 0.0f;
+        unsigned count;
+        chunk_rank(keep, count);
+        total += count;
+    }
+    if (threadIdx.x == 0) counts[b] = total;
+}
+
+// offsets[0] = 0, offsets[b + 1] = offsets[b] + counts[b]: the exclusive scan of the rays'
+// counts, in one block of 1024 threads (each scans a run of consecutive rays, then the runs'
+// sums are scanned in shared memory).
+extern "C" __global__ void __launch_bounds__(1024) scan_offsets(const u64* counts, u64 rays, u64* offsets) {
+    __shared__ u64 sums[1024];
+    u64 per = (rays + 1023) / 1024;
+    u64 first = threadIdx.x * per, end = first + per < rays ? first + per : rays;
+    u64 run = 0;
+    for (u64 b = first; b < end; ++b) run += counts[b];
+    sums[threadIdx.x] = run;
+    __syncthreads();
+    if (threadIdx.x == 0) {
+        u64 acc = 0;
+        for (int t = 0; t < 1024; ++t) {
+            u64 v = sums[t];
+            sums[t] = acc;
+            acc += v;
+        }
+        offsets[0] = 0;
+    }
+    __syncthreads();
+    u64 at = sums[threadIdx.x];
+    for (u64 b = first; b < end; ++b) {
+        at += counts[b];
+        offsets[b + 1] = at;
+    }
+}
+
+// Packs ray b's kept samples (positions, lengths, midpoints, and with `with_dirs` directions)
+// from the full buffers into the compact ones, at offsets[b] on.
+extern "C" __global__ void __launch_bounds__(COMPACT_THREADS)
+    compact(const float* positions, const float* delta, const float* ts, const float* dirs, u64 with_dirs,
+            u64 samples, const u64* offsets, float* c_positions, float* c_delta, float* c_ts, float* c_dirs) {
+    u64 b = blockIdx.x;
+    u64 at = offsets[b];
+    for (u64 c = 0; c < samples; c += COMPACT_THREADS) {
+        u64 k = c + threadIdx.x;
+        u64 i = b * samples + k;
+        bool keep = k < samples && delta[i] > 0.0f;
+        unsigned count;
+        unsigned rank = chunk_rank(keep, count);
+        if (keep) {
+            u64 o = at + rank;
+#pragma unroll
+            for (int a = 0; a < 3; ++a) c_positions[3 * o + a] = positions[3 * i + a];
+            c_delta[o] = delta[i];
+            c_ts[o] = ts[i];
+            if (with_dirs) {
+#pragma unroll
+                for (int a = 0; a < 3; ++a) c_dirs[3 * o + a] = dirs[3 * i + a];
+            }
+        }
+        at += count;
+    }
+}
+
 struct Rgb {
     double c[3];
 };
@@ -180,8 +275,8 @@ extern "C" __global__ void lattice(Box box, u64 nodes, float* positions) {
     }
 }
 
-// The distortion loss of mip-NeRF 360 (`fogray_ops::distortion`) of each batch ray, its
-// samples `samples` apart in the buffers, times `c` (the loss's weight over the batch's ray
+// The distortion loss of mip-NeRF 360 (`fogray_ops::distortion`) of each batch ray (its
+// samples `offsets[b]..offsets[b + 1]`), times `c` (the loss's weight over the batch's ray
 // count): its gradient with respect to the densities is added to `d_sigma`, and its value to
 // `loss` (zeroed by the host). One thread a ray, in two passes over its samples with the CPU
 // op's numerics: front to back, the weights `w` from the running optical depth and
@@ -189,13 +284,13 @@ extern "C" __global__ void lattice(Box box, u64 nodes, float* positions) {
 // `g_i = c (2 A_i + 2 B_i + (2/3) w_i delta_i)` and
 // `dL/dsigma_j = delta_j T_{j+1} (g_j - R_{j+1})`, `R_j = R_{j+1} + alpha_j (g_j - R_{j+1})`.
 // `w`, `A` and the optical depth after each sample are kept in the f64 scratch buffers
-// (`[batch samples]` each) between the passes.
-extern "C" __global__ void distortion(const float* sigma, const float* delta, const float* ts, u64 batch,
-                                      u64 samples, double c, double* w_s, double* a_s, double* depth_s,
+// (a value a sample) between the passes.
+extern "C" __global__ void distortion(const float* sigma, const float* delta, const float* ts, const u64* offsets,
+                                      u64 batch, double c, double* w_s, double* a_s, double* depth_s,
                                       float* d_sigma, double* loss) {
     u64 b = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     if (b >= batch) return;
-    u64 first = b * samples, end = first + samples;
+    u64 first = offsets[b], end = offsets[b + 1];
     double depth = 0.0, S = 0.0, A = 0.0, sum = 0.0;
     for (u64 k = first; k < end; ++k) {
         double tau = (double)sigma[k] * (double)delta[k];
@@ -260,12 +355,17 @@ extern "C" __global__ void occupancy_update(const float* raw, u64 channels, u64 
     occ[i] = (float)e > threshold ? 1 : 0;
 }
 
-// Adam with bias-corrected moments: `c1 = 1 - beta1^t`, `c2 = 1 - beta2^t`.
-extern "C" __global__ void adam(float* x, const float* g, float* m, float* v, u64 n, double lr, double beta1,
+// Adam with bias-corrected moments (`c1 = 1 - beta1^t`, `c2 = 1 - beta2^t`) on the gradient
+// the grid's scatter summed into `acc` (in f64; rounded once to f32 here, as the grid's
+// backward rounds it, and kept in `g` for checks), which is zeroed for the next step.
+extern "C" __global__ void adam(float* x, double* acc, float* g, float* m, float* v, u64 n, double lr, double beta1,
                                 double beta2, double eps, double c1, double c2) {
     u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) return;
-    double gi = (double)g[i];
+    float rounded = (float)acc[i];
+    acc[i] = 0.0;
+    g[i] = rounded;
+    double gi = (double)rounded;
     double mi = beta1 * (double)m[i] + (1.0 - beta1) * gi;
     double vi = beta2 * (double)v[i] + (1.0 - beta2) * gi * gi;
     m[i] = (float)mi;

@@ -69,6 +69,12 @@ fn the_grid_and_training_kernels_compile() {
                     "sample_range",
                     "photometric_loss",
                     "lattice",
+                    "occupancy_points",
+                    "occupancy_update",
+                    "distortion",
+                    "count_kept",
+                    "scan_offsets",
+                    "compact",
                     "adam",
                 ] {
                     assert!(src.contains(name), "{name} missing from the PTX for {capability:?}");
