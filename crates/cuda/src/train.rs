@@ -334,6 +334,8 @@ pub struct DenseGridTrainer<'g> {
     invalid: CudaSlice<u32>,
     sse: CudaSlice<f64>,
     steps: u64,
+    /// Whether Adam keeps each step's gradient in `state.grad` for `last_gradient`.
+    record_gradients: bool,
 }
 
 impl std::fmt::Debug for DenseGridTrainer<'_> {
@@ -532,6 +534,7 @@ impl<'g> DenseGridTrainer<'g> {
             invalid: s.alloc_zeros(1)?,
             sse: s.alloc_zeros(1)?,
             steps: 0,
+            record_gradients: false,
         })
     }
 
@@ -816,11 +819,13 @@ impl<'g> DenseGridTrainer<'g> {
         let (c1, c2) = (1.0 - beta1.powi(t), 1.0 - beta2.powi(t));
         let values = state.params.len();
         let len = values as u64;
+        let keep = u64::from(self.record_gradients);
         let mut launch = self.gpu.stream().launch_builder(&self.kernels.adam);
         launch
             .arg(&mut state.params)
             .arg(&mut state.acc)
             .arg(&mut state.grad)
+            .arg(&keep)
             .arg(&mut state.m)
             .arg(&mut state.v)
             .arg(&len)
@@ -830,7 +835,8 @@ impl<'g> DenseGridTrainer<'g> {
             .arg(&eps)
             .arg(&c1)
             .arg(&c2);
-        // SAFETY: five buffers of the grid's `values` values.
+        // SAFETY: five buffers of the grid's `values` values (the gradient's written only when
+        // it is kept, then that long).
         unsafe { launch.launch(launch_config(values)) }?;
         clock.lap(self.gpu, |p| &mut p.adam)
     }
@@ -976,9 +982,21 @@ impl<'g> DenseGridTrainer<'g> {
         Ok(self.gpu.stream().memcpy_htod(values, &mut self.state.params)?)
     }
 
+    /// Keeps (or stops keeping) each step's gradient for [`DenseGridTrainer::last_gradient`],
+    /// at the cost of writing the grid's size of values a step.
+    pub fn record_gradients(&mut self, on: bool) {
+        self.record_gradients = on;
+    }
+
     /// The gradient of the last step's loss with respect to the grid's raw values (before
-    /// Adam used it), for checks against the CPU ops.
+    /// Adam used it), for checks against the CPU ops. Errors: [`CudaError::InvalidSettings`]
+    /// unless [`DenseGridTrainer::record_gradients`] was on for that step.
     pub fn last_gradient(&self) -> Result<Vec<f32>, CudaError> {
+        if !self.record_gradients {
+            return Err(CudaError::InvalidSettings(
+                "the gradients are not kept: call record_gradients(true) before the step".into(),
+            ));
+        }
         Ok(self.gpu.stream().clone_dtoh(&self.state.grad)?)
     }
 }

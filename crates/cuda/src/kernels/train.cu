@@ -357,18 +357,24 @@ extern "C" __global__ void occupancy_update(const float* raw, u64 channels, u64 
 
 // Adam with bias-corrected moments (`c1 = 1 - beta1^t`, `c2 = 1 - beta2^t`) on the gradient
 // the grid's scatter summed into `acc` (in f64; rounded once to f32 here, as the grid's
-// backward rounds it, and kept in `g` for checks), which is zeroed for the next step.
-extern "C" __global__ void adam(float* x, double* acc, float* g, float* m, float* v, u64 n, double lr, double beta1,
+// backward rounds it, and kept in `g` when `keep_g`), which is zeroed for the next step. An
+// entry whose gradient is exactly 0 this step (no kept sample reached it) keeps its value and
+// moments, as instant-ngp skips them: the step's cost follows the cells the rays reach, not
+// the cube (the untouched entries cost the read of their sum alone).
+extern "C" __global__ void adam(float* __restrict__ x, double* __restrict__ acc, float* __restrict__ g, u64 keep_g,
+                                float* __restrict__ m, float* __restrict__ v, u64 n, double lr, double beta1,
                                 double beta2, double eps, double c1, double c2) {
     u64 i = (u64)blockIdx.x * blockDim.x + threadIdx.x;
     if (i >= n) return;
-    float rounded = (float)acc[i];
-    acc[i] = 0.0;
-    g[i] = rounded;
-    double gi = (double)rounded;
-    double mi = beta1 * (double)m[i] + (1.0 - beta1) * gi;
-    double vi = beta2 * (double)v[i] + (1.0 - beta2) * gi * gi;
+    double sum = acc[i];
+    float rounded = (float)sum;
+    if (keep_g) g[i] = rounded;
+    if (sum != 0.0) acc[i] = 0.0;
+    if (rounded == 0.0f) return;
+    double gi = (double)rounded, m0 = (double)m[i], v0 = (double)v[i], x0 = (double)x[i];
+    double mi = beta1 * m0 + (1.0 - beta1) * gi;
+    double vi = beta2 * v0 + (1.0 - beta2) * gi * gi;
     m[i] = (float)mi;
     v[i] = (float)vi;
-    x[i] = (float)((double)x[i] - lr * (mi / c1) / (sqrt(vi / c2) + eps));
+    x[i] = (float)(x0 - lr * (mi / c1) / (sqrt(vi / c2) + eps));
 }

@@ -8,6 +8,9 @@
 //!     --test integration lego -- --ignored --nocapture
 //! ```
 //!
+//! With `FOGRAY_GPU_RENDERS=<dir>`, each fit writes its first held-out view beside the
+//! photograph there at its end (`gpu-<nodes>-<seconds>s-<view>.png`).
+//!
 //! `FOGRAY_GPU_FITS` lists the fits to run, separated by commas, each
 //! `nodes:samples:batch:seconds[:sh_degree[:grow[:random_background[:occupancy[:distortion]]]]]`
 //! (default `128:256:8192:10:1:1:1:1:0.01`): with `grow` 1 the grid starts at a quarter of `nodes` and
@@ -49,7 +52,13 @@ fn rays(frames: &[Frame]) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
     (o, d, c, alpha)
 }
 
-fn held_out_psnr(trainer: &mut DenseGridTrainer<'_>, test: &[Frame], o: &[f32], d: &[f32]) -> Result<f64, CudaError> {
+/// The held-out PSNR over all pixels of `test`, and the renders.
+fn held_out_psnr(
+    trainer: &mut DenseGridTrainer<'_>,
+    test: &[Frame],
+    o: &[f32],
+    d: &[f32],
+) -> Result<(f64, Vec<Array3<f64>>), CudaError> {
     let colors = trainer.render(o, d)?;
     let mut renders = Vec::new();
     let mut exacts = Vec::new();
@@ -69,7 +78,7 @@ fn held_out_psnr(trainer: &mut DenseGridTrainer<'_>, test: &[Frame], o: &[f32], 
     }
     let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
     let e: Vec<_> = exacts.iter().map(|a| a.view()).collect();
-    Ok(fogray_fit::metrics::psnr(&r, &e).expect("same shapes"))
+    Ok((fogray_fit::metrics::psnr(&r, &e).expect("same shapes"), renders))
 }
 
 #[test]
@@ -175,7 +184,20 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
             trained += start.elapsed().as_secs_f64();
             let mse = trainer.take_mean_squared_error(since)?;
             since = 0;
-            let psnr = held_out_psnr(&mut trainer, &scene.test, &to, &td)?;
+            let (psnr, renders) = held_out_psnr(&mut trainer, &scene.test, &to, &td)?;
+            // The first held-out view beside its photograph, at the end of the fit.
+            if let (Ok(dir), true) = (std::env::var("FOGRAY_GPU_RENDERS"), stop == seconds) {
+                let frame = &scene.test[0];
+                let path = Path::new(&dir).join(format!("gpu-{nodes}-{seconds}s-{}.png", frame.name));
+                let exact = frame.picture.color.mapv(f64::from);
+                let render = &renders[0];
+                let error = (render - &exact).mapv(|v| (4.0 * v.abs()).min(1.0));
+                // Photograph, render, |error| x 4, side by side (no titles: the machine may
+                // have no fonts).
+                let row = ndarray::concatenate(ndarray::Axis(1), &[exact.view(), render.view(), error.view()])
+                    .expect("same heights");
+                fogray_fit::images::write_png(&path, row.view()).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
+            }
             let occupied = trainer.occupancy()?.map_or(String::new(), |cells| {
                 let kept = cells.iter().filter(|&&c| c != 0).count();
                 format!(", {:.1} % of cells occupied", 100.0 * kept as f64 / cells.len() as f64)

@@ -309,6 +309,7 @@ fn check_one_step(s: TrainerSettings, with_alpha: bool) {
     trainer.set_grid_values(&values).unwrap();
     trainer.refresh_occupancy().unwrap();
     let occupied = trainer.occupancy().unwrap().unwrap_or_default();
+    trainer.record_gradients(true);
     trainer.step(0.1).unwrap();
     let gpu_grad = trainer.last_gradient().unwrap();
     let gpu_mse = trainer.take_mean_squared_error(1).unwrap();
@@ -497,6 +498,53 @@ fn one_step_skipping_empty_cells_has_the_gradient_of_the_cpu_ops() {
 }
 
 #[test]
+fn a_step_moves_the_entries_with_a_gradient_by_adam_and_no_others() {
+    let Some(gpu) = device_for_tests().unwrap() else { return };
+    let (o, d, colors, _) = scene(300);
+    let s = TrainerSettings {
+        occupancy: Some(OCCUPANCY),
+        ..SETTINGS
+    };
+    let data = TrainingRays {
+        origins: &o,
+        directions: &d,
+        colors: &colors,
+        alpha: None,
+    };
+    let mut trainer = DenseGridTrainer::new(&gpu, s, data).unwrap();
+    assert!(matches!(trainer.last_gradient(), Err(CudaError::InvalidSettings(_))));
+    let mut r = rng(41);
+    let values: Vec<f32> = (0..s.nodes.pow(3) * 4).map(|_| r.gen_range(-2.0..2.0)).collect();
+    trainer.set_grid_values(&values).unwrap();
+    trainer.refresh_occupancy().unwrap();
+    trainer.record_gradients(true);
+    let lr = 0.3;
+    trainer.step(lr).unwrap();
+    let g = trainer.last_gradient().unwrap();
+    let after = trainer.grid_values().unwrap();
+    // Adam's first step from zero moments: m = (1 - beta1) g, v = (1 - beta2) g^2, both
+    // bias-corrected back to g and g^2: the entry moves by lr g / (|g| + eps).
+    let (mut moved, mut kept) = (0, 0);
+    for ((&x, &x1), &gi) in values.iter().zip(&after).zip(&g) {
+        if gi == 0.0 {
+            assert_eq!(x1.to_bits(), x.to_bits(), "an entry without a gradient keeps its value");
+            kept += 1;
+        } else {
+            let (gd, c1, c2) = (f64::from(gi), 1.0 - 0.9, 1.0 - 0.999f64);
+            let (m, v) = (c1 * gd, c2 * gd * gd);
+            let want = f64::from(x) - lr * (m / c1) / ((v / c2).sqrt() + 1e-8);
+            assert!(
+                (f64::from(x1) - want).abs() <= 1e-6 * want.abs().max(1.0),
+                "{x1} against {want}"
+            );
+            moved += 1;
+        }
+    }
+    println!("one Adam step: {moved} entries moved, {kept} without a gradient kept");
+    assert!(moved > 0 && kept > 0, "the test must see both");
+}
+
+#[test]
 fn resampling_takes_the_cpu_lookup_at_the_new_nodes() {
     let Some(gpu) = device_for_tests().unwrap() else { return };
     let (o, d, colors, _) = scene(50);
@@ -552,6 +600,7 @@ fn resampling_takes_the_cpu_lookup_at_the_new_nodes() {
         }
     }
     // Steps go on at the new size.
+    trainer.record_gradients(true);
     trainer.step(0.1).unwrap();
     assert_eq!(trainer.last_gradient().unwrap().len(), 4usize.pow(3) * k);
     assert!(matches!(trainer.resample(1), Err(CudaError::InvalidGrid(_))));
