@@ -1,16 +1,20 @@
 //! A whole training step of a dense grid radiance field on the device: rays in, loss and
-//! updated grid out. The model is the dense grid of `fogray-fit`: density
+//! updated grid out, with the model class of `fogray fit` (see `docs/cuda.md`): density
 //! `softplus(raw + shift)`, colour `sigmoid(raw)` from every direction alike or through
-//! spherical harmonics of degree 1 to 3 ([`TrainerSettings::sh_degree`]), a fixed number of
-//! samples a ray spread evenly between where it enters and leaves the box (at a random offset
-//! each step), the composite over the dataset's background or, for pictures with alpha, over a
-//! random colour per ray ([`TrainerSettings::random_background`]), the mean squared error, and
-//! Adam with bias-corrected moments; [`DenseGridTrainer::resample`] grows the grid coarse to
-//! fine.
+//! spherical harmonics ([`TrainerSettings::sh_degree`]); a fixed number of samples a ray
+//! spread evenly between where it enters and leaves the box (at a random offset each step),
+//! those in empty cells of an occupancy grid dropped ([`TrainerSettings::occupancy`]) and the
+//! rest packed ray by ray; the composite over the dataset's background or, for pictures with
+//! alpha, over a random colour per ray ([`TrainerSettings::random_background`]); the mean
+//! squared error plus the distortion loss ([`TrainerSettings::distortion`]); Adam with
+//! bias-corrected moments on the entries the batch reached. [`DenseGridTrainer::resample`]
+//! grows the grid coarse to fine.
 //!
 //! Every op of the step is a kernel of this crate checked against the CPU op
 //! ([`CudaGrid`], [`CudaDensityColor`], [`CudaShDensityColor`], [`CudaComposite`]); the step's
-//! own kernels (`kernels/train.cu`) draw the batch, take the loss and update the grid.
+//! own kernels (`kernels/train.cu`) draw and pack the batch, take the losses, refresh the
+//! occupancy grid and update the grid, and are checked against the same step through the CPU
+//! ops (`tests/integration/train.rs`).
 
 use cudarc::driver::{CudaFunction, CudaSlice, DeviceRepr, LaunchConfig, PushKernelArg};
 

@@ -577,12 +577,12 @@ fn resampling_takes_the_cpu_lookup_at_the_new_nodes() {
         let mut at = Vec::new();
         for i in 0..nodes.pow(3) {
             let idx = [i / (nodes * nodes), (i / nodes) % nodes, i % nodes];
-            for a in 0..3 {
+            for (a, &j) in idx.iter().enumerate() {
                 let (lo, hi) = (s.scene_box.0[a], s.scene_box.1[a]);
-                let p = if idx[a] + 1 == nodes {
+                let p = if j + 1 == nodes {
                     hi
                 } else {
-                    lo + idx[a] as f64 * ((hi - lo) / (nodes - 1) as f64)
+                    lo + j as f64 * ((hi - lo) / (nodes - 1) as f64)
                 };
                 at.push(p as f32);
             }
