@@ -117,3 +117,23 @@ fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
         }
     }
 }
+
+#[test]
+fn a_fit_whose_densities_are_all_below_the_threshold_keeps_sampling() {
+    // At a learning rate this small no density reaches the occupancy threshold by the first
+    // refreshes (steps 16 and 32): an occupancy grid emptied by them would leave no sample
+    // to train on, ever (the fit of a scene that slowly gains matter would end blank).
+    let data = ball_dataset(6, 1, 8);
+    let settings = FitSettings {
+        grid: 8,
+        batch: 64,
+        lr: 1e-6,
+        lr_final: 1e-6,
+        evaluations: 1,
+        ..FitSettings::default()
+    }
+    .with_budget(Budget::Steps(40));
+    let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {}).unwrap();
+    assert_eq!(result.occupied_fraction, 1.0);
+    assert!(result.samples_per_ray_mean > 1.0, "{}", result.samples_per_ray_mean);
+}

@@ -86,6 +86,16 @@ pub struct KnownCells {
 /// Cells per call of the density function (and per parallel task) in an update.
 const CHUNK: usize = 4096;
 
+/// The bits of `cells` cells, all occupied (no bit past the last cell, as after an update
+/// or a restore).
+fn every_cell(cells: usize) -> Vec<u64> {
+    let mut bits = vec![u64::MAX; cells.div_ceil(64)];
+    if cells % 64 != 0 {
+        bits[cells / 64] = (1u64 << (cells % 64)) - 1;
+    }
+    bits
+}
+
 impl OccupancyGrid {
     /// `resolution^3` cells over `bounds`. Errors: `resolution` outside `1..=1024`.
     pub fn new(bounds: Aabb, resolution: usize, config: OccupancyConfig) -> Result<Self, OpsError> {
@@ -94,17 +104,12 @@ impl OccupancyGrid {
         }
         let cells = resolution.pow(3);
         let (lo, hi) = (bounds.min(), bounds.max());
-        let mut bits = vec![u64::MAX; cells.div_ceil(64)];
-        // No bit past the last cell, as after an update or a restore.
-        if cells % 64 != 0 {
-            bits[cells / 64] = (1u64 << (cells % 64)) - 1;
-        }
         Ok(OccupancyGrid {
             bounds,
             resolution,
             cell: std::array::from_fn(|a| (hi[a] - lo[a]) / resolution as f64),
             estimate: vec![0.0; cells],
-            bits,
+            bits: every_cell(cells),
             config,
             known: None,
         })
@@ -190,6 +195,12 @@ impl OccupancyGrid {
     /// Whether point `p` lies in an occupied cell (false outside the box).
     pub fn is_occupied_at(&self, p: [f64; 3]) -> bool {
         self.cell_of(p).is_some_and(|c| self.is_occupied(c))
+    }
+
+    /// Marks every cell occupied, as a new grid is, keeping the estimates (the next update
+    /// decides again from them).
+    pub fn occupy_all(&mut self) {
+        self.bits = every_cell(self.estimate.len());
     }
 
     /// The share of occupied cells, in `[0, 1]`.

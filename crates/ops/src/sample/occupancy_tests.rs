@@ -28,6 +28,10 @@ fn opacity_threshold_by_hand() {
     let mut grid = OccupancyGrid::new(cube(), 4, c).unwrap();
     grid.update(constant(0.1), CellPoints::Centre).unwrap();
     assert_eq!(grid.occupied_fraction(), 0.0);
+    // Every cell occupied again, the estimates kept for the next update.
+    grid.occupy_all();
+    assert_eq!(grid.occupied_fraction(), 1.0);
+    assert!(grid.estimate().iter().all(|&e| e == 0.1));
     grid.update(constant(0.11), CellPoints::Centre).unwrap();
     assert_eq!(grid.occupied_fraction(), 1.0);
 }
