@@ -41,9 +41,29 @@ const SETTINGS: TrainerSettings = TrainerSettings {
     seed: 11,
 };
 
+/// The training pixels of [`scene`], owned.
+struct TestRays {
+    o: Vec<f32>,
+    d: Vec<f32>,
+    colors: Vec<f32>,
+    alpha: Vec<f32>,
+}
+
+impl TestRays {
+    /// The trainer's view of them, with or without their opacities.
+    fn rays(&self, with_alpha: bool) -> TrainingRays<'_> {
+        TrainingRays {
+            origins: &self.o,
+            directions: &self.d,
+            colors: &self.colors,
+            alpha: with_alpha.then_some(&self.alpha[..]),
+        }
+    }
+}
+
 /// Rays from a sphere of radius 4 towards points near the centre (some miss the box), their
 /// target colours, and opacities (a third opaque, a third clear, a third between).
-fn scene(rays: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
+fn scene(rays: usize) -> TestRays {
     let mut r = rng(17);
     let (mut o, mut d, mut t, mut alpha) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for _ in 0..rays {
@@ -61,7 +81,7 @@ fn scene(rays: usize) -> (Vec<f32>, Vec<f32>, Vec<f32>, Vec<f32>) {
         }
         alpha.push([1.0, 0.0, r.gen_range(0.0..1.0)][alpha.len() % 3]);
     }
-    (o, d, t, alpha)
+    TestRays { o, d, colors: t, alpha }
 }
 
 /// The batch of step 0 as the kernel draws it: the picked rays, positions `[n, 3]`, step
@@ -294,13 +314,8 @@ fn cpu_step(s: &TrainerSettings, data: &TrainingRays<'_>, values: &[f32], occupi
 /// Step 0 on the device against [`cpu_step`], from random grid values.
 fn check_one_step(s: TrainerSettings, with_alpha: bool) {
     let Some(gpu) = device_for_tests().unwrap() else { return };
-    let (o, d, colors, alpha) = scene(300);
-    let data = TrainingRays {
-        origins: &o,
-        directions: &d,
-        colors: &colors,
-        alpha: with_alpha.then_some(&alpha[..]),
-    };
+    let pixels = scene(300);
+    let data = pixels.rays(with_alpha);
     let mut trainer = DenseGridTrainer::new(&gpu, s, data).unwrap();
     let mut r = rng(19);
     let values: Vec<f32> = (0..s.nodes.pow(3) * trainer.channels())
@@ -418,18 +433,13 @@ const OCCUPANCY: OccupancySettings = OccupancySettings {
 #[test]
 fn a_refresh_marks_the_cells_whose_density_exceeds_the_threshold() {
     let Some(gpu) = device_for_tests().unwrap() else { return };
-    let (o, d, colors, _) = scene(20);
+    let pixels = scene(20);
     let s = TrainerSettings {
         scene_box: ([-1.0, -0.5, 0.0], [1.0, 2.0, 0.75]),
         occupancy: Some(OCCUPANCY),
         ..SETTINGS
     };
-    let data = TrainingRays {
-        origins: &o,
-        directions: &d,
-        colors: &colors,
-        alpha: None,
-    };
+    let data = pixels.rays(false);
     let mut trainer = DenseGridTrainer::new(&gpu, s, data).unwrap();
     let cells = OCCUPANCY.cells;
     assert_eq!(
@@ -500,17 +510,12 @@ fn one_step_skipping_empty_cells_has_the_gradient_of_the_cpu_ops() {
 #[test]
 fn a_step_moves_the_entries_with_a_gradient_by_adam_and_no_others() {
     let Some(gpu) = device_for_tests().unwrap() else { return };
-    let (o, d, colors, _) = scene(300);
+    let pixels = scene(300);
     let s = TrainerSettings {
         occupancy: Some(OCCUPANCY),
         ..SETTINGS
     };
-    let data = TrainingRays {
-        origins: &o,
-        directions: &d,
-        colors: &colors,
-        alpha: None,
-    };
+    let data = pixels.rays(false);
     let mut trainer = DenseGridTrainer::new(&gpu, s, data).unwrap();
     assert!(matches!(trainer.last_gradient(), Err(CudaError::InvalidSettings(_))));
     let mut r = rng(41);
@@ -547,18 +552,13 @@ fn a_step_moves_the_entries_with_a_gradient_by_adam_and_no_others() {
 #[test]
 fn resampling_takes_the_cpu_lookup_at_the_new_nodes() {
     let Some(gpu) = device_for_tests().unwrap() else { return };
-    let (o, d, colors, _) = scene(50);
+    let pixels = scene(50);
     let s = TrainerSettings {
         scene_box: ([-1.0, -0.5, 0.0], [1.0, 2.0, 0.75]),
         sh_degree: 1,
         ..SETTINGS
     };
-    let data = TrainingRays {
-        origins: &o,
-        directions: &d,
-        colors: &colors,
-        alpha: None,
-    };
+    let data = pixels.rays(false);
     let mut trainer = DenseGridTrainer::new(&gpu, s, data).unwrap();
     let k = trainer.channels();
     let mut r = rng(23);
@@ -610,14 +610,10 @@ fn resampling_takes_the_cpu_lookup_at_the_new_nodes() {
 #[test]
 fn the_trainer_refuses_bad_input() {
     let Some(gpu) = device_for_tests().unwrap() else { return };
-    let (o, d, t, alpha) = scene(10);
+    let pixels = scene(10);
+    let (o, d, alpha) = (&pixels.o, &pixels.d, &pixels.alpha);
     let s = SETTINGS;
-    let data = TrainingRays {
-        origins: &o,
-        directions: &d,
-        colors: &t,
-        alpha: None,
-    };
+    let data = pixels.rays(false);
     let bad_data = [
         TrainingRays {
             origins: &o[1..],
