@@ -1,6 +1,8 @@
-// The parts of a dense grid's training step that are not ops: drawing a batch of rays and
-// sampling them, the squared-error loss and its gradient, and Adam. Compiled at run time by
-// NVRTC (see `src/kernel.rs`), so it includes no header. f32 data.
+// The parts of a dense grid's training step that are not ops: drawing a batch of rays,
+// placing their samples and packing the ones an occupancy grid keeps, the occupancy grid's
+// refresh, the photometric and distortion losses with their gradients, the lattice a grid is
+// resampled at, and Adam. Compiled at run time by NVRTC (see `src/kernel.rs`), so it includes
+// no header. f32 data.
 
 typedef unsigned long long u64;
 typedef long long i64;
