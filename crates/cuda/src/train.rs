@@ -96,9 +96,9 @@ pub struct StepPhases {
     pub distortion: f64,
     /// The shading's backward.
     pub shading_backward: f64,
-    /// The grid's backward (zeroing, scatter, rounding).
+    /// The grid's backward: the scatter of the samples' gradients into the grid's f64 sums.
     pub grid_backward: f64,
-    /// Adam over the grid.
+    /// Adam over the grid (it also rounds the sums and zeroes them).
     pub adam: f64,
 }
 
@@ -237,12 +237,9 @@ struct Staging {
     counts: CudaSlice<u64>,
 }
 
-/// The occupancy grid on the device.
+/// The occupancy grid's refresh state on the device (its cells are the trainer's).
 struct OccupancyState {
     settings: OccupancySettings,
-    cells: DeviceCells,
-    /// One byte a cell, nonzero where occupied.
-    occupied: CudaSlice<u8>,
     estimate: CudaSlice<f32>,
     /// The refresh's points `[2 cells^3, 3]` and their raw values `[2 cells^3, channels]`.
     points: CudaSlice<f32>,
@@ -280,7 +277,7 @@ struct GridState {
 }
 
 impl GridState {
-    /// A grid of `spec` with zero values and fresh moments, on `grid`'s kernels.
+    /// `grid`'s values, all zero, with fresh moments.
     fn zeros(stream: &std::sync::Arc<cudarc::driver::CudaStream>, grid: CudaGrid) -> Result<Self, CudaError> {
         let values = grid.spec().values();
         Ok(GridState {
@@ -325,9 +322,12 @@ pub struct DenseGridTrainer<'g> {
     /// loss; else one zero each), and the sum of its values since it was last read.
     distortion_scratch: [CudaSlice<f64>; 3],
     distortion_sum: CudaSlice<f64>,
+    /// The cells the sampling kernels skip the empty ones of (0 cells: no occupancy grid,
+    /// every sample kept).
+    cells: DeviceCells,
+    /// One byte a cell, nonzero where occupied (one unread byte without an occupancy grid).
+    occupied: CudaSlice<u8>,
     occupancy: Option<OccupancyState>,
-    /// Stands in for the occupancy bytes where there is no occupancy grid (never read).
-    no_cells: CudaSlice<u8>,
     raw: CudaSlice<f32>,
     d_raw: CudaSlice<f32>,
     picked: CudaSlice<u64>,
@@ -354,13 +354,6 @@ impl std::fmt::Debug for DenseGridTrainer<'_> {
 
 /// Threads a block of the compaction kernels (`COMPACT_THREADS` in `kernels/train.cu`).
 const COMPACT_THREADS: u32 = 256;
-
-/// No occupancy grid: every sample kept.
-const NO_CELLS: DeviceCells = DeviceCells {
-    min: [0.0; 3],
-    scale: [0.0; 3],
-    cells: 0,
-};
 
 /// Values a node holds without spherical harmonics: density, then RGB.
 const VIEW_INDEPENDENT_CHANNELS: usize = 4;
@@ -474,19 +467,21 @@ impl<'g> DenseGridTrainer<'g> {
         let gradients = gpu.gradient_buffers(&batch_rays)?;
         let channels = shading.channels();
         let with_dirs = matches!(shading, Shading::Harmonics(_));
+        let per_axis = settings.occupancy.map_or(0, |o| o.cells);
+        let (lo, hi) = settings.scene_box;
+        let cells = DeviceCells {
+            min: lo,
+            scale: std::array::from_fn(|a| per_axis as f64 / (hi[a] - lo[a])),
+            cells: per_axis as u64,
+        };
+        // Every cell occupied until the first refresh.
+        let occupied = s.clone_htod(&vec![1u8; per_axis.pow(3).max(1)])?;
         let occupancy = match settings.occupancy {
             None => None,
             Some(o) => {
                 let count = o.cells.pow(3);
-                let (lo, hi) = settings.scene_box;
                 Some(OccupancyState {
                     settings: o,
-                    cells: DeviceCells {
-                        min: lo,
-                        scale: std::array::from_fn(|a| o.cells as f64 / (hi[a] - lo[a])),
-                        cells: o.cells as u64,
-                    },
-                    occupied: s.clone_htod(&vec![1u8; count])?,
                     estimate: s.alloc_zeros(count)?,
                     points: s.alloc_zeros(6 * count)?,
                     raw: s.alloc_zeros(2 * count * channels)?,
@@ -526,8 +521,9 @@ impl<'g> DenseGridTrainer<'g> {
                 [s.alloc_zeros(len)?, s.alloc_zeros(len)?, s.alloc_zeros(len)?]
             },
             distortion_sum: s.alloc_zeros(1)?,
+            cells,
+            occupied,
             occupancy,
-            no_cells: s.alloc_zeros(1)?,
             raw: s.alloc_zeros(channels * n)?,
             d_raw: s.alloc_zeros(channels * n)?,
             picked: s.alloc_zeros(settings.batch)?,
@@ -566,7 +562,7 @@ impl<'g> DenseGridTrainer<'g> {
         let count = o.settings.cells.pow(3);
         let (seed, refresh) = (self.settings.seed, o.refreshes);
         let mut launch = s.launch_builder(&self.kernels.occupancy_points);
-        launch.arg(&o.cells).arg(&seed).arg(&refresh).arg(&mut o.points);
+        launch.arg(&self.cells).arg(&seed).arg(&refresh).arg(&mut o.points);
         // SAFETY: `points` holds `2 cells^3` positions.
         unsafe { launch.launch(launch_config(count)) }?;
         let st = &self.state;
@@ -582,7 +578,7 @@ impl<'g> DenseGridTrainer<'g> {
             .arg(&o.settings.decay)
             .arg(&o.settings.density)
             .arg(&mut o.estimate)
-            .arg(&mut o.occupied);
+            .arg(&mut self.occupied);
         // SAFETY: `raw` holds `2 cells^3` rows of `channels`, the estimate and the bytes
         // `cells^3`.
         unsafe { launch.launch(launch_config(count)) }?;
@@ -594,7 +590,7 @@ impl<'g> DenseGridTrainer<'g> {
     /// there is one.
     pub fn occupancy(&self) -> Result<Option<Vec<u8>>, CudaError> {
         match &self.occupancy {
-            Some(o) => Ok(Some(self.gpu.stream().clone_dtoh(&o.occupied)?)),
+            Some(_) => Ok(Some(self.gpu.stream().clone_dtoh(&self.occupied)?)),
             None => Ok(None),
         }
     }
@@ -706,10 +702,6 @@ impl<'g> DenseGridTrainer<'g> {
         let (batch, samples) = (st.batch as u64, st.samples_per_ray as u64);
         let (rays, seed, step, with_dirs) = (self.rays as u64, st.seed, self.steps, self.with_dirs());
         {
-            let (cells, occupied) = match &self.occupancy {
-                Some(o) => (o.cells, &o.occupied),
-                None => (NO_CELLS, &self.no_cells),
-            };
             let g = &mut self.staging;
             let mut launch = self.gpu.stream().launch_builder(&self.kernels.sample_batch);
             launch
@@ -727,8 +719,8 @@ impl<'g> DenseGridTrainer<'g> {
                 .arg(&mut self.picked)
                 .arg(&with_dirs)
                 .arg(&mut g.dirs)
-                .arg(&cells)
-                .arg(occupied);
+                .arg(&self.cells)
+                .arg(&self.occupied);
             // SAFETY: the kernel's arguments in its order and types; `rays` rays in the ray
             // buffers, `batch * samples` samples in the batch buffers (and their directions
             // when `with_dirs`), `batch` picks; a thread a sample.
@@ -923,10 +915,6 @@ impl<'g> DenseGridTrainer<'g> {
             let count = st.batch.min(rays - first);
             let (first64, count64, samples) = (first as u64, count as u64, st.samples_per_ray as u64);
             {
-                let (cells, occupied) = match &self.occupancy {
-                    Some(o) => (o.cells, &o.occupied),
-                    None => (NO_CELLS, &self.no_cells),
-                };
                 let g = &mut self.staging;
                 // The batch's rays past `count` keep step length 0: they add nothing.
                 s.memset_zeros(&mut g.delta)?;
@@ -943,8 +931,8 @@ impl<'g> DenseGridTrainer<'g> {
                     .arg(&mut g.ts)
                     .arg(&with_dirs)
                     .arg(&mut g.dirs)
-                    .arg(&cells)
-                    .arg(occupied);
+                    .arg(&self.cells)
+                    .arg(&self.occupied);
                 // SAFETY: rays first..first + count exist; the batch buffers hold `batch >=
                 // count` rays of samples; a thread a sample.
                 unsafe { launch.launch(launch_config(count * st.samples_per_ray)) }?;

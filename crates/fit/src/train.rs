@@ -340,11 +340,11 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
         if let Some(grid) = &mut occupancy {
             let m = &model;
             let points = CellPoints::CentreAndRandom { seed: step as u64 };
-            grid.update_every_n_steps(step, |p| m.densities(p), points)?;
+            let refreshed = grid.update_every_n_steps(step, |p| m.densities(p), points)?;
             // A refresh before any density has reached the threshold (a slow learning rate, a
             // faint scene) would empty every cell, and a grid with no sample left never trains
             // again: until some cell is above the threshold, every cell stays occupied.
-            if grid.occupied_fraction() == 0.0 {
+            if refreshed && grid.occupied_fraction() == 0.0 {
                 grid.occupy_all();
             }
         }
