@@ -691,14 +691,10 @@ impl<'g> DenseGridTrainer<'g> {
         Ok(clock.phases)
     }
 
-    fn step_with(&mut self, lr: f64, clock: &mut PhaseClock) -> Result<(), CudaError> {
+    /// Draws the step's batch, places its samples (skipping empty occupancy cells) and packs
+    /// the kept ones.
+    fn sample_batch(&mut self) -> Result<(), CudaError> {
         let st = self.settings;
-        if let Some(o) = st.occupancy {
-            if self.steps > 0 && self.steps % o.every == 0 {
-                self.refresh_occupancy()?;
-            }
-        }
-        clock.lap(self.gpu, |p| &mut p.occupancy)?;
         let (batch, samples) = (st.batch as u64, st.samples_per_ray as u64);
         let (rays, seed, step, with_dirs) = (self.rays as u64, st.seed, self.steps, self.with_dirs());
         {
@@ -726,9 +722,35 @@ impl<'g> DenseGridTrainer<'g> {
             // when `with_dirs`), `batch` picks; a thread a sample.
             unsafe { launch.launch(launch_config(st.batch * st.samples_per_ray)) }?;
         }
-        self.compact_samples()?;
+        self.compact_samples()
+    }
+
+    /// Whether the trainer has an occupancy grid and none of its cells is occupied (reads the
+    /// cells back: called only when a batch kept no sample).
+    fn occupancy_is_empty(&self) -> Result<bool, CudaError> {
+        Ok(self.occupancy()?.is_some_and(|cells| cells.iter().all(|&c| c == 0)))
+    }
+
+    fn step_with(&mut self, lr: f64, clock: &mut PhaseClock) -> Result<(), CudaError> {
+        let st = self.settings;
+        if let Some(o) = st.occupancy {
+            if self.steps > 0 && self.steps % o.every == 0 {
+                self.refresh_occupancy()?;
+            }
+        }
+        clock.lap(self.gpu, |p| &mut p.occupancy)?;
+        self.sample_batch()?;
+        if self.kept == 0 && self.occupancy_is_empty()? {
+            // A refresh emptied the occupancy grid (every density below its threshold, as a
+            // slow learning rate can leave it): with no samples nothing could raise a density
+            // again, so every cell is occupied until the next refresh, as `fogray fit` does.
+            let cells = self.gpu.stream().clone_htod(&vec![1u8; self.occupied.len()])?;
+            self.occupied = cells;
+            self.sample_batch()?;
+        }
         clock.lap(self.gpu, |p| &mut p.sampling)?;
         self.render_batch(clock)?;
+        let (batch, seed, step) = (st.batch as u64, st.seed, self.steps);
         {
             let random = u64::from(self.random);
             let background = DeviceRgb(st.background.map(f64::from));

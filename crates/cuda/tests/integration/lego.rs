@@ -9,7 +9,8 @@
 //! ```
 //!
 //! With `FOGRAY_GPU_RENDERS=<dir>`, each fit writes its first held-out view beside the
-//! photograph there at its end (`gpu-<nodes>-<seconds>s-<view>.png`).
+//! photograph there at its end (`gpu-<nodes>-<seconds>s-<view>.png`). Each fit prints the
+//! device memory in use (total minus free) at most, sampled after each allocation it makes.
 //!
 //! `FOGRAY_GPU_FITS` lists the fits to run, separated by commas, each
 //! `nodes:samples:batch:seconds[:sh_degree[:grow[:random_background[:occupancy[:distortion]]]]]`
@@ -25,7 +26,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use fogray_cuda::{
-    device_for_tests, CudaError, DenseGridTrainer, OccupancySettings, StepPhases, TrainerSettings, TrainingRays,
+    device_for_tests, CudaComposite, CudaError, DenseGridTrainer, OccupancySettings, StepPhases, TrainerSettings,
+    TrainingRays,
 };
 use fogray_data::{load, Frame, LoadOptions};
 use ndarray::Array3;
@@ -81,6 +83,23 @@ fn held_out_psnr(
     Ok((fogray_fit::metrics::psnr(&r, &e).expect("same shapes"), renders))
 }
 
+/// Hands back to the device what the stream-ordered allocator keeps after frees (its pool),
+/// so that the next fit's memory counts its own buffers alone.
+fn release_pooled_memory(gpu: &CudaComposite) -> Result<(), CudaError> {
+    use fogray_cuda::cudarc::driver::sys;
+    gpu.stream().synchronize()?;
+    let ctx = gpu.context();
+    ctx.bind_to_thread()?;
+    let mut pool = std::ptr::null_mut();
+    // SAFETY: the context's own device, bound to this thread; its current pool is the one
+    // the stream's allocations come from, and trimming frees only memory no buffer holds.
+    unsafe {
+        sys::cuDeviceGetMemPool(&mut pool, ctx.cu_device()).result()?;
+        sys::cuMemPoolTrimTo(pool, 0).result()?;
+    }
+    Ok(())
+}
+
 #[test]
 #[ignore = "needs a GPU and the lego dataset; prints PSNR against time"]
 fn lego_fit_on_the_device() -> Result<(), CudaError> {
@@ -105,6 +124,13 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
         colors: &c,
         alpha: Some(&alpha),
     };
+    // The device memory in use (total - free): the context and kernels before any trainer,
+    // then sampled after each allocation of a fit (its start, each growth, each evaluation).
+    let used = || -> Result<f64, CudaError> {
+        let (free, total) = gpu.context().mem_get_info()?;
+        Ok((total - free) as f64 / (1 << 20) as f64)
+    };
+    let before = used()?;
     let fits = std::env::var("FOGRAY_GPU_FITS").unwrap_or_else(|_| "128:256:8192:10:1:1:1:1:0.01".into());
     for fit in fits.split(',') {
         let v: Vec<f64> = fit
@@ -145,7 +171,9 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
             occupancy,
             seed: 0,
         };
+        release_pooled_memory(&gpu)?;
         let mut trainer = DenseGridTrainer::new(&gpu, settings, data)?;
+        let mut peak = used()?;
         let mut stage = 1;
         // fogray fit's schedule: --lr 0.4 until 60 % of the budget, then down geometrically to 0.04.
         let lr_at = |t: f64| {
@@ -172,6 +200,7 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
                 }
                 if stage < stages.len() && t >= stages[stage].0 * seconds {
                     trainer.resample(stages[stage].1)?;
+                    peak = peak.max(used()?);
                     stage += 1;
                 }
                 for _ in 0..10 {
@@ -185,6 +214,7 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
             let mse = trainer.take_mean_squared_error(since)?;
             since = 0;
             let (psnr, renders) = held_out_psnr(&mut trainer, &scene.test, &to, &td)?;
+            peak = peak.max(used()?);
             // The first held-out view beside its photograph, at the end of the fit.
             if let (Ok(dir), true) = (std::env::var("FOGRAY_GPU_RENDERS"), stop == seconds) {
                 let frame = &scene.test[0];
@@ -222,6 +252,7 @@ fn lego_fit_on_the_device() -> Result<(), CudaError> {
             ms(sum.loss), ms(sum.composite_backward), ms(sum.distortion), ms(sum.shading_backward),
             ms(sum.grid_backward), ms(sum.adam), ms(sum.total())
         );
+        println!("  device memory in use: at most {peak:.0} MiB, of which {before:.0} MiB before the trainer");
     }
     Ok(())
 }

@@ -494,6 +494,42 @@ fn a_refresh_marks_the_cells_whose_density_exceeds_the_threshold() {
 }
 
 #[test]
+fn a_step_after_a_refresh_that_empties_the_occupancy_grid_samples_every_cell() {
+    let Some(gpu) = device_for_tests().unwrap() else { return };
+    let pixels = scene(100);
+    let s = TrainerSettings {
+        occupancy: Some(OCCUPANCY),
+        ..SETTINGS
+    };
+    let mut trainer = DenseGridTrainer::new(&gpu, s, pixels.rays(false)).unwrap();
+    // Raw density -20 (softplus(-21) = 7.6e-10) everywhere: far below the threshold 0.4.
+    let values: Vec<f32> = (0..s.nodes.pow(3) * 4)
+        .map(|i| if i % 4 == 0 { -20.0 } else { 0.5 })
+        .collect();
+    trainer.set_grid_values(&values).unwrap();
+    trainer.refresh_occupancy().unwrap();
+    let cells = OCCUPANCY.cells.pow(3);
+    assert_eq!(
+        trainer.occupancy().unwrap(),
+        Some(vec![0; cells]),
+        "the refresh empties it"
+    );
+    trainer.record_gradients(true);
+    trainer.step(0.1).unwrap();
+    // With no cell occupied no sample would be kept and nothing could raise a density
+    // again: the step occupies every cell and trains on the batch.
+    assert_eq!(trainer.occupancy().unwrap(), Some(vec![1; cells]));
+    let g = trainer.last_gradient().unwrap();
+    let touched = g.iter().filter(|&&v| v != 0.0).count();
+    println!(
+        "a step after an emptying refresh: {touched} of {} grid values have a gradient",
+        g.len()
+    );
+    assert!(touched > 0);
+    assert!(trainer.take_mean_squared_error(1).unwrap() > 0.0);
+}
+
+#[test]
 fn one_step_skipping_empty_cells_has_the_gradient_of_the_cpu_ops() {
     for sh_degree in [0, 1] {
         check_one_step(
