@@ -4,10 +4,9 @@ use cudarc::nvrtc::{compile_ptx_with_opts, CompileOptions, Ptx};
 
 use crate::error::CudaError;
 
-/// How the composite kernels stage their memory traffic, and in which precision they take the
-/// exponentials of f32 data, fixed when they are compiled. The results do not depend on the
-/// layout (every layout computes the same sums in the same order); the speed does, differently
-/// on each device, so the benchmark compares layouts.
+/// How the composite kernels stage their memory traffic, fixed when they are compiled. The
+/// results do not depend on it (every layout computes the same sums in the same order); the
+/// speed does, differently on each device, so the benchmark compares layouts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct KernelTuning {
     /// Bytes of densities in the span of a ray that a lane takes per step: 32 or 64 (whole
@@ -17,11 +16,6 @@ pub struct KernelTuning {
     pub loads_in_flight: u32,
     /// Threads (rays) per block: 32, 64 or 128.
     pub threads_per_block: u32,
-    /// Take each sample's `exp(-depth)` and `-expm1(-tau)` of f32 data in f32, from the f64
-    /// depth and optical depth rounded to f32 (the sums stay f64; f64 data is unaffected):
-    /// cheaper than the double functions, within 1e-6 of the CPU op relative to the size of
-    /// the terms rather than 1e-7. Off by default: the CPU op takes them in f64.
-    pub f32_exponentials: bool,
 }
 
 /// The values of each [`KernelTuning`] field the kernels are built for.
@@ -37,13 +31,12 @@ impl Default for KernelTuning {
             span_bytes: 64,
             loads_in_flight: 8,
             threads_per_block: 128,
-            f32_exponentials: false,
         }
     }
 }
 
 impl KernelTuning {
-    /// Every layout the kernels are built for (with the exponentials in f64).
+    /// Every layout the kernels are built for.
     pub fn every() -> Vec<KernelTuning> {
         let mut all = Vec::new();
         for span_bytes in SPAN_BYTES {
@@ -53,7 +46,6 @@ impl KernelTuning {
                         span_bytes,
                         loads_in_flight,
                         threads_per_block,
-                        f32_exponentials: false,
                     });
                 }
             }
@@ -94,7 +86,6 @@ pub fn compile_tuned(capability: (i32, i32), tuning: KernelTuning) -> Result<Ptx
             format!("-DSPAN_BYTES={}", tuning.span_bytes),
             format!("-DLOADS={}", tuning.loads_in_flight),
             format!("-DBLOCK={}", tuning.threads_per_block),
-            format!("-DF32_EXP={}", u8::from(tuning.f32_exponentials)),
         ],
     )
 }

@@ -28,28 +28,6 @@ typedef unsigned long long u64;
 #define F32_MAX 3.402823466e38f
 #define F64_MAX 1.7976931348623157e308
 
-// With F32_EXP 1 (`KernelTuning::f32_exponentials`), the per-sample exp(-depth) and
-// -expm1(-tau) of f32 data are taken in f32 from the f64 values rounded to f32 (every sum stays
-// an f64): an error of at most depth * 2^-24 + 2 ulp relative in each T, and 1 ulp in each
-// alpha, for a fraction of the double functions' cost. f64 data always uses the doubles.
-#ifndef F32_EXP
-#define F32_EXP 0
-#endif
-
-// T = exp(-depth) and alpha = -expm1(-tau) of one sample of T-typed data.
-template <typename T>
-__device__ __forceinline__ double transmittance(double depth) { return exp(-depth); }
-template <typename T>
-__device__ __forceinline__ double absorbed(double tau) { return -expm1(-tau); }
-template <>
-__device__ __forceinline__ double transmittance<float>(double depth) {
-    return F32_EXP ? (double)expf(-(float)depth) : exp(-depth);
-}
-template <>
-__device__ __forceinline__ double absorbed<float>(double tau) {
-    return F32_EXP ? (double)-expm1f(-(float)tau) : -expm1(-tau);
-}
-
 // Finite and non-negative (NaN fails both comparisons).
 __device__ __forceinline__ bool in_domain(float v) { return v >= 0.0f && v <= F32_MAX; }
 __device__ __forceinline__ bool in_domain(double v) { return v >= 0.0 && v <= F64_MAX; }
@@ -75,7 +53,7 @@ __device__ __forceinline__ void add_sample(const T* __restrict__ color, u64 k, d
                                            double& c1, double& c2, bool& ok) {
     T r0 = color[3 * k], r1 = color[3 * k + 1], r2 = color[3 * k + 2];
     ok &= is_finite(r0) & is_finite(r1) & is_finite(r2);
-    double w = transmittance<T>(depth) * absorbed<T>(tau);
+    double w = exp(-depth) * -expm1(-tau);
     c0 = fma(w, (double)r0, c0);
     c1 = fma(w, (double)r1, c1);
     c2 = fma(w, (double)r2, c2);
@@ -311,8 +289,8 @@ __device__ __forceinline__ void backward_chunk(T* sigma, T* delta, T* color, int
         if (i < m) {
             T s = sigma[i], d = delta[i];
             double tau = (double)s * (double)d;
-            double alpha = absorbed<T>(tau);
-            double t_k = transmittance<T>(dep[i]);
+            double alpha = -expm1(-tau);
+            double t_k = exp(-dep[i]);
             double c0 = (double)color[3 * i], c1 = (double)color[3 * i + 1], c2 = (double)color[3 * i + 2];
             double v = g0 * c0 + g1 * c1 + g2 * c2 + go;
             double diff = v - behind;

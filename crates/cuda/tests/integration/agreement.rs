@@ -13,45 +13,18 @@ const F32_FLOOR: f64 = 1e-30;
 const F64_TOL: f64 = 1e-12;
 const F64_FLOOR: f64 = 1e-290;
 
-/// The default kernels, and those that take f32 data's exponentials in f32
-/// (`KernelTuning::f32_exponentials`), which every f32 check runs too.
-struct Gpus {
-    exact: CudaComposite,
-    f32_exponentials: CudaComposite,
+fn gpu() -> Option<CudaComposite> {
+    device_for_tests().unwrap_or_else(|e| panic!("CUDA device present but unusable: {e}"))
 }
 
-impl std::ops::Deref for Gpus {
-    type Target = CudaComposite;
-    fn deref(&self) -> &CudaComposite {
-        &self.exact
-    }
-}
-
-fn gpu() -> Option<Gpus> {
-    let exact = device_for_tests().unwrap_or_else(|e| panic!("CUDA device present but unusable: {e}"))?;
-    let tuning = KernelTuning {
-        f32_exponentials: true,
-        ..KernelTuning::default()
-    };
-    let f32_exponentials = CudaComposite::with_tuning(0, tuning).unwrap_or_else(|e| panic!("{tuning:?}: {e}"));
-    Some(Gpus {
-        exact,
-        f32_exponentials,
-    })
-}
-
-fn check_both(gpu: &Gpus, c: &Case) {
+fn check_both(gpu: &CudaComposite, c: &Case) {
     check_f32(gpu, c);
     check_f64(gpu, c);
 }
 
-fn check_f32(gpu: &Gpus, c: &Case) {
-    let e = compare::<f32>(&gpu.exact, c, F32_FLOOR);
+fn check_f32(gpu: &CudaComposite, c: &Case) {
+    let e = compare::<f32>(gpu, c, F32_FLOOR);
     assert!(e.iter().all(|&e| e <= F32_TOL), "f32 {}: {e:?}", c.name);
-    let e = compare::<f32>(&gpu.f32_exponentials, c, F32_FLOOR);
-    let most = e.iter().fold(0.0f64, |m, &v| m.max(v));
-    println!("{}, f32 exponentials: worst scaled error {most:.2e}", c.name);
-    assert!(e.iter().all(|&e| e <= F32_TOL), "f32 exponentials {}: {e:?}", c.name);
 }
 
 fn check_f64(gpu: &CudaComposite, c: &Case) {

@@ -9,7 +9,6 @@
 //! `FOGRAY_BENCH_CPU=0` leaves out the CPU op (its time, and the check of the GPU's results
 //! against it on the same batch). `FOGRAY_BENCH_TUNINGS=1` also times every staging layout
 //! the kernels are built for ([`KernelTuning`]), each checked to give the default's bits.
-//! `FOGRAY_BENCH_F32_EXP=1` builds every kernel timed with `KernelTuning::f32_exponentials`.
 
 use std::time::Instant;
 
@@ -23,12 +22,6 @@ use rand::Rng;
 const RAYS: usize = 1 << 20;
 const LEN: usize = 64;
 const REPS: usize = 10;
-
-/// Whether `FOGRAY_BENCH_F32_EXP=1` asks for the kernels that take f32 data's exponentials in
-/// f32.
-fn f32_exponentials() -> bool {
-    std::env::var("FOGRAY_BENCH_F32_EXP").is_ok_and(|v| v == "1")
-}
 
 /// Milliseconds per call of `f`, timed with events on the stream (after one warm-up call).
 fn time_ms(gpu: &CudaComposite, mut f: impl FnMut() -> Result<(), CudaError>) -> Result<f64, CudaError> {
@@ -51,18 +44,8 @@ fn time_ms(gpu: &CudaComposite, mut f: impl FnMut() -> Result<(), CudaError>) ->
 #[ignore = "needs a GPU; prints throughput"]
 fn throughput_of_a_million_rays_of_64_samples() -> Result<(), CudaError> {
     let Some(gpu) = device_for_tests()? else { return Ok(()) };
-    let tuning = KernelTuning {
-        f32_exponentials: f32_exponentials(),
-        ..KernelTuning::default()
-    };
-    let gpu = if tuning == KernelTuning::default() {
-        gpu
-    } else {
-        drop(gpu);
-        CudaComposite::with_tuning(0, tuning)?
-    };
     println!(
-        "device: {} (compute capability {:?}), {tuning:?}",
+        "device: {} (compute capability {:?})",
         gpu.device_name(),
         gpu.compute_capability()
     );
@@ -218,11 +201,7 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
         background: &[1.0, 1.0, 1.0],
     };
     let mut reference: Option<Vec<Vec<f32>>> = None;
-    for layout in KernelTuning::every() {
-        let tuning = KernelTuning {
-            f32_exponentials: f32_exponentials(),
-            ..layout
-        };
+    for tuning in KernelTuning::every() {
         let g = CudaComposite::with_tuning(0, tuning)?;
         let x = g.upload(&host)?;
         let up = g.upload_upstream(&x, &d_color, None)?;
