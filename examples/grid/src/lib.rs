@@ -42,6 +42,7 @@
 
 #![warn(missing_docs)]
 
+pub mod capture;
 pub mod exact;
 pub mod photographs;
 pub mod report;

@@ -26,6 +26,7 @@ use fogray::fit::render::{render_picture, RenderOptions};
 use fogray::fit::settings::{FitSettings, ModelKind};
 use fogray::fit::train::{fit_from, FitResult, Progress};
 use fogray::fit::RadianceField;
+use fogray_grid::capture::{self, CaptureSettings};
 use fogray_grid::photographs::{photograph, photographs};
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
@@ -123,6 +124,27 @@ enum Command {
         /// Directory for one PNG per view (created if missing).
         #[arg(long)]
         out: Option<PathBuf>,
+    },
+    /// Writes a phone-like capture of the scene as an instant-ngp dataset in --out
+    /// (transforms.json and images/frame_NNNN.png): a hand-held walk once around it through a
+    /// distorted, off-centre lens, with the scene standing in a painted room beyond the box and
+    /// no alpha. Each picture is exact for its lens. Fit it with `fogray fit --data DIR
+    /// --learn-background`.
+    Capture {
+        #[command(flatten)]
+        scene: SceneArg,
+        /// Views along the walk (every eighth is held out by `fogray fit`).
+        #[arg(long, default_value_t = CaptureSettings::default().views)]
+        views: usize,
+        /// Picture width in pixels.
+        #[arg(long, default_value_t = CaptureSettings::default().width)]
+        width: usize,
+        /// Picture height in pixels.
+        #[arg(long, default_value_t = CaptureSettings::default().height)]
+        height: usize,
+        /// The folder to write (created if missing).
+        #[arg(long)]
+        out: PathBuf,
     },
     /// Fits a dense grid of density and colour to the training views' exact photographs
     /// (Adam on random batches of rays), measuring the test PSNR on the held-out views.
@@ -691,6 +713,38 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
             if let (Some(dir), Some(last)) = (&out, written.last()) {
                 println!("written: {}/view-000.png .. {}", dir.display(), last.display());
             }
+        }
+        Command::Capture {
+            scene,
+            views,
+            width,
+            height,
+            out,
+        } => {
+            let scene = scene.load()?;
+            let settings = CaptureSettings {
+                views,
+                width,
+                height,
+                ..CaptureSettings::default()
+            };
+            let cams = capture::cameras(&settings)?;
+            let pictures: Vec<_> = cams
+                .iter()
+                .map(|c| capture::capture_photograph(&scene, c, settings.room_radius))
+                .collect();
+            let names: Vec<String> = (0..cams.len()).map(capture::frame_name).collect();
+            let frames: Vec<_> = names
+                .iter()
+                .zip(&cams)
+                .zip(&pictures)
+                .map(|((n, c), p)| (n.as_str(), c, p))
+                .collect();
+            let transforms = fogray_data::write_instant_ngp(&out, &frames)?;
+            println!(
+                "{views} views of {width} x {height} pixels written: {}",
+                transforms.display()
+            );
         }
         Command::Fit(args) => {
             let fit = matches.subcommand_matches("fit");

@@ -137,3 +137,45 @@ fn the_rings_photographs_through_a_distorted_lens_read_back_from_an_instant_ngp_
         assert_eq!(file, dir.join("transforms.json"));
     });
 }
+
+/// `fogray-grid capture` writes an instant-ngp dataset that fogray-data reads back with its
+/// lens, its split and, in every picture, the exact capture photograph to 8-bit rounding.
+#[test]
+fn the_capture_command_writes_a_capture_that_reads_back() {
+    use fogray_grid::capture::{cameras, capture_photograph, frame_name, CaptureSettings};
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("capture");
+    let args = ["capture", "--views", "9", "--width", "24", "--height", "18"];
+    crate::common::ok(&[&args[..], &["--out", out.to_str().unwrap()]].concat());
+    let settings = CaptureSettings {
+        views: 9,
+        width: 24,
+        height: 18,
+        ..CaptureSettings::default()
+    };
+    let cams = cameras(&settings).unwrap();
+    let data = load(&out, &LoadOptions::default()).unwrap();
+    assert_eq!(data.format, Format::InstantNgp);
+    let held_out: Vec<&str> = data.test.iter().map(|f| f.name.as_str()).collect();
+    assert_eq!(held_out, [frame_name(0), frame_name(8)]);
+    assert_eq!(data.train.len(), 7);
+    let scene = Scene::default();
+    for frame in data.train.iter().chain(&data.test) {
+        let i: usize = frame.name["frame_".len()..].parse().unwrap();
+        assert_eq!(*frame.camera.distortion(), settings.distortion, "{}", frame.name);
+        assert!(frame.picture.alpha.is_none());
+        let exact = capture_photograph(&scene, &cams[i], settings.room_radius);
+        let mut worst = 0.0f64;
+        for row in 0..18 {
+            for col in 0..24 {
+                let (a, b) = (frame.camera.direction(row, col), cams[i].direction(row, col));
+                worst = (0..3).map(|j| (a[j] - b[j]).abs()).fold(worst, f64::max);
+                for c in 0..3 {
+                    let read = f64::from(frame.picture.color[[row, col, c]]);
+                    assert!((read - exact[[row, col, c]]).abs() <= PIXEL_TOLERANCE, "{}", frame.name);
+                }
+            }
+        }
+        assert!(worst <= RAY_TOLERANCE, "{}: a direction is {worst} off", frame.name);
+    }
+}
