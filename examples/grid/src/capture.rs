@@ -80,9 +80,10 @@ const MAX_CAMERA_DISTANCE: f64 = 3.6;
 
 /// The hand-held walk: view `i` of `n` at azimuth `2 pi i / n` (plus a wobble), at a height
 /// of 10 to 40 degrees and a distance of 2.7 to 3.3 that vary smoothly along the walk, aimed
-/// within 0.15 of the origin, world `z` up (the built-in scene's floor lies in `z`). The lens
-/// is `settings.distortion` with the focal length `0.85 width` and the principal point a few
-/// pixels off the centre.
+/// at a point that wanders within 0.15 of the centre across and 0.2 below it, world `z` up
+/// (the built-in scene's floor is level in `z`). The lens is `settings.distortion` with the
+/// focal length `0.85 width` and the principal point 1.1 % and 0.7 % of the picture off its
+/// centre.
 pub fn cameras(settings: &CaptureSettings) -> Result<Vec<PinholeCamera>, CaptureError> {
     let s = settings;
     if s.views < 2 || s.width == 0 || s.height == 0 {
