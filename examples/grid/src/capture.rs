@@ -19,9 +19,9 @@
 
 use fogray::ops::{Distortion, Intrinsics, OpsError, PinholeCamera};
 use ndarray::Array3;
-use rayon::prelude::*;
 
 use crate::exact::{render_ray, Ray};
+use crate::photographs::picture;
 use crate::scene::Scene;
 
 /// The capture's cameras, lens and room.
@@ -165,25 +165,15 @@ fn wall_direction(ray: &Ray, radius: f64) -> [f64; 3] {
 /// The exact picture from `camera` of `scene` standing in the room: the scene composited
 /// along each pixel's ray, the wall behind it. `scene`'s own background is not used.
 pub fn capture_photograph(scene: &Scene, camera: &PinholeCamera, room_radius: f64) -> Array3<f64> {
-    let (w, h) = (camera.intrinsics().width, camera.intrinsics().height);
     let in_room = Scene {
         background: [0.0; 3],
         primitives: scene.primitives.clone(),
     };
-    let pixels: Vec<f64> = (0..w * h)
-        .into_par_iter()
-        .flat_map_iter(|p| {
-            let ray = Ray {
-                origin: camera.centre(),
-                direction: camera.direction(p / w, p % w),
-            };
-            let seen = render_ray(&in_room, &ray);
-            let wall = wall_color(wall_direction(&ray, room_radius));
-            std::array::from_fn::<f64, 3, _>(|c| seen.color[c] + seen.transmittance * wall[c])
-        })
-        .collect();
-    // w * h * 3 values were produced for that shape.
-    Array3::from_shape_vec((h, w, 3), pixels).unwrap_or_else(|_| unreachable!())
+    picture(camera, |ray| {
+        let seen = render_ray(&in_room, ray);
+        let wall = wall_color(wall_direction(ray, room_radius));
+        std::array::from_fn(|c| seen.color[c] + seen.transmittance * wall[c])
+    })
 }
 
 /// The capture's name for view `i` (its picture's file stem).

@@ -25,6 +25,12 @@ use crate::scene::Scene;
 /// (rows top to bottom). Values are in `[0, 1]`: convex combinations of colours and
 /// background.
 pub fn photograph(scene: &Scene, camera: &PinholeCamera) -> Array3<f64> {
+    picture(camera, |ray| render_ray(scene, ray).color)
+}
+
+/// The picture `[row][column][channel]` whose pixels are `shade` of the camera's ray through
+/// each, in parallel over pixels.
+pub fn picture(camera: &PinholeCamera, shade: impl Fn(&Ray) -> [f64; 3] + Sync) -> Array3<f64> {
     let (w, h) = (camera.intrinsics().width, camera.intrinsics().height);
     let pixels: Vec<f64> = (0..w * h)
         .into_par_iter()
@@ -33,7 +39,7 @@ pub fn photograph(scene: &Scene, camera: &PinholeCamera) -> Array3<f64> {
                 origin: camera.centre(),
                 direction: camera.direction(p / w, p % w),
             };
-            render_ray(scene, &ray).color
+            shade(&ray)
         })
         .collect();
     // w * h * 3 values were produced for that shape.
