@@ -1,8 +1,8 @@
 //! A background the fit learns, for captures without alpha (phone photographs): what lies
 //! beyond the scene's box is seen as an environment at infinity, a colour that depends on the
 //! ray's direction alone, `sigmoid(sum_b k[c B + b] Y_b(d))` with the spherical harmonics of
-//! [`DEGREE`] ([`ShColor`], one set of coefficients for the whole scene, learned with the
-//! grid). Without it such a capture's background must be painted into the box (haze at its
+//! a degree from 0 to 3 (`FitSettings::background_degree`; [`ShColor`], one set of
+//! coefficients for the whole scene, learned with the grid). Without it such a capture's background must be painted into the box (haze at its
 //! walls) or stays an error the fit cannot remove.
 //!
 //! ```
@@ -10,7 +10,8 @@
 //! use fogray_tape::Tape;
 //! use ndarray::{arr2, Array2};
 //!
-//! let environment = Environment::new();
+//! let environment = Environment::new(2)?;
+//! assert_eq!(environment.coefficient_count(), 27);
 //! let coefficients = Array2::<f64>::zeros((1, environment.coefficient_count()));
 //! let directions = arr2(&[[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]]);
 //! // Fresh coefficients are 0: grey (sigmoid 0) from every direction.
@@ -27,17 +28,9 @@ use ndarray::{Array2, ArrayView2};
 use crate::error::FitError;
 use crate::shading::Shading;
 
-/// The name of the coefficients `[1, 3 (DEGREE + 1)^2]` in a model's parameter store and a
+/// The name of the coefficients `[1, 3 (degree + 1)^2]` in a model's parameter store and a
 /// checkpoint.
 pub const ENVIRONMENT: &str = "environment";
-
-/// The degree of the environment's spherical harmonics: a sky brighter than the ground, a
-/// window on one side, with 27 values in all (a capture's background seen from tens of
-/// directions constrains no more).
-pub const DEGREE: usize = 2;
-
-// ShColor is written out to degree 3: `Environment::new` cannot fail.
-const _: () = assert!(DEGREE <= fogray_ops::sh::basis::MAX_DEGREE);
 
 /// The learned background's colour model (its coefficients are a model's parameter).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -45,21 +38,18 @@ pub struct Environment {
     colour: ShColor,
 }
 
-impl Default for Environment {
-    fn default() -> Self {
-        Environment::new()
-    }
-}
-
 impl Environment {
-    /// The environment of spherical harmonics of [`DEGREE`].
-    pub fn new() -> Self {
-        // DEGREE is at most ShColor's highest degree (asserted at compile time above).
-        let colour = ShColor::new(DEGREE).unwrap_or_else(|_| unreachable!("degree {DEGREE} is supported"));
-        Environment { colour }
+    /// The environment of spherical harmonics of `degree`: 0 (one colour from every
+    /// direction) to 3. Degree 2 holds a sky brighter than the ground and a window on one
+    /// side; 3 follows a room's walls a little further (reports/grid/capture.md).
+    ///
+    /// Errors: [`FitError::Config`] for a degree above 3, naming the flag.
+    pub fn new(degree: usize) -> Result<Self, FitError> {
+        let colour = ShColor::new(degree).map_err(|e| FitError::Config(format!("--background-degree: {e}")))?;
+        Ok(Environment { colour })
     }
 
-    /// Values of its coefficients: 3 channels of `(DEGREE + 1)^2`.
+    /// Values of its coefficients: 3 channels of `(degree + 1)^2`.
     pub fn coefficient_count(&self) -> usize {
         self.colour.coefficient_count()
     }

@@ -287,10 +287,15 @@ pub struct FitSettings {
     pub model: ModelKind,
     /// For captures without alpha (photographs whose background lies beyond the box): learn
     /// the background, a colour that depends on the view direction (spherical harmonics of
-    /// degree 2), in place of the dataset's fixed background colour; renders use it too.
-    /// Views with alpha are trained over random colours instead (--random-background).
+    /// --background-degree), in place of the dataset's fixed background colour; renders use
+    /// it too. Views with alpha are trained over random colours instead (--random-background).
     #[cfg_attr(feature = "cli", arg(long))]
     pub learn_background: bool,
+    /// The degree of the learned background's spherical harmonics, 0 to 3 (3 (degree + 1)^2
+    /// values; 0 is one colour from every direction). Used with --learn-background.
+    #[cfg_attr(feature = "cli", arg(long, value_name = "DEGREE", default_value_t = FitSettings::DEFAULT.background_degree))]
+    #[serde(default = "background_of_degree_2")]
+    pub background_degree: usize,
 }
 
 impl FitSettings {
@@ -317,6 +322,7 @@ impl FitSettings {
         model: ModelKind::Dense,
         distortion: 0.0,
         learn_background: false,
+        background_degree: 3,
     };
 
     /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].
@@ -368,6 +374,9 @@ impl FitSettings {
         if self.sh_degree > 3 {
             return bad("--sh-degree must be 0, 1, 2 or 3");
         }
+        if self.background_degree > 3 {
+            return bad("--background-degree must be 0, 1, 2 or 3");
+        }
         if let Some(b) = self.scene_box {
             b.check()?;
         }
@@ -407,6 +416,12 @@ fn trained_without_random_background() -> bool {
     false
 }
 
+/// `background_degree` of settings written before it existed: their learned backgrounds were
+/// of degree 2 (and their checkpoints hold that many coefficients).
+fn background_of_degree_2() -> usize {
+    2
+}
+
 impl Default for FitSettings {
     fn default() -> Self {
         FitSettings::DEFAULT
@@ -441,6 +456,20 @@ mod tests {
     }
 
     #[test]
+    fn settings_written_before_the_background_degree_read_degree_2() {
+        const { assert!(FitSettings::DEFAULT.background_degree == 3) };
+        let old: FitSettings = serde_json::from_str(r#"{"grid": 32, "learn_background": true}"#).unwrap();
+        assert_eq!(old.background_degree, 2);
+        let text = serde_json::to_string(&FitSettings::DEFAULT).unwrap();
+        assert_eq!(serde_json::from_str::<FitSettings>(&text).unwrap().background_degree, 3);
+        let four = FitSettings {
+            background_degree: 4,
+            ..FitSettings::DEFAULT
+        };
+        assert!(four.check().unwrap_err().to_string().contains("--background-degree"));
+    }
+
+    #[test]
     fn settings_written_before_random_backgrounds_read_them_off() {
         const { assert!(FitSettings::DEFAULT.random_background) };
         let old: FitSettings = serde_json::from_str(r#"{"grid": 32}"#).unwrap();
@@ -448,6 +477,8 @@ mod tests {
         assert_eq!(
             FitSettings {
                 random_background: true,
+                // The other field that settings this old read otherwise (see above).
+                background_degree: FitSettings::DEFAULT.background_degree,
                 ..old
             },
             FitSettings {

@@ -106,8 +106,12 @@ impl Shading {
     ///
     /// Errors: as [`Shading::new`].
     pub fn of(settings: &FitSettings) -> Result<Self, FitError> {
+        let environment = match settings.learn_background {
+            true => Some(Environment::new(settings.background_degree)?),
+            false => None,
+        };
         Ok(Shading {
-            environment: settings.learn_background.then(Environment::new),
+            environment,
             ..Shading::new(settings.shift, settings.sh_degree)?
         })
     }

@@ -3,7 +3,7 @@
 //! into the box.
 
 use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::environment::{Environment, DEGREE, ENVIRONMENT};
+use fogray_fit::environment::{Environment, ENVIRONMENT};
 use fogray_fit::model::RadianceField;
 use fogray_fit::settings::{FitSettings, SceneBox};
 use fogray_ops::sh::basis::{C0, C1};
@@ -49,8 +49,8 @@ fn sky_ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
 
 #[test]
 fn the_environment_is_the_sigmoid_of_the_harmonics_in_the_ray_direction() {
-    let environment = Environment::new();
-    let b = (DEGREE + 1) * (DEGREE + 1);
+    let environment = Environment::new(2).unwrap();
+    let b = 9;
     assert_eq!(environment.coefficient_count(), 3 * b);
     // The sky in closed form: Y_0 = C0 and Y_2 = C1 z, so channel c's coefficients are
     // L_c / C0 and 1.5 / C1, every other one 0.
@@ -96,18 +96,43 @@ fn a_fit_with_a_learned_background_learns_the_sky() {
     let id = learned.model.params().id(ENVIRONMENT).unwrap();
     let coefficients = learned.model.params().get(id).unwrap().to_owned();
     let coefficients = coefficients.into_dimensionality::<ndarray::Ix2>().unwrap();
+    // The settings' degree (3 by default): 3 channels of 16 coefficients.
+    assert_eq!(coefficients.dim(), (1, 48));
     let mut rng = ChaCha12Rng::seed_from_u64(5);
     // Directions the training views saw beside the ball: from the cameras' elevations.
     for _ in 0..50 {
         let (azimuth, z) = (rng.gen_range(0.0..std::f64::consts::TAU), rng.gen_range(-0.4..0.4f64));
         let r = (1.0 - z * z).sqrt();
         let d = ndarray::arr2(&[[r * azimuth.cos(), r * azimuth.sin(), z]]);
-        let got = Environment::new().colors(coefficients.view(), d.view()).unwrap();
+        let got = Environment::new(learned_settings.background_degree)
+            .unwrap()
+            .colors(coefficients.view(), d.view())
+            .unwrap();
         for (g, want) in got.row(0).iter().zip(sky(d.row(0))) {
             assert!((g - want).abs() < 0.05, "{d}: {g} against {want}");
         }
     }
     assert!(fixed.model.params().id(ENVIRONMENT).is_none());
+}
+
+#[test]
+fn the_degree_sets_the_coefficients_and_above_3_is_refused() {
+    for (degree, count) in [(0, 3), (1, 12), (2, 27), (3, 48)] {
+        assert_eq!(Environment::new(degree).unwrap().coefficient_count(), count);
+    }
+    let e = Environment::new(4).unwrap_err().to_string();
+    assert!(e.contains("--background-degree"), "{e}");
+    // Degree 0 is one colour from every direction: sigmoid(C0 k) per channel.
+    let zero = Environment::new(0).unwrap();
+    let k = ndarray::arr2(&[[1.0, -2.0, 0.5]]);
+    let d = ndarray::arr2(&[[0.0, 0.0, 1.0], [0.6, -0.8, 0.0]]);
+    let colors = zero.colors(k.view(), d.view()).unwrap();
+    for row in colors.outer_iter() {
+        for (c, k) in row.iter().zip(k.row(0)) {
+            let want = 1.0 / (1.0 + (-C0 * k).exp());
+            assert!((c - want).abs() < 1e-15, "{c} against {want}");
+        }
+    }
 }
 
 #[test]
