@@ -2,8 +2,9 @@
 //! beyond the scene's box is seen as an environment at infinity, a colour that depends on the
 //! ray's direction alone, `sigmoid(sum_b k[c B + b] Y_b(d))` with the spherical harmonics of
 //! a degree from 0 to 3 (`FitSettings::background_degree`; [`ShColor`], one set of
-//! coefficients for the whole scene, learned with the grid). Without it such a capture's background must be painted into the box (haze at its
-//! walls) or stays an error the fit cannot remove.
+//! coefficients for the whole scene, learned with the grid). Without it such a capture's
+//! background must be painted into the box (haze at its walls) or stays an error the fit
+//! cannot remove.
 //!
 //! ```
 //! use fogray_fit::environment::Environment;

@@ -24,38 +24,47 @@ use crate::exact::{render_ray, Ray};
 use crate::photographs::picture;
 use crate::scene::Scene;
 
-/// The capture's cameras, lens and room.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The capture's cameras, lens and room (the command line of `fogray-grid capture`).
+#[derive(Debug, Clone, Copy, PartialEq, clap::Args)]
 pub struct CaptureSettings {
-    /// Views along the walk.
+    /// Views along the walk (every eighth is held out by `fogray fit`).
+    #[arg(long, default_value_t = CaptureSettings::DEFAULT.views)]
     pub views: usize,
-    /// Picture width and height in pixels.
+    /// Picture width in pixels.
+    #[arg(long, default_value_t = CaptureSettings::DEFAULT.width)]
     pub width: usize,
-    /// See `width`.
+    /// Picture height in pixels.
+    #[arg(long, default_value_t = CaptureSettings::DEFAULT.height)]
     pub height: usize,
     /// The lens's OpenCV distortion.
+    #[arg(skip = CaptureSettings::DEFAULT.distortion)]
     pub distortion: Distortion,
-    /// The room's radius, beyond the scene's box.
+    /// The room's radius, beyond the scene's box and the cameras (more than 3.6).
+    #[arg(long, default_value_t = CaptureSettings::DEFAULT.room_radius)]
     pub room_radius: f64,
 }
 
-impl Default for CaptureSettings {
+impl CaptureSettings {
     /// 120 views of 480 x 360 pixels through a barrel-distorted lens, in a room of radius 8
     /// (the cameras walk at about 3 from the centre).
+    pub const DEFAULT: CaptureSettings = CaptureSettings {
+        views: 120,
+        width: 480,
+        height: 360,
+        distortion: Distortion {
+            k1: -0.12,
+            k2: 0.03,
+            p1: 0.0008,
+            p2: -0.0005,
+            ..Distortion::NONE
+        },
+        room_radius: 8.0,
+    };
+}
+
+impl Default for CaptureSettings {
     fn default() -> Self {
-        CaptureSettings {
-            views: 120,
-            width: 480,
-            height: 360,
-            distortion: Distortion {
-                k1: -0.12,
-                k2: 0.03,
-                p1: 0.0008,
-                p2: -0.0005,
-                ..Distortion::NONE
-            },
-            room_radius: 8.0,
-        }
+        CaptureSettings::DEFAULT
     }
 }
 

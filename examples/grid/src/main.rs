@@ -133,15 +133,8 @@ enum Command {
     Capture {
         #[command(flatten)]
         scene: SceneArg,
-        /// Views along the walk (every eighth is held out by `fogray fit`).
-        #[arg(long, default_value_t = CaptureSettings::default().views)]
-        views: usize,
-        /// Picture width in pixels.
-        #[arg(long, default_value_t = CaptureSettings::default().width)]
-        width: usize,
-        /// Picture height in pixels.
-        #[arg(long, default_value_t = CaptureSettings::default().height)]
-        height: usize,
+        #[command(flatten)]
+        settings: CaptureSettings,
         /// The folder to write (created if missing).
         #[arg(long)]
         out: PathBuf,
@@ -714,20 +707,8 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
                 println!("written: {}/view-000.png .. {}", dir.display(), last.display());
             }
         }
-        Command::Capture {
-            scene,
-            views,
-            width,
-            height,
-            out,
-        } => {
+        Command::Capture { scene, settings, out } => {
             let scene = scene.load()?;
-            let settings = CaptureSettings {
-                views,
-                width,
-                height,
-                ..CaptureSettings::default()
-            };
             let cams = capture::cameras(&settings)?;
             let pictures: Vec<_> = cams
                 .iter()
@@ -742,7 +723,10 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
                 .collect();
             let transforms = fogray_data::write_instant_ngp(&out, &frames)?;
             println!(
-                "{views} views of {width} x {height} pixels written: {}",
+                "{} views of {} x {} pixels written: {}",
+                settings.views,
+                settings.width,
+                settings.height,
                 transforms.display()
             );
         }

@@ -179,3 +179,23 @@ fn the_capture_command_writes_a_capture_that_reads_back() {
         assert!(worst <= RAY_TOLERANCE, "{}: a direction is {worst} off", frame.name);
     }
 }
+
+/// Settings that cannot make a capture are refused with one line and status 2, and nothing is
+/// written.
+#[test]
+fn the_capture_command_refuses_bad_settings_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("capture");
+    for (flag, value, names) in [
+        ("--room-radius", "2", "room radius 2"),
+        ("--views", "1", "1 views"),
+        ("--width", "0", "0 x 360"),
+    ] {
+        let (code, stdout, stderr) = crate::common::grid(&["capture", flag, value, "--out", out.to_str().unwrap()]);
+        assert_eq!(code, 2, "{flag} {value}: {stderr}");
+        assert!(stdout.is_empty());
+        assert_eq!(stderr.lines().count(), 1, "{stderr}");
+        assert!(stderr.contains(names), "{flag} {value}: {stderr}");
+        assert!(!out.exists());
+    }
+}
