@@ -744,8 +744,8 @@ impl<'g> DenseGridTrainer<'g> {
             // A refresh emptied the occupancy grid (every density below its threshold, as a
             // slow learning rate can leave it): with no samples nothing could raise a density
             // again, so every cell is occupied until the next refresh, as `fogray fit` does.
-            let cells = self.gpu.stream().clone_htod(&vec![1u8; self.occupied.len()])?;
-            self.occupied = cells;
+            let every = vec![1u8; self.occupied.len()];
+            self.gpu.stream().memcpy_htod(&every, &mut self.occupied)?;
             self.sample_batch()?;
         }
         clock.lap(self.gpu, |p| &mut p.sampling)?;
