@@ -211,6 +211,27 @@ pub struct HostRays<'a, F> {
     pub background: &'a [F],
 }
 
+/// Threads of the background gradient's reduction, `REDUCE` in the kernel source.
+const REDUCE_BLOCK: usize = 256;
+
+/// What the driver reports of one of the composite's kernels once compiled for the device:
+/// what decides how many of its blocks share a multiprocessor.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct KernelInfo {
+    /// `forward_f32`, `backward_f64`, `reduce_f32`, ...
+    pub name: String,
+    /// Registers per thread.
+    pub registers: i32,
+    /// Local memory (stack) per thread, in bytes: spills show here.
+    pub local_bytes: i32,
+    /// Static shared memory per block, in bytes.
+    pub shared_bytes: i32,
+    /// Threads per block it is launched with.
+    pub threads_per_block: u32,
+    /// Blocks that fit on one multiprocessor at once (the occupancy calculator's answer).
+    pub blocks_per_multiprocessor: u32,
+}
+
 /// The background gradient's partial sums: one per warp of 32 rays, at least one (zeros) so
 /// that the reduction always has something to add.
 fn partials(rays: usize) -> usize {
@@ -296,17 +317,27 @@ impl CudaComposite {
         &self.stream
     }
 
-    /// Each kernel's name, registers per thread and local memory (stack) per thread in bytes,
-    /// as the driver reports them after compiling the PTX for the device (spills show here).
-    pub fn kernel_info(&self) -> Result<Vec<(String, i32, i32)>, CudaError> {
+    /// What the driver reports of each kernel after compiling the PTX for the device.
+    pub fn kernel_info(&self) -> Result<Vec<KernelInfo>, CudaError> {
         let mut info = Vec::new();
         for (suffix, k) in [("f32", &self.f32), ("f64", &self.f64)] {
-            for (name, f) in [
-                ("forward", &k.forward),
-                ("backward", &k.backward),
-                ("reduce", &k.reduce),
+            for (name, f, block) in [
+                ("forward", &k.forward, self.block),
+                ("backward", &k.backward, self.block),
+                ("reduce", &k.reduce, REDUCE_BLOCK),
             ] {
-                info.push((format!("{name}_{suffix}"), f.num_regs()?, f.local_size_bytes()?));
+                info.push(KernelInfo {
+                    name: format!("{name}_{suffix}"),
+                    registers: f.num_regs()?,
+                    local_bytes: f.local_size_bytes()?,
+                    shared_bytes: f.shared_size_bytes()?,
+                    blocks_per_multiprocessor: f.occupancy_max_active_blocks_per_multiprocessor(
+                        block as u32,
+                        0,
+                        None,
+                    )?,
+                    threads_per_block: block as u32,
+                });
             }
         }
         Ok(info)
@@ -482,12 +513,12 @@ impl CudaComposite {
         unsafe { launch.launch(config(x.rays, self.block)) }?;
         let mut reduce = self.stream.launch_builder(&k.reduce);
         reduce.arg(&grads.partial).arg(&partials).arg(&mut grads.background);
-        // SAFETY: one block of the kernel's 256 threads reads `partials * 3` partial sums (the
-        // buffer's length, checked above) and writes 3 values.
+        // SAFETY: one block of the kernel's REDUCE_BLOCK threads reads `partials * 3` partial
+        // sums (the buffer's length, checked above) and writes 3 values.
         unsafe {
             reduce.launch(LaunchConfig {
                 grid_dim: (1, 1, 1),
-                block_dim: (256, 1, 1),
+                block_dim: (REDUCE_BLOCK as u32, 1, 1),
                 shared_mem_bytes: 0,
             })
         }?;

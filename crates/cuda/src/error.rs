@@ -66,7 +66,7 @@ pub enum CudaError {
     InvalidShift(f64),
     /// A staging layout the kernels are not built for.
     #[error(
-        "kernel tuning {0:?}: span_bytes must be 32 or 64, loads_in_flight 4, 8 or 16, threads_per_block 32, 64 or 128"
+        "kernel tuning {0:?}: span_bytes must be 32 or 64, loads_in_flight 4, 8 or 16, threads_per_block 32, 64 or 128 (32 or 64 when pipelined)"
     )]
     Tuning(crate::kernel::KernelTuning),
     /// The batch is larger than one launch can cover.

@@ -4,24 +4,56 @@ use cudarc::nvrtc::{compile_ptx_with_opts, CompileOptions, Ptx};
 
 use crate::error::CudaError;
 
-/// How the composite kernels stage their memory traffic, fixed when they are compiled. The
-/// results do not depend on it (every layout computes the same sums in the same order); the
-/// speed does, differently on each device, so the benchmark compares layouts.
+/// How the composite kernels are built: how they stage their memory traffic, and in which
+/// precision they take f32 data's exponentials. The results do not depend on the staging
+/// (every layout computes the same sums in the same order); the speed does, differently on
+/// each device, so the benchmark compares layouts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct KernelTuning {
     /// Bytes of densities in the span of a ray that a lane takes per step: 32 or 64 (whole
     /// 8-sample residual chunks, so at least one chunk).
     pub span_bytes: u32,
-    /// Loads a lane issues before it stores any of them to shared memory: 4, 8 or 16.
-    pub loads_in_flight: u32,
-    /// Threads (rays) per block: 32, 64 or 128.
+    /// How a warp's loads are staged.
+    pub staging: Staging,
+    /// Threads (rays) per block: 32, 64 or 128 ([`Staging::Pipelined`]: 32 or 64, since its two
+    /// stages a warp must fit a block's 48 KB of static shared memory).
     pub threads_per_block: u32,
+    /// How each sample's `exp(-depth)` and `-expm1(-tau)` are taken for f32 data.
+    pub exponentials: Exponentials,
+}
+
+/// The precision of the per-sample exponentials of f32 data (f64 data always takes them in
+/// f64). Every sum, and each ray's final transmittance, stays f64 either way.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Exponentials {
+    /// In f64, as the CPU op takes them.
+    Double,
+    /// With the single-precision functions: `T = expf(-hi) (1 - lo)` for the depth split into
+    /// its f32 rounding `hi` and the exact rest `lo` (so that rounding a long ray's depth
+    /// costs nothing), `alpha = -expm1f(-tau)`. Cheaper; within expf's 2 ulp of each `T`.
+    SplitSingle,
+}
+
+/// How a warp brings its rays' spans into shared memory.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Staging {
+    /// Load a step's spans, then compute on them: each lane issues `loads_in_flight` loads
+    /// (4, 8 or 16) before it stores any of them to shared memory.
+    Batched {
+        /// Loads a lane has in flight.
+        loads_in_flight: u32,
+    },
+    /// Copy the next step's spans into a second stage while computing on this one's, with
+    /// asynchronous copies (`cp.async`) on compute capability 8.0 and newer (on older devices
+    /// the copies are plain loads and stores, in the same order).
+    Pipelined,
 }
 
 /// The values of each [`KernelTuning`] field the kernels are built for.
 const SPAN_BYTES: [u32; 2] = [32, 64];
 const LOADS_IN_FLIGHT: [u32; 3] = [4, 8, 16];
 const THREADS_PER_BLOCK: [u32; 3] = [32, 64, 128];
+const PIPELINED_THREADS_PER_BLOCK: [u32; 2] = [32, 64];
 
 impl Default for KernelTuning {
     /// The layout chosen from the benchmark's comparison of layouts on an H100
@@ -29,14 +61,15 @@ impl Default for KernelTuning {
     fn default() -> Self {
         KernelTuning {
             span_bytes: 64,
-            loads_in_flight: 8,
+            staging: Staging::Batched { loads_in_flight: 8 },
             threads_per_block: 128,
+            exponentials: Exponentials::Double,
         }
     }
 }
 
 impl KernelTuning {
-    /// Every layout the kernels are built for.
+    /// Every staging layout the kernels are built for, each with `Exponentials::Double`.
     pub fn every() -> Vec<KernelTuning> {
         let mut all = Vec::new();
         for span_bytes in SPAN_BYTES {
@@ -44,23 +77,53 @@ impl KernelTuning {
                 for threads_per_block in THREADS_PER_BLOCK {
                     all.push(KernelTuning {
                         span_bytes,
-                        loads_in_flight,
+                        staging: Staging::Batched { loads_in_flight },
                         threads_per_block,
+                        exponentials: Exponentials::Double,
                     });
                 }
+            }
+            for threads_per_block in PIPELINED_THREADS_PER_BLOCK {
+                all.push(KernelTuning {
+                    span_bytes,
+                    staging: Staging::Pipelined,
+                    threads_per_block,
+                    exponentials: Exponentials::Double,
+                });
             }
         }
         all
     }
 
     fn check(&self) -> Result<(), CudaError> {
-        if !SPAN_BYTES.contains(&self.span_bytes)
-            || !LOADS_IN_FLIGHT.contains(&self.loads_in_flight)
-            || !THREADS_PER_BLOCK.contains(&self.threads_per_block)
-        {
+        let staging_ok = match self.staging {
+            Staging::Batched { loads_in_flight } => {
+                LOADS_IN_FLIGHT.contains(&loads_in_flight) && THREADS_PER_BLOCK.contains(&self.threads_per_block)
+            }
+            Staging::Pipelined => PIPELINED_THREADS_PER_BLOCK.contains(&self.threads_per_block),
+        };
+        if !SPAN_BYTES.contains(&self.span_bytes) || !staging_ok {
             return Err(CudaError::Tuning(*self));
         }
         Ok(())
+    }
+
+    /// The preprocessor definitions that build the kernels for this layout.
+    fn defines(&self) -> Vec<String> {
+        let staging = match self.staging {
+            Staging::Batched { loads_in_flight } => format!("-DLOADS={loads_in_flight}"),
+            Staging::Pipelined => "-DPIPELINED=1".to_string(),
+        };
+        let exponentials = match self.exponentials {
+            Exponentials::Double => 0,
+            Exponentials::SplitSingle => 1,
+        };
+        vec![
+            format!("-DSPAN_BYTES={}", self.span_bytes),
+            staging,
+            format!("-DBLOCK={}", self.threads_per_block),
+            format!("-DF32_EXP={exponentials}"),
+        ]
     }
 }
 
@@ -79,14 +142,14 @@ pub fn compile(capability: (i32, i32)) -> Result<Ptx, CudaError> {
 /// [`compile`] with another staging layout than the default.
 pub fn compile_tuned(capability: (i32, i32), tuning: KernelTuning) -> Result<Ptx, CudaError> {
     tuning.check()?;
+    // No multiply-add the source does not write as `fma`: where the compiler fuses one depends
+    // on the code around it, so the staging layouts' f64 results differed in the last bit
+    // (the pipelined backward's against the batched, measured on an H200), and the CPU op
+    // (Rust) never fuses.
     nvrtc(
         COMPOSITE_SOURCE,
         capability,
-        vec![
-            format!("-DSPAN_BYTES={}", tuning.span_bytes),
-            format!("-DLOADS={}", tuning.loads_in_flight),
-            format!("-DBLOCK={}", tuning.threads_per_block),
-        ],
+        [tuning.defines(), vec!["--fmad=false".to_string()]].concat(),
     )
 }
 
@@ -107,7 +170,7 @@ pub fn compile_train(capability: (i32, i32)) -> Result<Ptx, CudaError> {
     nvrtc(TRAIN_SOURCE, capability, Vec::new())
 }
 
-fn nvrtc(source: &str, capability: (i32, i32), defines: Vec<String>) -> Result<Ptx, CudaError> {
+fn nvrtc(source: &str, capability: (i32, i32), extra_options: Vec<String>) -> Result<Ptx, CudaError> {
     // SAFETY: only tries to open the library by its usual names (cudarc's loader panics when
     // it is missing, so ask first).
     if !unsafe { cudarc::nvrtc::sys::is_culib_present() } {
@@ -126,7 +189,7 @@ fn nvrtc(source: &str, capability: (i32, i32), defines: Vec<String>) -> Result<P
                 format!("--gpu-architecture=compute_{major}{minor}"),
                 "--std=c++17".into(),
             ],
-            defines,
+            extra_options,
         ]
         .concat(),
         ..Default::default()

@@ -74,13 +74,14 @@ mod train;
 pub use activation::{CudaDensityColor, HostActivated};
 pub use composite::{
     CudaComposite, DeviceFloat, DeviceForward, DeviceGradients, DeviceRays, DeviceUpstream, HostGradients, HostOutputs,
-    HostRays,
+    HostRays, KernelInfo,
 };
 pub use cudarc;
 pub use error::CudaError;
 pub use grid::{CudaGrid, GridSpec};
 pub use kernel::{
-    compile, compile_grid, compile_train, compile_tuned, KernelTuning, COMPOSITE_SOURCE, GRID_SOURCE, TRAIN_SOURCE,
+    compile, compile_grid, compile_train, compile_tuned, Exponentials, KernelTuning, Staging, COMPOSITE_SOURCE,
+    GRID_SOURCE, TRAIN_SOURCE,
 };
 pub use packing::{check_packing, CHANNELS};
 pub use sh::{CudaShDensityColor, MAX_SH_DEGREE};

@@ -16,7 +16,8 @@
 // CHUNK samples (one double per CHUNK samples, the op's only residual), and the backward
 // recomputes each chunk's prefix depths front to back in registers, then walks the chunk back
 // to front. Both sums run in the same order (the CPU op's, see `forward`), so they give the
-// same bits.
+// same bits. The host compiles this file with --fmad=false: every fused multiply-add is an
+// explicit `fma` below, none is the compiler's choice, which depends on the code around it.
 
 typedef unsigned long long u64;
 
@@ -27,6 +28,36 @@ typedef unsigned long long u64;
 #endif
 #define F32_MAX 3.402823466e38f
 #define F64_MAX 1.7976931348623157e308
+
+// With F32_EXP 1 (`Exponentials::SplitSingle` on the host), the per-sample exp(-depth) and
+// -expm1(-tau) of f32 data are taken with the single-precision functions, a fraction of the
+// double ones' cost; every sum stays a double, and f64 data always takes the doubles. Rounding
+// the depth d to f32 alone would cost up to d 2^-24 of T (1e-6 at d = 17), so T is split:
+// d = hi + lo with hi = (float)d and lo = d - hi exact, T = expf(-hi) exp(-lo), and
+// exp(-lo) = 1 - lo to within lo^2 / 2, below 2^-49 d^2 of T. What remains is expf's own
+// error (2 ulp, 2.4e-7 of T). tau is exact in f64 for f32 data, and rounding it to f32 costs
+// alpha at most 2^-24 of itself.
+#ifndef F32_EXP
+#define F32_EXP 0
+#endif
+
+// T = exp(-depth) and alpha = -expm1(-tau) of one sample of T-typed data.
+template <typename T>
+__device__ __forceinline__ double transmittance(double depth) { return exp(-depth); }
+template <typename T>
+__device__ __forceinline__ double absorbed(double tau) { return -expm1(-tau); }
+#if F32_EXP
+template <>
+__device__ __forceinline__ double transmittance<float>(double depth) {
+    float hi = (float)depth;
+    double lo = depth - (double)hi;
+    // expf(-hi) is 0 from hi = 104 on; past FLT_MAX hi is infinite and lo -infinite, whose
+    // product would be NaN.
+    return hi < 104.0f ? (double)expf(-hi) * (1.0 - lo) : 0.0;
+}
+template <>
+__device__ __forceinline__ double absorbed<float>(double tau) { return (double)-expm1f(-(float)tau); }
+#endif
 
 // Finite and non-negative (NaN fails both comparisons).
 __device__ __forceinline__ bool in_domain(float v) { return v >= 0.0f && v <= F32_MAX; }
@@ -53,7 +84,7 @@ __device__ __forceinline__ void add_sample(const T* __restrict__ color, u64 k, d
                                            double& c1, double& c2, bool& ok) {
     T r0 = color[3 * k], r1 = color[3 * k + 1], r2 = color[3 * k + 2];
     ok &= is_finite(r0) & is_finite(r1) & is_finite(r2);
-    double w = exp(-depth) * -expm1(-tau);
+    double w = transmittance<T>(depth) * absorbed<T>(tau);
     c0 = fma(w, (double)r0, c0);
     c1 = fma(w, (double)r1, c1);
     c2 = fma(w, (double)r2, c2);
@@ -80,6 +111,20 @@ __device__ __forceinline__ void add_sample(const T* __restrict__ color, u64 k, d
 #endif
 #ifndef LOADS
 #define LOADS 8
+#endif
+// 1: the staging is pipelined. The warp copies the next step's spans into a second stage with
+// asynchronous copies (cp.async: global to shared memory without registers, on compute
+// capability 8.0 and newer) while it computes on this step's, so its loads are in flight while it
+// computes, not only between steps. Two stages of shared memory a warp: the host builds it for
+// blocks of 32 and 64 threads only (a block's static shared memory is at most 48 KB).
+#ifndef PIPELINED
+#define PIPELINED 0
+#endif
+#define STAGES (PIPELINED ? 2 : 1)
+#if PIPELINED && defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
+#define ASYNC_COPIES 1
+#else
+#define ASYNC_COPIES 0
 #endif
 
 // Chunks per span: SPAN_BYTES of densities, at least one chunk.
@@ -131,6 +176,47 @@ __device__ __forceinline__ void gather(const T* __restrict__ global, T* staged, 
     }
 }
 
+// One element from global to shared memory, asynchronously where the device can (completed by
+// `wait_copies`), else at once.
+template <typename T>
+__device__ __forceinline__ void copy_async(T* shared, const T* global) {
+#if ASYNC_COPIES
+    unsigned to = (unsigned)__cvta_generic_to_shared(shared);
+    asm volatile("cp.async.ca.shared.global [%0], [%1], %2;\n" ::"r"(to), "l"(global), "n"((int)sizeof(T)) : "memory");
+#else
+    *shared = *global;
+#endif
+}
+
+// Closes the group of copies this thread has issued since the last group.
+__device__ __forceinline__ void commit_copies() {
+#if ASYNC_COPIES
+    asm volatile("cp.async.commit_group;\n" ::: "memory");
+#endif
+}
+
+// Waits until at most PENDING of this thread's groups of copies are in flight (a `__syncwarp`
+// after it makes the lanes' copies visible to each other).
+template <int PENDING>
+__device__ __forceinline__ void wait_copies() {
+#if ASYNC_COPIES
+    asm volatile("cp.async.wait_group %0;\n" ::"n"(PENDING) : "memory");
+#endif
+}
+
+// `gather` with asynchronous copies: nothing waits for a load, so every element of the spans
+// is in flight at once.
+template <typename T, int PER>
+__device__ __forceinline__ void gather_async(const T* __restrict__ global, T* staged, const Stage<T>& st,
+                                             unsigned lane) {
+    constexpr int W = PER * Span<T>::len;
+#pragma unroll 4
+    for (int t = 0; t < W; ++t) {
+        unsigned idx = t * 32 + lane, l = idx / W, i = idx % W;
+        if ((int)i < PER * st.len[l]) copy_async(&staged[l * (W + 1) + i], &global[PER * st.start[l] + i]);
+    }
+}
+
 // The reverse of `gather`: the staged spans back out to `global`.
 template <typename T, int PER>
 __device__ __forceinline__ void scatter(T* __restrict__ global, const T* staged, const Stage<T>& st, unsigned lane) {
@@ -154,6 +240,20 @@ __device__ __forceinline__ void stage_in(const T* __restrict__ sigma, const T* _
     gather<T, 1>(delta + warp_start, st.delta, st, lane);
     gather<T, 3>(color + 3 * warp_start, st.color, st, lane);
     __syncwarp();
+}
+
+// `stage_in` for the pipeline: sets this lane's span and issues the copies of the warp's spans
+// as one group, without waiting for them.
+template <typename T>
+__device__ __forceinline__ void post(const T* __restrict__ sigma, const T* __restrict__ delta,
+                                     const T* __restrict__ color, u64 warp_start, u64 s0, int len, Stage<T>& st,
+                                     unsigned lane) {
+    st.start[lane] = (unsigned)(s0 - warp_start);
+    st.len[lane] = len;
+    __syncwarp();
+    gather_async<T, 1>(sigma + warp_start, st.sigma, st, lane);
+    gather_async<T, 1>(delta + warp_start, st.delta, st, lane);
+    gather_async<T, 3>(color + 3 * warp_start, st.color, st, lane);
 }
 
 // The warp's step count: its longest ray's span count.
@@ -180,7 +280,7 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
                                         T* __restrict__ out_opacity, double* __restrict__ chunk_depth,
                                         unsigned* __restrict__ invalid) {
     constexpr int SPAN = Span<T>::len, SPANS = Span<T>::chunks;
-    __shared__ Stage<T> stage[WARPS];
+    __shared__ Stage<T> stage[WARPS][STAGES];
     unsigned lane = threadIdx.x & 31u, wid = threadIdx.x >> 5;
     u64 first = (u64)blockIdx.x * BLOCK + wid * 32;
     // No block-wide barrier below: a warp with no ray leaves.
@@ -196,17 +296,44 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
     }
     u64 base = chunk_base(start, r);
     u64 steps = warp_max(spans);
-    Stage<T>& st = stage[wid];
-    const T* my_sigma = &st.sigma[lane * (SPAN + 1)];
-    const T* my_delta = &st.delta[lane * (SPAN + 1)];
-    const T* my_color = &st.color[lane * (3 * SPAN + 1)];
+    // This lane's span in step j (the j-th from the front): its first sample, and its length
+    // (0: none).
+    auto span = [&](u64 j, u64& s0) -> int {
+        s0 = start + j * SPAN;
+        return j < spans ? ((end - s0 < SPAN) ? (int)(end - s0) : SPAN) : 0;
+    };
+#if PIPELINED
+    if (steps > 0) {
+        u64 s0;
+        int m = span(0, s0);
+        post(sigma, delta, color, warp_start, s0, m, stage[wid][0], lane);
+        commit_copies();
+    }
+#endif
     double running = 0.0, c0 = 0.0, c1 = 0.0, c2 = 0.0;
     bool ok = true;
     for (u64 j = 0; j < steps; ++j) {
-        bool has = j < spans;
-        u64 s0 = start + j * SPAN;
-        int m = has ? ((end - s0 < SPAN) ? (int)(end - s0) : SPAN) : 0;
+        Stage<T>& st = stage[wid][j % STAGES];
+        u64 s0;
+        int m = span(j, s0);
+#if PIPELINED
+        // The next step's spans go out before this step's are waited for.
+        if (j + 1 < steps) {
+            u64 s1;
+            int m1 = span(j + 1, s1);
+            post(sigma, delta, color, warp_start, s1, m1, stage[wid][(j + 1) % STAGES], lane);
+            commit_copies();
+            wait_copies<1>();
+        } else {
+            wait_copies<0>();
+        }
+        __syncwarp();
+#else
         stage_in(sigma, delta, color, warp_start, s0, m, st, lane);
+#endif
+        const T* my_sigma = &st.sigma[lane * (SPAN + 1)];
+        const T* my_delta = &st.delta[lane * (SPAN + 1)];
+        const T* my_color = &st.color[lane * (3 * SPAN + 1)];
 #pragma unroll
         for (int g = 0; g < SPAN; g += 4) {
             if (g < m && g % CHUNK == 0) chunk_depth[base + j * SPANS + g / CHUNK] = running;
@@ -289,8 +416,8 @@ __device__ __forceinline__ void backward_chunk(T* sigma, T* delta, T* color, int
         if (i < m) {
             T s = sigma[i], d = delta[i];
             double tau = (double)s * (double)d;
-            double alpha = -expm1(-tau);
-            double t_k = exp(-dep[i]);
+            double alpha = absorbed<T>(tau);
+            double t_k = transmittance<T>(dep[i]);
             double c0 = (double)color[3 * i], c1 = (double)color[3 * i + 1], c2 = (double)color[3 * i + 2];
             double v = g0 * c0 + g1 * c1 + g2 * c2 + go;
             double diff = v - behind;
@@ -318,7 +445,7 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
                                          T* __restrict__ g_delta, T* __restrict__ g_color,
                                          double* __restrict__ bg_partial, u64 partials) {
     constexpr int SPAN = Span<T>::len, SPANS = Span<T>::chunks;
-    __shared__ Stage<T> stage[WARPS];
+    __shared__ Stage<T> stage[WARPS][STAGES];
     unsigned lane = threadIdx.x & 31u, wid = threadIdx.x >> 5;
     u64 first = (u64)blockIdx.x * BLOCK + wid * 32;
     // No block-wide barrier: a warp past the partial sums leaves; one past the rays but not
@@ -341,18 +468,52 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
     }
     u64 base = chunk_base(start, r);
     u64 steps = warp_max(spans);
-    Stage<T>& st = stage[wid];
-    T* my_sigma = &st.sigma[lane * (SPAN + 1)];
-    T* my_delta = &st.delta[lane * (SPAN + 1)];
-    T* my_color = &st.color[lane * (3 * SPAN + 1)];
+    // This lane's span in step j (the j-th from the back): its index, first sample and length
+    // (0: none).
+    auto span = [&](u64 j, u64& c, u64& s0) -> int {
+        bool has = j < spans;
+        c = has ? spans - 1 - j : 0;
+        s0 = start + c * SPAN;
+        return has ? ((end - s0 < SPAN) ? (int)(end - s0) : SPAN) : 0;
+    };
+#if PIPELINED
+    // The depths before the span's chunks (the forward's residual) travel with the span.
+    __shared__ double depths[WARPS][STAGES][32 * SPANS];
+    auto post_step = [&](u64 j) {
+        u64 c, s0;
+        int m = span(j, c, s0);
+        int k = (int)(j % STAGES);
+        post(sigma, delta, color, warp_start, s0, m, stage[wid][k], lane);
+#pragma unroll
+        for (int h = 0; h < SPANS; ++h) {
+            if (h * CHUNK < m) copy_async(&depths[wid][k][lane * SPANS + h], &chunk_depth[base + c * SPANS + h]);
+        }
+        commit_copies();
+    };
+    if (steps > 0) post_step(0);
+#endif
     double t_end = 1.0, t_next = 1.0;
     for (u64 j = 0; j < steps; ++j) {
-        // This lane's span: the j-th from the back, or none (m = 0).
-        bool has = j < spans;
-        u64 c = has ? spans - 1 - j : 0;
-        u64 s0 = start + c * SPAN;
-        int m = has ? ((end - s0 < SPAN) ? (int)(end - s0) : SPAN) : 0;
+        Stage<T>& st = stage[wid][j % STAGES];
+        u64 c, s0;
+        int m = span(j, c, s0);
+#if PIPELINED
+        // The next step's spans go out before this step's are waited for.
+        if (j + 1 < steps) {
+            post_step(j + 1);
+            wait_copies<1>();
+        } else {
+            wait_copies<0>();
+        }
+        __syncwarp();
+        const double* my_depth = &depths[wid][j % STAGES][lane * SPANS];
+#else
         stage_in(sigma, delta, color, warp_start, s0, m, st, lane);
+        const double* my_depth = &chunk_depth[base + c * SPANS];
+#endif
+        T* my_sigma = &st.sigma[lane * (SPAN + 1)];
+        T* my_delta = &st.delta[lane * (SPAN + 1)];
+        T* my_color = &st.color[lane * (3 * SPAN + 1)];
         // The span's chunks, back to front.
 #pragma unroll
         for (int h = SPANS - 1; h >= 0; --h) {
@@ -360,8 +521,7 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
             if (mh > 0) {
                 bool last = j == 0 && (h + 1) * CHUNK >= m;
                 backward_chunk(my_sigma + h * CHUNK, my_delta + h * CHUNK, my_color + 3 * h * CHUNK,
-                               mh < CHUNK ? mh : CHUNK, chunk_depth[base + c * SPANS + h], last, g0, g1, g2, go,
-                               behind, t_next, t_end);
+                               mh < CHUNK ? mh : CHUNK, my_depth[h], last, g0, g1, g2, go, behind, t_next, t_end);
             }
         }
         __syncwarp();

@@ -4,7 +4,7 @@
 //! or device (`FOGRAY_CUDA_REQUIRED=1` makes that a failure).
 
 use crate::common::{compare, random_case, rng, Case, Typed};
-use fogray_cuda::{device_for_tests, CudaComposite, CudaError, DeviceFloat, HostRays, KernelTuning};
+use fogray_cuda::{device_for_tests, CudaComposite, CudaError, DeviceFloat, Exponentials, HostRays, KernelTuning};
 
 /// Scaled-error bounds, and the scale below which a value is judged absolutely (an f32 output
 /// below 1e-30 is near its subnormals, where relative precision ends).
@@ -13,18 +13,45 @@ const F32_FLOOR: f64 = 1e-30;
 const F64_TOL: f64 = 1e-12;
 const F64_FLOOR: f64 = 1e-290;
 
-fn gpu() -> Option<CudaComposite> {
-    device_for_tests().unwrap_or_else(|e| panic!("CUDA device present but unusable: {e}"))
+/// The default kernels, and those that take f32 data's exponentials in single precision
+/// (`Exponentials::SplitSingle`), which every f32 check runs too.
+struct Gpus {
+    exact: CudaComposite,
+    split_single: CudaComposite,
 }
 
-fn check_both(gpu: &CudaComposite, c: &Case) {
+impl std::ops::Deref for Gpus {
+    type Target = CudaComposite;
+    fn deref(&self) -> &CudaComposite {
+        &self.exact
+    }
+}
+
+fn gpu() -> Option<Gpus> {
+    let exact = device_for_tests().unwrap_or_else(|e| panic!("CUDA device present but unusable: {e}"))?;
+    let tuning = KernelTuning {
+        exponentials: Exponentials::SplitSingle,
+        ..KernelTuning::default()
+    };
+    let split_single = CudaComposite::with_tuning(0, tuning).unwrap_or_else(|e| panic!("{tuning:?}: {e}"));
+    Some(Gpus { exact, split_single })
+}
+
+fn check_both(gpu: &Gpus, c: &Case) {
     check_f32(gpu, c);
     check_f64(gpu, c);
 }
 
-fn check_f32(gpu: &CudaComposite, c: &Case) {
-    let e = compare::<f32>(gpu, c, F32_FLOOR);
+fn check_f32(gpu: &Gpus, c: &Case) {
+    let e = compare::<f32>(&gpu.exact, c, F32_FLOOR);
     assert!(e.iter().all(|&e| e <= F32_TOL), "f32 {}: {e:?}", c.name);
+    let e = compare::<f32>(&gpu.split_single, c, F32_FLOOR);
+    let worst = e.iter().fold(0.0f64, |m, &v| m.max(v));
+    println!(
+        "f32 {}, single-precision exponentials: worst scaled error {worst:.2e}",
+        c.name
+    );
+    assert!(e.iter().all(|&e| e <= F32_TOL), "f32 {} (SplitSingle): {e:?}", c.name);
 }
 
 fn check_f64(gpu: &CudaComposite, c: &Case) {

@@ -9,19 +9,30 @@
 //! `FOGRAY_BENCH_CPU=0` leaves out the CPU op (its time, and the check of the GPU's results
 //! against it on the same batch). `FOGRAY_BENCH_TUNINGS=1` also times every staging layout
 //! the kernels are built for ([`KernelTuning`]), each checked to give the default's bits.
+//! `FOGRAY_BENCH_F32_EXP=1` builds every kernel timed with `Exponentials::SplitSingle`.
 
 use std::time::Instant;
 
 use crate::common::{scales, worst, Case, Typed};
 use fogray_cuda::cudarc::driver::sys::CUevent_flags;
 use fogray_cuda::{
-    device_for_tests, CudaComposite, CudaError, DeviceRays, DeviceUpstream, HostGradients, HostOutputs, KernelTuning,
+    device_for_tests, CudaComposite, CudaError, DeviceRays, DeviceUpstream, Exponentials, HostGradients, HostOutputs,
+    KernelTuning, Staging,
 };
 use rand::Rng;
 
 const RAYS: usize = 1 << 20;
 const LEN: usize = 64;
 const REPS: usize = 10;
+
+/// The exponentials `FOGRAY_BENCH_F32_EXP` asks for.
+fn exponentials() -> Exponentials {
+    if std::env::var("FOGRAY_BENCH_F32_EXP").is_ok_and(|v| v == "1") {
+        Exponentials::SplitSingle
+    } else {
+        Exponentials::Double
+    }
+}
 
 /// Milliseconds per call of `f`, timed with events on the stream (after one warm-up call).
 fn time_ms(gpu: &CudaComposite, mut f: impl FnMut() -> Result<(), CudaError>) -> Result<f64, CudaError> {
@@ -44,13 +55,26 @@ fn time_ms(gpu: &CudaComposite, mut f: impl FnMut() -> Result<(), CudaError>) ->
 #[ignore = "needs a GPU; prints throughput"]
 fn throughput_of_a_million_rays_of_64_samples() -> Result<(), CudaError> {
     let Some(gpu) = device_for_tests()? else { return Ok(()) };
+    let tuning = KernelTuning {
+        exponentials: exponentials(),
+        ..KernelTuning::default()
+    };
+    let gpu = if tuning == KernelTuning::default() {
+        gpu
+    } else {
+        drop(gpu);
+        CudaComposite::with_tuning(0, tuning)?
+    };
     println!(
-        "device: {} (compute capability {:?})",
+        "device: {} (compute capability {:?}), {tuning:?}",
         gpu.device_name(),
         gpu.compute_capability()
     );
-    for (name, regs, local) in gpu.kernel_info()? {
-        println!("kernel {name}: {regs} registers, {local} bytes of local memory per thread");
+    for k in gpu.kernel_info()? {
+        println!(
+            "kernel {}: {} registers, {} bytes of local memory per thread, {} bytes of shared memory and {} threads a block, {} blocks a multiprocessor",
+            k.name, k.registers, k.local_bytes, k.shared_bytes, k.threads_per_block, k.blocks_per_multiprocessor
+        );
     }
     let n = RAYS * LEN;
     let mut rng = crate::common::rng(2024);
@@ -201,7 +225,11 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
         background: &[1.0, 1.0, 1.0],
     };
     let mut reference: Option<Vec<Vec<f32>>> = None;
-    for tuning in KernelTuning::every() {
+    for layout in KernelTuning::every() {
+        let tuning = KernelTuning {
+            exponentials: exponentials(),
+            ..layout
+        };
         let g = CudaComposite::with_tuning(0, tuning)?;
         let x = g.upload(&host)?;
         let up = g.upload_upstream(&x, &d_color, None)?;
@@ -209,17 +237,25 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
         let regs: Vec<String> = g
             .kernel_info()?
             .into_iter()
-            .filter(|(name, _, _)| name.ends_with("f32") && !name.starts_with("reduce"))
-            .map(|(name, r, l)| format!("{name} {r} regs {l} B local"))
+            .filter(|k| k.name.ends_with("f32") && !k.name.starts_with("reduce"))
+            .map(|k| {
+                format!(
+                    "{} {} regs {} B local {} B shared {} blocks/SM",
+                    k.name, k.registers, k.local_bytes, k.shared_bytes, k.blocks_per_multiprocessor
+                )
+            })
             .collect();
+        let staging = match tuning.staging {
+            Staging::Batched { loads_in_flight } => format!("batched, {loads_in_flight} loads"),
+            Staging::Pipelined => "pipelined".to_string(),
+        };
         println!(
-                "layout span {} B, {} loads, {} threads: forward {f:.3} ms, backward {b:.3} ms, both {both:.3} ms ({:.0} M samples/s); {}",
-                tuning.span_bytes,
-                tuning.loads_in_flight,
-                tuning.threads_per_block,
-                n as f64 / both / 1e3,
-                regs.join(", ")
-            );
+            "layout span {} B, {staging}, {} threads: forward {f:.3} ms, backward {b:.3} ms, both {both:.3} ms ({:.0} M samples/s); {}",
+            tuning.span_bytes,
+            tuning.threads_per_block,
+            n as f64 / both / 1e3,
+            regs.join(", ")
+        );
         match &reference {
             None => reference = Some(bits),
             Some(want) => assert!(bits == *want, "layout {tuning:?} gives other bits"),

@@ -1,6 +1,8 @@
 //! The kernels compile with NVRTC (no GPU needed; skipped where libnvrtc does not load).
 
-use fogray_cuda::{compile, compile_grid, compile_train, compile_tuned, CudaError, KernelTuning};
+use fogray_cuda::{
+    compile, compile_grid, compile_train, compile_tuned, CudaError, Exponentials, KernelTuning, Staging,
+};
 
 #[test]
 fn the_kernels_compile_for_hopper_ampere_and_turing() {
@@ -31,11 +33,17 @@ fn every_staging_layout_compiles_and_others_are_refused() {
     for bad in [
         KernelTuning { span_bytes: 16, ..good },
         KernelTuning {
-            loads_in_flight: 3,
+            staging: Staging::Batched { loads_in_flight: 3 },
             ..good
         },
         KernelTuning {
             threads_per_block: 256,
+            ..good
+        },
+        // Two stages of 128 warps' spans overflow a block's static shared memory.
+        KernelTuning {
+            staging: Staging::Pipelined,
+            threads_per_block: 128,
             ..good
         },
     ] {
@@ -86,5 +94,52 @@ fn the_grid_and_training_kernels_compile() {
             }
             Err(e) => panic!("{e}"),
         }
+    }
+}
+
+#[test]
+fn the_pipelined_staging_copies_asynchronously_from_ampere_on() {
+    let pipelined = KernelTuning {
+        staging: Staging::Pipelined,
+        threads_per_block: 64,
+        ..KernelTuning::default()
+    };
+    for (capability, want_async) in [((7, 5), false), ((8, 0), true), ((9, 0), true)] {
+        match compile_tuned(capability, pipelined) {
+            Ok(ptx) => {
+                let src = ptx.to_src();
+                assert_eq!(src.contains("cp.async.ca.shared.global"), want_async, "{capability:?}");
+                assert_eq!(src.contains("cp.async.wait_group"), want_async, "{capability:?}");
+            }
+            Err(CudaError::NoNvrtc) => {
+                eprintln!("SKIPPED: libnvrtc could not be loaded");
+                return;
+            }
+            Err(e) => panic!("{capability:?}: {e}"),
+        }
+    }
+    // The batched staging never does.
+    if let Ok(ptx) = compile_tuned((9, 0), KernelTuning::default()) {
+        assert!(!ptx.to_src().contains("cp.async"));
+    }
+}
+
+#[test]
+fn single_precision_exponentials_use_the_single_precision_functions() {
+    let split = KernelTuning {
+        exponentials: Exponentials::SplitSingle,
+        ..KernelTuning::default()
+    };
+    match (compile((9, 0)), compile_tuned((9, 0), split)) {
+        (Ok(double), Ok(single)) => {
+            // expf reduces to the hardware's base-2 exponential; the double exp and expm1 are
+            // polynomials in f64 and never use it.
+            assert!(!double.to_src().contains("ex2.approx"));
+            assert!(single.to_src().contains("ex2.approx"));
+        }
+        (Err(CudaError::NoNvrtc), _) | (_, Err(CudaError::NoNvrtc)) => {
+            eprintln!("SKIPPED: libnvrtc could not be loaded");
+        }
+        (Err(e), _) | (_, Err(e)) => panic!("{e}"),
     }
 }
