@@ -228,32 +228,26 @@ __device__ __forceinline__ void scatter(T* __restrict__ global, const T* staged,
     }
 }
 
-// Sets this lane's span for the step (`len` 0 for none) and stages the warp's spans.
-template <typename T>
+// Sets this lane's span for the step (`len` 0 for none) and stages the warp's spans: at once
+// (`stage_in<false>`), or, for the pipeline, issued as one group of asynchronous copies that
+// nothing waits for here (`stage_in<true>`, completed by `wait_copies`).
+template <bool ASYNC, typename T>
 __device__ __forceinline__ void stage_in(const T* __restrict__ sigma, const T* __restrict__ delta,
                                          const T* __restrict__ color, u64 warp_start, u64 s0, int len,
                                          Stage<T>& st, unsigned lane) {
     st.start[lane] = (unsigned)(s0 - warp_start);
     st.len[lane] = len;
     __syncwarp();
-    gather<T, 1>(sigma + warp_start, st.sigma, st, lane);
-    gather<T, 1>(delta + warp_start, st.delta, st, lane);
-    gather<T, 3>(color + 3 * warp_start, st.color, st, lane);
-    __syncwarp();
-}
-
-// `stage_in` for the pipeline: sets this lane's span and issues the copies of the warp's spans
-// as one group, without waiting for them.
-template <typename T>
-__device__ __forceinline__ void post(const T* __restrict__ sigma, const T* __restrict__ delta,
-                                     const T* __restrict__ color, u64 warp_start, u64 s0, int len, Stage<T>& st,
-                                     unsigned lane) {
-    st.start[lane] = (unsigned)(s0 - warp_start);
-    st.len[lane] = len;
-    __syncwarp();
-    gather_async<T, 1>(sigma + warp_start, st.sigma, st, lane);
-    gather_async<T, 1>(delta + warp_start, st.delta, st, lane);
-    gather_async<T, 3>(color + 3 * warp_start, st.color, st, lane);
+    if constexpr (ASYNC) {
+        gather_async<T, 1>(sigma + warp_start, st.sigma, st, lane);
+        gather_async<T, 1>(delta + warp_start, st.delta, st, lane);
+        gather_async<T, 3>(color + 3 * warp_start, st.color, st, lane);
+    } else {
+        gather<T, 1>(sigma + warp_start, st.sigma, st, lane);
+        gather<T, 1>(delta + warp_start, st.delta, st, lane);
+        gather<T, 3>(color + 3 * warp_start, st.color, st, lane);
+        __syncwarp();
+    }
 }
 
 // The warp's step count: its longest ray's span count.
@@ -306,7 +300,7 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
     if (steps > 0) {
         u64 s0;
         int m = span(0, s0);
-        post(sigma, delta, color, warp_start, s0, m, stage[wid][0], lane);
+        stage_in<true>(sigma, delta, color, warp_start, s0, m, stage[wid][0], lane);
         commit_copies();
     }
 #endif
@@ -321,7 +315,7 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
         if (j + 1 < steps) {
             u64 s1;
             int m1 = span(j + 1, s1);
-            post(sigma, delta, color, warp_start, s1, m1, stage[wid][(j + 1) % STAGES], lane);
+            stage_in<true>(sigma, delta, color, warp_start, s1, m1, stage[wid][(j + 1) % STAGES], lane);
             commit_copies();
             wait_copies<1>();
         } else {
@@ -329,7 +323,7 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
         }
         __syncwarp();
 #else
-        stage_in(sigma, delta, color, warp_start, s0, m, st, lane);
+        stage_in<false>(sigma, delta, color, warp_start, s0, m, st, lane);
 #endif
         const T* my_sigma = &st.sigma[lane * (SPAN + 1)];
         const T* my_delta = &st.delta[lane * (SPAN + 1)];
@@ -483,7 +477,7 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
         u64 c, s0;
         int m = span(j, c, s0);
         int k = (int)(j % STAGES);
-        post(sigma, delta, color, warp_start, s0, m, stage[wid][k], lane);
+        stage_in<true>(sigma, delta, color, warp_start, s0, m, stage[wid][k], lane);
 #pragma unroll
         for (int h = 0; h < SPANS; ++h) {
             if (h * CHUNK < m) copy_async(&depths[wid][k][lane * SPANS + h], &chunk_depth[base + c * SPANS + h]);
@@ -508,7 +502,7 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
         __syncwarp();
         const double* my_depth = &depths[wid][j % STAGES][lane * SPANS];
 #else
-        stage_in(sigma, delta, color, warp_start, s0, m, st, lane);
+        stage_in<false>(sigma, delta, color, warp_start, s0, m, st, lane);
         const double* my_depth = &chunk_depth[base + c * SPANS];
 #endif
         T* my_sigma = &st.sigma[lane * (SPAN + 1)];
