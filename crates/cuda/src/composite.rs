@@ -10,7 +10,7 @@ use cudarc::driver::{
 
 use crate::buffers::{check_len, put};
 use crate::error::CudaError;
-use crate::kernel::{compile_tuned, KernelTuning};
+use crate::kernel::{compile_tuned, KernelTuning, REDUCE_BLOCK};
 use crate::packing::{check_packing, residual_len, CHANNELS, WARP};
 
 mod sealed {
@@ -210,9 +210,6 @@ pub struct HostRays<'a, F> {
     /// The background colour shared by every ray, `[3]`, finite.
     pub background: &'a [F],
 }
-
-/// Threads of the background gradient's reduction, `REDUCE` in the kernel source.
-const REDUCE_BLOCK: usize = 256;
 
 /// What the driver reports of one of the composite's kernels once compiled for the device:
 /// what decides how many of its blocks share a multiprocessor.

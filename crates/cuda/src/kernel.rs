@@ -49,6 +49,10 @@ pub enum Staging {
     Pipelined,
 }
 
+/// Threads of the background gradient's reduction (`REDUCE` in the kernel source, which is
+/// compiled with this value).
+pub(crate) const REDUCE_BLOCK: usize = 256;
+
 /// The values of each [`KernelTuning`] field the kernels are built for.
 const SPAN_BYTES: [u32; 2] = [32, 64];
 const LOADS_IN_FLIGHT: [u32; 3] = [4, 8, 16];
@@ -123,6 +127,7 @@ impl KernelTuning {
             staging,
             format!("-DBLOCK={}", self.threads_per_block),
             format!("-DF32_EXP={exponentials}"),
+            format!("-DREDUCE={REDUCE_BLOCK}"),
         ]
     }
 }

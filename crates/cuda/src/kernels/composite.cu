@@ -547,7 +547,11 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
     }
 }
 
+// Threads of the background gradient's reduction, a power of 2 (`REDUCE_BLOCK` on the host,
+// which launches it).
+#ifndef REDUCE
 #define REDUCE 256
+#endif
 
 template <typename T>
 __device__ __forceinline__ void reduce_background(const double* __restrict__ bg_partial, u64 partials,
