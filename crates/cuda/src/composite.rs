@@ -67,7 +67,7 @@ pub struct CudaComposite {
     f64: Kernels,
     name: String,
     capability: (i32, i32),
-    block: usize,
+    tuning: KernelTuning,
 }
 
 impl std::fmt::Debug for CudaComposite {
@@ -290,8 +290,18 @@ impl CudaComposite {
             stream,
             name,
             capability,
-            block: tuning.threads_per_block as usize,
+            tuning,
         })
+    }
+
+    /// The layout and exponentials the kernels were built with.
+    pub fn tuning(&self) -> KernelTuning {
+        self.tuning
+    }
+
+    /// Threads a block of the forward and backward kernels.
+    fn block(&self) -> usize {
+        self.tuning.threads_per_block as usize
     }
 
     /// The device's name, as the driver reports it.
@@ -319,8 +329,8 @@ impl CudaComposite {
         let mut info = Vec::new();
         for (suffix, k) in [("f32", &self.f32), ("f64", &self.f64)] {
             for (name, f, block) in [
-                ("forward", &k.forward, self.block),
-                ("backward", &k.backward, self.block),
+                ("forward", &k.forward, self.block()),
+                ("backward", &k.backward, self.block()),
                 ("reduce", &k.reduce, REDUCE_BLOCK),
             ] {
                 info.push(KernelInfo {
@@ -445,7 +455,7 @@ impl CudaComposite {
         // SAFETY: the arguments are the kernel's, in its order and of its types; every buffer
         // has the length the kernel indexes (checked above and when the buffers were made);
         // `rays` threads do the work, the rest of the last block returns at once.
-        unsafe { launch.launch(config(x.rays, self.block)) }?;
+        unsafe { launch.launch(config(x.rays, self.block())) }?;
         Ok(())
     }
 
@@ -507,7 +517,7 @@ impl CudaComposite {
         // SAFETY: as in `launch_forward`: the kernel's arguments and types, every buffer
         // checked against the lengths it indexes; a warp past `partials` writes nothing, one
         // past `rays` (only when there is no ray) writes its zero partial sum.
-        unsafe { launch.launch(config(x.rays, self.block)) }?;
+        unsafe { launch.launch(config(x.rays, self.block())) }?;
         let mut reduce = self.stream.launch_builder(&k.reduce);
         reduce.arg(&grads.partial).arg(&partials).arg(&mut grads.background);
         // SAFETY: one block of the kernel's REDUCE_BLOCK threads reads `partials * 3` partial

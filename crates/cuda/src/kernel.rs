@@ -47,6 +47,11 @@ pub enum Staging {
     /// asynchronous copies (`cp.async`) on compute capability 8.0 and newer (on older devices
     /// the copies are plain loads and stores, in the same order).
     Pipelined,
+    /// One stage, as [`Staging::Batched`], filled with asynchronous copies (`cp.async`, compute
+    /// capability 8.0 and newer) that are all posted before any is waited for: every element of
+    /// a step's spans in flight at once, without holding registers (on older devices, plain
+    /// loads and stores).
+    Async,
 }
 
 /// Threads of the background gradient's reduction (`REDUCE` in the kernel source, which is
@@ -95,6 +100,14 @@ impl KernelTuning {
                     exponentials: Exponentials::Double,
                 });
             }
+            for threads_per_block in THREADS_PER_BLOCK {
+                all.push(KernelTuning {
+                    span_bytes,
+                    staging: Staging::Async,
+                    threads_per_block,
+                    exponentials: Exponentials::Double,
+                });
+            }
         }
         all
     }
@@ -105,6 +118,7 @@ impl KernelTuning {
                 LOADS_IN_FLIGHT.contains(&loads_in_flight) && THREADS_PER_BLOCK.contains(&self.threads_per_block)
             }
             Staging::Pipelined => PIPELINED_THREADS_PER_BLOCK.contains(&self.threads_per_block),
+            Staging::Async => THREADS_PER_BLOCK.contains(&self.threads_per_block),
         };
         if !SPAN_BYTES.contains(&self.span_bytes) || !staging_ok {
             return Err(CudaError::Tuning(*self));
@@ -117,6 +131,7 @@ impl KernelTuning {
         let staging = match self.staging {
             Staging::Batched { loads_in_flight } => format!("-DLOADS={loads_in_flight}"),
             Staging::Pipelined => "-DPIPELINED=1".to_string(),
+            Staging::Async => "-DASYNC_STAGE=1".to_string(),
         };
         let exponentials = match self.exponentials {
             Exponentials::Double => 0,

@@ -120,8 +120,14 @@ __device__ __forceinline__ void add_sample(const T* __restrict__ color, u64 k, d
 #ifndef PIPELINED
 #define PIPELINED 0
 #endif
+// 1: one stage, filled with asynchronous copies that are all posted before the warp waits for
+// any: every element of a step's spans is in flight at once without holding a register (the
+// batched staging holds LOADS in registers), and the shared memory stays one stage.
+#ifndef ASYNC_STAGE
+#define ASYNC_STAGE 0
+#endif
 #define STAGES (PIPELINED ? 2 : 1)
-#if PIPELINED && defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
+#if (PIPELINED || ASYNC_STAGE) && defined(__CUDA_ARCH__) && __CUDA_ARCH__ >= 800
 #define ASYNC_COPIES 1
 #else
 #define ASYNC_COPIES 0
@@ -250,6 +256,22 @@ __device__ __forceinline__ void stage_in(const T* __restrict__ sigma, const T* _
     }
 }
 
+// The staging of a step that is not pipelined: `stage_in` at once, or all of it posted as
+// asynchronous copies and then waited for.
+template <typename T>
+__device__ __forceinline__ void stage_step(const T* __restrict__ sigma, const T* __restrict__ delta,
+                                           const T* __restrict__ color, u64 warp_start, u64 s0, int len,
+                                           Stage<T>& st, unsigned lane) {
+#if ASYNC_STAGE
+    stage_in<true>(sigma, delta, color, warp_start, s0, len, st, lane);
+    commit_copies();
+    wait_copies<0>();
+    __syncwarp();
+#else
+    stage_in<false>(sigma, delta, color, warp_start, s0, len, st, lane);
+#endif
+}
+
 // The warp's step count: its longest ray's span count.
 __device__ __forceinline__ u64 warp_max(u64 v) {
 #pragma unroll
@@ -323,7 +345,7 @@ __device__ __forceinline__ void forward(const u64* __restrict__ offsets, u64 ray
         }
         __syncwarp();
 #else
-        stage_in<false>(sigma, delta, color, warp_start, s0, m, st, lane);
+        stage_step(sigma, delta, color, warp_start, s0, m, st, lane);
 #endif
         const T* my_sigma = &st.sigma[lane * (SPAN + 1)];
         const T* my_delta = &st.delta[lane * (SPAN + 1)];
@@ -502,7 +524,7 @@ __device__ __forceinline__ void backward(const u64* __restrict__ offsets, u64 ra
         __syncwarp();
         const double* my_depth = &depths[wid][j % STAGES][lane * SPANS];
 #else
-        stage_in<false>(sigma, delta, color, warp_start, s0, m, st, lane);
+        stage_step(sigma, delta, color, warp_start, s0, m, st, lane);
         const double* my_depth = &chunk_depth[base + c * SPANS];
 #endif
         T* my_sigma = &st.sigma[lane * (SPAN + 1)];

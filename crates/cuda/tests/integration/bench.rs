@@ -8,7 +8,8 @@
 //!
 //! `FOGRAY_BENCH_CPU=0` leaves out the CPU op (its time, and the check of the GPU's results
 //! against it on the same batch). `FOGRAY_BENCH_TUNINGS=1` also times every staging layout
-//! the kernels are built for ([`KernelTuning`]), each checked to give the default's bits.
+//! the kernels are built for ([`KernelTuning`]), each checked to give the first one's bits;
+//! `FOGRAY_BENCH_STAGING=batched|pipelined|async` times only those of that staging.
 //! `FOGRAY_BENCH_F32_EXP=1` builds every kernel timed with `Exponentials::SplitSingle`.
 
 use std::time::Instant;
@@ -225,11 +226,20 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
         background: &[1.0, 1.0, 1.0],
     };
     let mut reference: Option<Vec<Vec<f32>>> = None;
+    let only = std::env::var("FOGRAY_BENCH_STAGING").ok();
     for layout in KernelTuning::every() {
         let tuning = KernelTuning {
             exponentials: exponentials(),
             ..layout
         };
+        let staging = match tuning.staging {
+            Staging::Batched { loads_in_flight } => format!("batched, {loads_in_flight} loads"),
+            Staging::Pipelined => "pipelined".to_string(),
+            Staging::Async => "async".to_string(),
+        };
+        if only.as_ref().is_some_and(|o| !staging.starts_with(o.as_str())) {
+            continue;
+        }
         let g = CudaComposite::with_tuning(0, tuning)?;
         let x = g.upload(&host)?;
         let up = g.upload_upstream(&x, &d_color, None)?;
@@ -245,10 +255,6 @@ fn throughput_of_each_staging_layout() -> Result<(), CudaError> {
                 )
             })
             .collect();
-        let staging = match tuning.staging {
-            Staging::Batched { loads_in_flight } => format!("batched, {loads_in_flight} loads"),
-            Staging::Pipelined => "pipelined".to_string(),
-        };
         println!(
             "layout span {} B, {staging}, {} threads: forward {f:.3} ms, backward {b:.3} ms, both {both:.3} ms ({:.0} M samples/s); {}",
             tuning.span_bytes,

@@ -98,24 +98,27 @@ fn the_grid_and_training_kernels_compile() {
 }
 
 #[test]
-fn the_pipelined_staging_copies_asynchronously_from_ampere_on() {
-    let pipelined = KernelTuning {
-        staging: Staging::Pipelined,
-        threads_per_block: 64,
-        ..KernelTuning::default()
-    };
-    for (capability, want_async) in [((7, 5), false), ((8, 0), true), ((9, 0), true)] {
-        match compile_tuned(capability, pipelined) {
-            Ok(ptx) => {
-                let src = ptx.to_src();
-                assert_eq!(src.contains("cp.async.ca.shared.global"), want_async, "{capability:?}");
-                assert_eq!(src.contains("cp.async.wait_group"), want_async, "{capability:?}");
+fn the_pipelined_and_async_stagings_copy_asynchronously_from_ampere_on() {
+    for staging in [Staging::Pipelined, Staging::Async] {
+        let tuning = KernelTuning {
+            staging,
+            threads_per_block: 64,
+            ..KernelTuning::default()
+        };
+        for (capability, want_async) in [((7, 5), false), ((8, 0), true), ((9, 0), true)] {
+            match compile_tuned(capability, tuning) {
+                Ok(ptx) => {
+                    let src = ptx.to_src();
+                    let what = format!("{staging:?} {capability:?}");
+                    assert_eq!(src.contains("cp.async.ca.shared.global"), want_async, "{what}");
+                    assert_eq!(src.contains("cp.async.wait_group"), want_async, "{what}");
+                }
+                Err(CudaError::NoNvrtc) => {
+                    eprintln!("SKIPPED: libnvrtc could not be loaded");
+                    return;
+                }
+                Err(e) => panic!("{capability:?}: {e}"),
             }
-            Err(CudaError::NoNvrtc) => {
-                eprintln!("SKIPPED: libnvrtc could not be loaded");
-                return;
-            }
-            Err(e) => panic!("{capability:?}: {e}"),
         }
     }
     // The batched staging never does.

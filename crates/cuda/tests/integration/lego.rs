@@ -12,6 +12,9 @@
 //! photograph there at its end (`gpu-<nodes>-<seconds>s-<view>.png`). Each fit prints the
 //! device memory in use (total minus free) at most, sampled after each allocation it makes.
 //!
+//! `FOGRAY_GPU_EXPONENTIALS=split-single` builds the composite with
+//! `Exponentials::SplitSingle` (default: `Exponentials::Double`).
+//!
 //! `FOGRAY_GPU_FITS` lists the fits to run, separated by commas, each
 //! `nodes:samples:batch:seconds[:sh_degree[:grow[:random_background[:occupancy[:distortion]]]]]`
 //! (default `128:256:8192:10:1:1:1:1:0.01`): with `grow` 1 the grid starts at a quarter of `nodes` and
@@ -26,8 +29,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use fogray_cuda::{
-    device_for_tests, CudaComposite, CudaError, DenseGridTrainer, OccupancySettings, StepPhases, TrainerSettings,
-    TrainingRays,
+    device_for_tests, CudaComposite, CudaError, DenseGridTrainer, Exponentials, KernelTuning, OccupancySettings,
+    StepPhases, TrainerSettings, TrainingRays,
 };
 use fogray_data::{load, Frame, LoadOptions};
 use ndarray::Array3;
@@ -104,6 +107,18 @@ fn release_pooled_memory(gpu: &CudaComposite) -> Result<(), CudaError> {
 #[ignore = "needs a GPU and the lego dataset; prints PSNR against time"]
 fn lego_fit_on_the_device() -> Result<(), CudaError> {
     let Some(gpu) = device_for_tests()? else { return Ok(()) };
+    let gpu = match std::env::var("FOGRAY_GPU_EXPONENTIALS").as_deref() {
+        Ok("split-single") => CudaComposite::with_tuning(
+            0,
+            KernelTuning {
+                exponentials: Exponentials::SplitSingle,
+                ..KernelTuning::default()
+            },
+        )?,
+        Ok("double") | Err(_) => gpu,
+        Ok(other) => panic!("FOGRAY_GPU_EXPONENTIALS={other}: split-single or double"),
+    };
+    println!("exponentials: {:?}", gpu.tuning().exponentials);
     let Ok(root) = std::env::var("FOGRAY_DATA") else {
         eprintln!("SKIPPED: FOGRAY_DATA is not set");
         return Ok(());
