@@ -14,7 +14,7 @@ use fogray_fit::metrics::haze_fraction;
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
 use fogray_fit::settings::{Budget, FitSettings, SceneBox};
-use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
+use fogray_fit::train::{fit_from, training_views_psnr, FitResult, LogEntry, Progress};
 use fogray_fit::RadianceField;
 use fogray_tape::Float;
 use serde::Serialize;
@@ -155,6 +155,10 @@ pub struct FitSummary<'a> {
     /// SSIM (Gaussian window 11, sigma 1.5) over the held-out views at the end; null for views
     /// smaller than its window.
     pub final_test_ssim: f64,
+    /// PSNR (dB) at the end over as many training views as there are held-out ones, spread
+    /// through the training list ([`training_views_psnr`]): its gap to `final_test_psnr` is
+    /// how much better the fit reproduces its own views than new ones.
+    pub train_views_psnr: f64,
     /// Training seconds (evaluations and loading excluded).
     pub seconds: f64,
     /// Training steps.
@@ -432,6 +436,13 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         peak_resident_bytes: crate::memory::peak_resident_bytes(),
         final_test_psnr: result.final_test_psnr,
         final_test_ssim: result.final_test_ssim,
+        train_views_psnr: training_views_psnr(
+            &result.model,
+            data,
+            settings,
+            result.occupancy.as_ref(),
+            data.test.len(),
+        )?,
         seconds: result.seconds,
         steps: result.training.step,
         log: &result.log,
@@ -461,12 +472,13 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         );
     }
     text += &format!(
-        "final test PSNR {:.2} dB, SSIM {:.4}, over {} held-out views after {:.1} s ({} steps)",
+        "final test PSNR {:.2} dB, SSIM {:.4}, over {} held-out views after {:.1} s ({} steps); {:.2} dB on as many training views",
         result.final_test_psnr,
         result.final_test_ssim,
         data.test.len(),
         result.seconds,
-        result.training.step
+        result.training.step,
+        summary.train_views_psnr
     );
     Ok(FitOutcome::Done(text))
 }

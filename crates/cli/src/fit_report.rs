@@ -110,6 +110,10 @@ fn markdown(
     let rows = [
         ("held-out PSNR", format!("{:.2} dB", s.final_test_psnr)),
         ("held-out SSIM", number(s.final_test_ssim, |v| format!("{v:.4}"))),
+        (
+            "PSNR on as many training views (the gap to held-out: how much the fit learnt its own views)",
+            format!("{:.2} dB", s.train_views_psnr),
+        ),
         ("training seconds (evaluations excluded)", format!("{:.1}", s.seconds)),
         ("steps", s.steps.to_string()),
         (

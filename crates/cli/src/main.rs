@@ -219,8 +219,10 @@ whole fit. Ctrl-C stops after the current step and saves the model (to --save-mo
 fogray-model.safetensors in --out or here), exit status 130; `fogray fit --resume FILE`
 continues it.
 
---json prints {"final_test_psnr", "seconds", "steps", "log": [{"step", "seconds",
-"train_loss", "test_psnr", "samples"}], "views", "size", "load_seconds"}; a progress bar on
+--json prints {"final_test_psnr", "train_views_psnr", "seconds", "steps", "log": [{"step",
+"seconds", "train_loss", "test_psnr", "samples"}], "views", "size", "load_seconds"}:
+train_views_psnr is the PSNR on as many training views as held-out ones, and its gap to
+final_test_psnr how much the fit learnt its own views rather than the scene; a progress bar on
 stderr otherwise. A bad dataset: exit status 2, one line on stderr naming the file."#;
 
 const COMPOSITE_HELP: &str = r#"Composite packed rays (the emission-absorption model: w_k = T_k (1 - exp(-sigma_k delta_k)),

@@ -65,6 +65,14 @@ fn check_report(dir: &Path, json: &Value) {
     assert!(0.5 < ssim && ssim < 1.0, "SSIM {ssim}");
     assert!(md.contains(&format!("| held-out PSNR | {psnr:.2} dB |")), "{md}");
     assert!(md.contains(&format!("| held-out SSIM | {ssim:.4} |")), "{md}");
+    // The training views' PSNR: a fit of the ball reproduces its own views at least as well as
+    // new ones (within a little: the views differ).
+    let train = json["train_views_psnr"].as_f64().unwrap();
+    assert!(train > psnr - 1.0, "training views {train} dB, held-out {psnr} dB");
+    assert!(
+        md.contains(&format!("how much the fit learnt its own views) | {train:.2} dB |")),
+        "{md}"
+    );
     assert!(md.contains(&format!("| steps | {STEPS} |")), "{md}");
     assert!(md.contains("fogray fit --data"), "the command: {md}");
     for picture in [

@@ -137,3 +137,46 @@ fn a_fit_whose_densities_are_all_below_the_threshold_keeps_sampling() {
     assert_eq!(result.occupied_fraction, 1.0);
     assert!(result.samples_per_ray_mean > 1.0, "{}", result.samples_per_ray_mean);
 }
+
+#[test]
+fn the_training_views_psnr_renders_evenly_spaced_training_views() {
+    use fogray_fit::dataset::Dataset;
+    use fogray_fit::train::{render_test_views, test_psnr, training_views_psnr};
+    let ball = ball_dataset(6, 2, 8);
+    let settings = FitSettings {
+        grid: 8,
+        batch: 64,
+        evaluations: 1,
+        ..FitSettings::default()
+    }
+    .with_budget(Budget::Steps(20));
+    let result = fit::<f64, DenseGrid<f64>>(&ball, &settings, &mut |_| {}).unwrap();
+    let model = &result.model;
+    let occupancy = result.occupancy.as_ref();
+    // Training views 0 and 2 of 4 are the two held-out views; 1 and 3 are a training view with
+    // its picture negated, which no render comes near. Two of four views are 0 and 2, so their
+    // PSNR is the held-out PSNR, measured through the test views' own path.
+    let (a, b) = (ball.test[0].clone(), ball.test[1].clone());
+    let mut wrong = ball.train[0].clone();
+    wrong.image.mapv_inplace(|v| -v);
+    let data = Dataset::new(vec![a, wrong.clone(), b, wrong], ball.test.clone(), ball.background).unwrap();
+    let held_out = test_psnr(&render_test_views(model, &data, &settings, occupancy).unwrap(), &data).unwrap();
+    let two = training_views_psnr(model, &data, &settings, occupancy, 2).unwrap();
+    assert_eq!(two, held_out);
+    // All four (and a count past the list: all of them) take the negated views in, and lose
+    // more than 10 dB.
+    let four = training_views_psnr(model, &data, &settings, occupancy, 4).unwrap();
+    assert_eq!(
+        training_views_psnr(model, &data, &settings, occupancy, 9).unwrap(),
+        four
+    );
+    assert!(four < held_out - 10.0, "{four} against {held_out}");
+    // One view: the first, held-out view 0.
+    let first = Dataset::new(data.train.clone(), vec![data.test[0].clone()], data.background).unwrap();
+    let want = test_psnr(&render_test_views(model, &first, &settings, occupancy).unwrap(), &first).unwrap();
+    assert_eq!(
+        training_views_psnr(model, &data, &settings, occupancy, 1).unwrap(),
+        want
+    );
+    assert!(training_views_psnr(model, &data, &settings, occupancy, 0).is_err());
+}
