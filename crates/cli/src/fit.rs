@@ -10,7 +10,7 @@ use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
 use fogray_fit::dispatch::{with_model, ModelWork};
 use fogray_fit::interrupt::StopFlag;
-use fogray_fit::metrics::haze_fraction;
+use fogray_fit::metrics::{haze_fraction, view_scores, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
 use fogray_fit::settings::{Budget, FitSettings, SceneBox};
@@ -180,6 +180,18 @@ pub struct FitSummary<'a> {
     pub held_out_haze: f64,
     /// The process's peak resident memory in bytes (null where the system does not say).
     pub peak_resident_bytes: Option<u64>,
+    /// Each held-out view's PSNR and share of the held-out squared error, in view order.
+    pub held_out_views: Vec<HeldOutScore>,
+}
+
+/// One held-out view's PSNR and its share of the squared error over all of them.
+#[derive(Debug, Serialize)]
+pub struct HeldOutScore {
+    /// The view's name.
+    pub name: String,
+    /// Its PSNR and share of the error.
+    #[serde(flatten)]
+    pub score: ViewScore,
 }
 
 /// How a fit ended: its output for stdout, or an interruption (saved).
@@ -434,6 +446,17 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
             0.95,
         ),
         peak_resident_bytes: crate::memory::peak_resident_bytes(),
+        held_out_views: view_scores(
+            &result.renders.iter().map(|r| r.view()).collect::<Vec<_>>(),
+            &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
+        )?
+        .into_iter()
+        .zip(&data.test)
+        .map(|(score, t)| HeldOutScore {
+            name: t.name.clone(),
+            score,
+        })
+        .collect(),
         final_test_psnr: result.final_test_psnr,
         final_test_ssim: result.final_test_ssim,
         train_views_psnr: training_views_psnr(

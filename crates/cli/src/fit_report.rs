@@ -158,7 +158,22 @@ fn markdown(
     writeln!(md, "\n## Held-out views\n").map_err(w_)?;
     writeln!(
         md,
-        "Each row: the photograph, the render, the absolute error times 4, and the render's expected \
+        "The held-out PSNR is set by the mean squared error over all views, so a view's share of the \
+         squared error says how much of the loss it carries.\n"
+    )
+    .map_err(w_)?;
+    writeln!(md, "| view | PSNR (dB) | share of the squared error |\n|---|---|---|").map_err(w_)?;
+    for v in &s.held_out_views {
+        writeln!(
+            md,
+            "| {} | {:.2} | {:.3} |",
+            v.name, v.score.psnr, v.score.share_of_error
+        )
+        .map_err(w_)?;
+    }
+    writeln!(
+        md,
+        "\nEach row: the photograph, the render, the absolute error times 4, and the render's expected \
          depth (scene units; grey where the opacity is below 0.1).\n"
     )
     .map_err(w_)?;

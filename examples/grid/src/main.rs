@@ -380,6 +380,8 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
 struct FitSummary<'a> {
     log: &'a [fogray::fit::train::LogEntry],
     final_test_psnr: f64,
+    /// PSNR on as many training views as held-out ones (`training_views_psnr`).
+    train_views_psnr: f64,
     seconds: f64,
     samples_per_ray_mean: f64,
     occupied_fraction: f64,
@@ -586,7 +588,7 @@ fn fit_and_save<F: fogray::tape::Float, M: RadianceField<F>>(
     report_fit(args, settings, data, result, &bar)
 }
 
-fn report_fit<F: fogray::tape::Float, M>(
+fn report_fit<F: fogray::tape::Float, M: fogray::fit::RadianceField<F>>(
     args: &FitArgs,
     settings: &FitSettings,
     data: &Dataset,
@@ -623,6 +625,13 @@ fn report_fit<F: fogray::tape::Float, M>(
     let summary = FitSummary {
         log: &result.log,
         final_test_psnr: result.final_test_psnr,
+        train_views_psnr: fogray::fit::train::training_views_psnr(
+            &result.model,
+            data,
+            settings,
+            result.occupancy.as_ref(),
+            data.test.len(),
+        )?,
         seconds: result.seconds,
         samples_per_ray_mean: result.samples_per_ray_mean,
         occupied_fraction: result.occupied_fraction,
@@ -644,8 +653,9 @@ fn report_fit<F: fogray::tape::Float, M>(
         );
     }
     println!(
-        "final test PSNR {:.2} dB after {:.1} s of training; {:.1} samples per ray; {:.1} % of cells occupied",
+        "final test PSNR {:.2} dB ({:.2} on as many training views) after {:.1} s of training; {:.1} samples per ray; {:.1} % of cells occupied",
         result.final_test_psnr,
+        summary.train_views_psnr,
         result.seconds,
         result.samples_per_ray_mean,
         100.0 * result.occupied_fraction

@@ -86,6 +86,23 @@ fn check_report(dir: &Path, json: &Value) {
         assert!(md.contains(picture), "report.md shows no {picture}");
         assert!(dir.join(picture).is_file(), "{picture} was not written");
     }
+    // Each held-out view's row; the shares of the squared error add up to 1, and the views'
+    // mean squared error (same-sized views) gives the held-out PSNR.
+    let views = json["held_out_views"].as_array().unwrap();
+    assert_eq!(views.len(), 3);
+    let (mut share, mut mse) = (0.0, 0.0);
+    for v in views {
+        let (name, db, part) = (
+            v["name"].as_str().unwrap(),
+            v["psnr"].as_f64().unwrap(),
+            v["share_of_error"].as_f64().unwrap(),
+        );
+        assert!(md.contains(&format!("| {name} | {db:.2} | {part:.3} |")), "{md}");
+        share += part;
+        mse += 10f64.powf(-db / 10.0) / views.len() as f64;
+    }
+    assert!((share - 1.0).abs() < 1e-12, "{share}");
+    assert!((-10.0 * mse.log10() - psnr).abs() < 1e-9);
     let log = json["log"].as_array().unwrap();
     let last = log.last().unwrap()["test_ssim"].as_f64().unwrap();
     assert_eq!(last, ssim);

@@ -66,3 +66,36 @@ fn ssim_refuses_what_it_cannot_measure() {
         Err(ImageError::Shape { .. })
     ));
 }
+
+#[test]
+fn view_scores_split_the_psnr_of_all_views_by_their_squared_error() {
+    use fogray_fit::metrics::{psnr, view_scores};
+    let (exact, a, b) = (smooth(), perturbed(), noise());
+    // Clamped as psnr clamps: a render above 1 where the picture is 1 costs nothing.
+    let mut over = exact.clone();
+    over.mapv_inplace(|v| if v > 0.8 { 1.0 } else { v });
+    let bright = over.mapv(|v| if v == 1.0 { 7.0 } else { v + 0.05 });
+    let renders = [a.view(), b.view(), bright.view()];
+    let exacts = [exact.view(), exact.view(), over.view()];
+    let scores = view_scores(&renders, &exacts).unwrap();
+    for (i, s) in scores.iter().enumerate() {
+        assert_eq!(s.psnr, psnr(&renders[i..=i], &exacts[i..=i]).unwrap());
+    }
+    // Same-sized views: the mean of their squared errors is the PSNR of all of them, and the
+    // shares are each view's squared error over the sum.
+    let mse: Vec<f64> = scores.iter().map(|s| 10f64.powf(-s.psnr / 10.0)).collect();
+    let all = psnr(&renders, &exacts).unwrap();
+    assert!((-10.0 * (mse.iter().sum::<f64>() / 3.0).log10() - all).abs() < 1e-9);
+    for (s, m) in scores.iter().zip(&mse) {
+        assert!((s.share_of_error - m / mse.iter().sum::<f64>()).abs() < 1e-12);
+    }
+    // The clamped view's error is the 0.05 off the values below 1 alone.
+    let below = over.iter().filter(|&&v| v < 1.0).count() as f64;
+    let want = -10.0 * (below * 0.05f64.powi(2) / over.len() as f64).log10();
+    assert!(
+        (scores[2].psnr - want).abs() < 1e-9,
+        "{} against {want}",
+        scores[2].psnr
+    );
+    assert!(view_scores(&[], &[]).is_err());
+}
