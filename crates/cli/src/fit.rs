@@ -14,7 +14,7 @@ use fogray_fit::metrics::{haze_fraction, view_scores, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
 use fogray_fit::settings::{Budget, FitSettings, SceneBox};
-use fogray_fit::train::{fit_from, training_views_psnr, FitResult, LogEntry, Progress};
+use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
 use fogray_fit::RadianceField;
 use fogray_tape::Float;
 use serde::Serialize;
@@ -156,7 +156,7 @@ pub struct FitSummary<'a> {
     /// smaller than its window.
     pub final_test_ssim: f64,
     /// PSNR (dB) at the end over as many training views as there are held-out ones, spread
-    /// through the training list ([`training_views_psnr`]): its gap to `final_test_psnr` is
+    /// through the training list ([`FitResult::training_views_psnr`]): its gap to `final_test_psnr` is
     /// how much better the fit reproduces its own views than new ones.
     pub train_views_psnr: f64,
     /// Training seconds (evaluations and loading excluded).
@@ -459,13 +459,7 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         .collect(),
         final_test_psnr: result.final_test_psnr,
         final_test_ssim: result.final_test_ssim,
-        train_views_psnr: training_views_psnr(
-            &result.model,
-            data,
-            settings,
-            result.occupancy.as_ref(),
-            data.test.len(),
-        )?,
+        train_views_psnr: result.training_views_psnr(data, settings)?,
         seconds: result.seconds,
         steps: result.training.step,
         log: &result.log,

@@ -146,6 +146,17 @@ pub fn training_views_psnr<F: Float, M: RadianceField<F>>(
     Ok(psnr(&r, &e)?)
 }
 
+impl<F: Float, M: RadianceField<F>> FitResult<F, M> {
+    /// [`training_views_psnr`] of the fitted model on as many of `data`'s training views as it
+    /// has held-out ones, with the fit's occupancy grid: the figure to set beside
+    /// [`FitResult::final_test_psnr`].
+    ///
+    /// Errors: the ops' errors.
+    pub fn training_views_psnr(&self, data: &Dataset, settings: &FitSettings) -> Result<f64, FitError> {
+        training_views_psnr(&self.model, data, settings, self.occupancy.as_ref(), data.test.len())
+    }
+}
+
 /// The PSNR of `renders` against the test views' pictures.
 ///
 /// Errors: renders that do not match the views.

@@ -625,13 +625,7 @@ fn report_fit<F: fogray::tape::Float, M: fogray::fit::RadianceField<F>>(
     let summary = FitSummary {
         log: &result.log,
         final_test_psnr: result.final_test_psnr,
-        train_views_psnr: fogray::fit::train::training_views_psnr(
-            &result.model,
-            data,
-            settings,
-            result.occupancy.as_ref(),
-            data.test.len(),
-        )?,
+        train_views_psnr: result.training_views_psnr(data, settings)?,
         seconds: result.seconds,
         samples_per_ray_mean: result.samples_per_ray_mean,
         occupied_fraction: result.occupied_fraction,
