@@ -77,49 +77,45 @@ impl Default for KernelTuning {
     }
 }
 
+impl Staging {
+    /// Every staging the kernels are built for, in the order [`KernelTuning::every`] lists them.
+    fn every() -> Vec<Staging> {
+        let batched = LOADS_IN_FLIGHT.map(|loads_in_flight| Staging::Batched { loads_in_flight });
+        [batched.as_slice(), &[Staging::Pipelined, Staging::Async]].concat()
+    }
+
+    /// The threads per block the kernels are built for with this staging (the pipelined one's
+    /// two stages a warp must fit a block's 48 KB of static shared memory).
+    fn threads_per_block(self) -> &'static [u32] {
+        match self {
+            Staging::Pipelined => &PIPELINED_THREADS_PER_BLOCK,
+            Staging::Batched { .. } | Staging::Async => &THREADS_PER_BLOCK,
+        }
+    }
+}
+
 impl KernelTuning {
     /// Every staging layout the kernels are built for, each with `Exponentials::Double`.
     pub fn every() -> Vec<KernelTuning> {
         let mut all = Vec::new();
         for span_bytes in SPAN_BYTES {
-            for loads_in_flight in LOADS_IN_FLIGHT {
-                for threads_per_block in THREADS_PER_BLOCK {
+            for staging in Staging::every() {
+                for &threads_per_block in staging.threads_per_block() {
                     all.push(KernelTuning {
                         span_bytes,
-                        staging: Staging::Batched { loads_in_flight },
+                        staging,
                         threads_per_block,
                         exponentials: Exponentials::Double,
                     });
                 }
-            }
-            for threads_per_block in PIPELINED_THREADS_PER_BLOCK {
-                all.push(KernelTuning {
-                    span_bytes,
-                    staging: Staging::Pipelined,
-                    threads_per_block,
-                    exponentials: Exponentials::Double,
-                });
-            }
-            for threads_per_block in THREADS_PER_BLOCK {
-                all.push(KernelTuning {
-                    span_bytes,
-                    staging: Staging::Async,
-                    threads_per_block,
-                    exponentials: Exponentials::Double,
-                });
             }
         }
         all
     }
 
     fn check(&self) -> Result<(), CudaError> {
-        let staging_ok = match self.staging {
-            Staging::Batched { loads_in_flight } => {
-                LOADS_IN_FLIGHT.contains(&loads_in_flight) && THREADS_PER_BLOCK.contains(&self.threads_per_block)
-            }
-            Staging::Pipelined => PIPELINED_THREADS_PER_BLOCK.contains(&self.threads_per_block),
-            Staging::Async => THREADS_PER_BLOCK.contains(&self.threads_per_block),
-        };
+        let staging_ok = Staging::every().contains(&self.staging)
+            && self.staging.threads_per_block().contains(&self.threads_per_block);
         if !SPAN_BYTES.contains(&self.span_bytes) || !staging_ok {
             return Err(CudaError::Tuning(*self));
         }

@@ -235,8 +235,8 @@ __device__ __forceinline__ void scatter(T* __restrict__ global, const T* staged,
 }
 
 // Sets this lane's span for the step (`len` 0 for none) and stages the warp's spans: at once
-// (`stage_in<false>`), or, for the pipeline, issued as one group of asynchronous copies that
-// nothing waits for here (`stage_in<true>`, completed by `wait_copies`).
+// (`stage_in<false>`), or issued as asynchronous copies that nothing waits for here
+// (`stage_in<true>`, for the pipeline and the asynchronous stage; completed by `wait_copies`).
 template <bool ASYNC, typename T>
 __device__ __forceinline__ void stage_in(const T* __restrict__ sigma, const T* __restrict__ delta,
                                          const T* __restrict__ color, u64 warp_start, u64 s0, int len,
