@@ -65,12 +65,12 @@ const THREADS_PER_BLOCK: [u32; 3] = [32, 64, 128];
 const PIPELINED_THREADS_PER_BLOCK: [u32; 2] = [32, 64];
 
 impl Default for KernelTuning {
-    /// The layout chosen from the benchmark's comparison of layouts on an H100
-    /// (`reports/cuda/composite-layouts.log`; within noise of the fastest there).
+    /// The layout chosen from the benchmark's comparison of layouts on an H200
+    /// (`reports/cuda/h200/composite-layouts-async*.log`: the fastest, with 64 threads level).
     fn default() -> Self {
         KernelTuning {
             span_bytes: 64,
-            staging: Staging::Batched { loads_in_flight: 8 },
+            staging: Staging::Async,
             threads_per_block: 128,
             exponentials: Exponentials::Double,
         }

@@ -243,7 +243,8 @@ fn the_scales_bound_the_cpu_values() {
 
 /// Every staging layout the kernels are built for sums in the same order: the same bits as
 /// the default layout, in f32 and f64, on random rays (lengths across the span sizes) and a
-/// ray longer than any span.
+/// ray longer than any span; and with `Exponentials::SplitSingle`, the same f32 bits as the
+/// default layout built with it.
 #[test]
 fn every_staging_layout_gives_the_same_bits() {
     let Some(default) = gpu() else { return };
@@ -261,6 +262,19 @@ fn every_staging_layout_gives_the_same_bits() {
     for c in &cases {
         same_bits::<f32>(&default, &others, &layouts, c);
         same_bits::<f64>(&default, &others, &layouts, c);
+    }
+    let split = |t: KernelTuning| KernelTuning {
+        exponentials: Exponentials::SplitSingle,
+        ..t
+    };
+    let default = CudaComposite::with_tuning(0, split(KernelTuning::default())).expect("SplitSingle");
+    let layouts: Vec<KernelTuning> = layouts.into_iter().map(split).collect();
+    let others: Vec<CudaComposite> = layouts
+        .iter()
+        .map(|&t| CudaComposite::with_tuning(0, t).unwrap_or_else(|e| panic!("{t:?}: {e}")))
+        .collect();
+    for c in &cases {
+        same_bits::<f32>(&default, &others, &layouts, c);
     }
 }
 

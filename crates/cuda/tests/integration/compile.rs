@@ -122,7 +122,11 @@ fn the_pipelined_and_async_stagings_copy_asynchronously_from_ampere_on() {
         }
     }
     // The batched staging never does.
-    if let Ok(ptx) = compile_tuned((9, 0), KernelTuning::default()) {
+    let batched = KernelTuning {
+        staging: Staging::Batched { loads_in_flight: 8 },
+        ..KernelTuning::default()
+    };
+    if let Ok(ptx) = compile_tuned((9, 0), batched) {
         assert!(!ptx.to_src().contains("cp.async"));
     }
 }
