@@ -172,7 +172,8 @@ fn wall_direction(ray: &Ray, radius: f64) -> [f64; 3] {
 }
 
 /// The exact picture from `camera` of `scene` standing in the room: the scene composited
-/// along each pixel's ray, the wall behind it. `scene`'s own background is not used.
+/// along each ray, the wall behind it, each pixel the mean over its area
+/// ([`picture`](crate::photographs::picture)). `scene`'s own background is not used.
 pub fn capture_photograph(scene: &Scene, camera: &PinholeCamera, room_radius: f64) -> Array3<f64> {
     let in_room = Scene {
         background: [0.0; 3],

@@ -37,7 +37,7 @@ use fogray_grid::views::dataset;
     name = "fogray-grid",
     version,
     about = "Exact photographs of a scene of constant-density spheres and boxes, seen by a ring of cameras",
-    long_about = "A scene of constant-density spheres and boxes inside [-1, 1]^3 (densities add where they overlap, colours mix by density) is photographed exactly: along a ray the medium is piecewise constant, so compositing its pieces is the emission-absorption integral itself. The cameras sit on a Fibonacci lattice over the sphere of radius 3, look at the origin with a 40 degree field of view, and every e-th view (e = (V + T) / T) is held out for testing."
+    long_about = "A scene of constant-density spheres and boxes inside [-1, 1]^3 (densities add where they overlap, colours mix by density) is photographed exactly: along a ray the medium is piecewise constant, so compositing its pieces is the emission-absorption integral itself; each pixel is the mean of 4 x 4 such rays across its area. The cameras sit on a Fibonacci lattice over the sphere of radius 3, look at the origin with a 40 degree field of view, and every e-th view (e = (V + T) / T) is held out for testing."
 )]
 struct Cli {
     #[command(subcommand)]

@@ -199,8 +199,15 @@ impl PinholeCamera {
     /// outside the image: no check), through the lens. Where the lens model cannot be inverted
     /// (far outside a calibrated lens's field) the pinhole direction is used.
     pub fn direction(&self, row: usize, col: usize) -> [f64; 3] {
+        self.direction_at(row as f64 + 0.5, col as f64 + 0.5)
+    }
+
+    /// The unit world direction through the image point (`y`, `x`) in pixels (the top-left
+    /// corner of the image is (0, 0), pixel (`row`, `col`)'s centre is (`row + 0.5`,
+    /// `col + 0.5`)), through the lens, as [`PinholeCamera::direction`].
+    pub fn direction_at(&self, y: f64, x: f64) -> [f64; 3] {
         let k = &self.intrinsics;
-        let distorted = [(col as f64 + 0.5 - k.cx) / k.fx, (row as f64 + 0.5 - k.cy) / k.fy];
+        let distorted = [(x - k.cx) / k.fx, (y - k.cy) / k.fy];
         let [x, y] = self.distortion.undistort(distorted).unwrap_or(distorted);
         let cam = [x, y, 1.0];
         // An invertible R maps a non-zero vector to a non-zero one.

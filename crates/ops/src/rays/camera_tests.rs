@@ -94,6 +94,49 @@ fn general_intrinsics_and_transform() {
     assert!(d.iter().zip(d2).all(|(a, b)| (a - b).abs() < 1e-15));
 }
 
+/// `direction_at` takes any point of the image: with the intrinsics of the test above, the
+/// point (y 0.25, x 3.75) of pixel (0, 3) has the camera direction ((3.75 - 1) / 2,
+/// (0.25 - 0.5) / 4, 1) = (1.375, -0.0625, 1); a pixel's centre is `direction`'s ray, bit for
+/// bit, through a lens too.
+#[test]
+fn a_point_of_the_image_has_the_direction_through_it() {
+    let k = Intrinsics {
+        fx: 2.0,
+        fy: 4.0,
+        cx: 1.0,
+        cy: 0.5,
+        width: 5,
+        height: 3,
+    };
+    let m = [
+        [1.0, 0.0, 0.0, 1.0],
+        [0.0, 1.0, 0.0, 2.0],
+        [0.0, 0.0, 1.0, 3.0],
+        [0.0, 0.0, 0.0, 1.0],
+    ];
+    let cam = PinholeCamera::new(k, m).unwrap();
+    let n = (1.375f64 * 1.375 + 0.0625 * 0.0625 + 1.0).sqrt();
+    let d = cam.direction_at(0.25, 3.75);
+    for (g, w) in d.iter().zip([1.375 / n, -0.0625 / n, 1.0 / n]) {
+        assert!((g - w).abs() < 1e-15, "{d:?}");
+    }
+    let lens = Distortion {
+        k1: 0.1,
+        k2: -0.02,
+        p1: 0.001,
+        p2: -0.002,
+        k3: 0.0,
+        k4: 0.0,
+    };
+    for camera in [cam, PinholeCamera::new(k, m).unwrap().with_distortion(lens).unwrap()] {
+        for (row, col) in [(0, 0), (1, 3), (2, 4)] {
+            let centre = camera.direction_at(row as f64 + 0.5, col as f64 + 0.5);
+            assert_eq!(centre, camera.direction(row, col));
+        }
+        assert_ne!(camera.direction_at(1.25, 3.5), camera.direction(1, 3));
+    }
+}
+
 #[test]
 fn opengl_pose_is_the_opencv_pose_with_y_and_z_flipped() {
     let k = Intrinsics::from_vertical_fov(6, 4, 0.8).unwrap();
