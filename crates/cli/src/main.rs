@@ -219,9 +219,11 @@ whole fit. Ctrl-C stops after the current step and saves the model (to --save-mo
 fogray-model.safetensors in --out or here), exit status 130; `fogray fit --resume FILE`
 continues it.
 
---json prints {"final_test_psnr", "train_views_psnr", "seconds", "steps", "log": [{"step",
-"seconds", "train_loss", "test_psnr", "samples"}], "views", "size", "load_seconds"}:
-train_views_psnr is the PSNR on as many training views as held-out ones, and its gap to
+--json prints {"final_test_psnr", "final_test_psnr_view_mean", "train_views_psnr", "seconds",
+"steps", "log": [{"step", "seconds", "train_loss", "test_psnr", "samples"}], "views", "size",
+"load_seconds"}: final_test_psnr is the PSNR of the mean squared error over the held-out views,
+final_test_psnr_view_mean the mean of their own PSNRs (the figure papers and nerfstudio report;
+never lower); train_views_psnr is the PSNR on as many training views as held-out ones, and its gap to
 final_test_psnr how much the fit learnt its own views rather than the scene; a progress bar on
 stderr otherwise. A bad dataset: exit status 2, one line on stderr naming the file."#;
 

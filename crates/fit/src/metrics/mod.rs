@@ -79,6 +79,33 @@ pub fn view_scores(
         .collect())
 }
 
+/// The mean of the image pairs' own PSNRs (dB), with [`psnr`]'s clamping: the convention of
+/// the NeRF literature and its tools (nerfstudio's evaluation, instant-ngp, DVGO, Plenoxels),
+/// where [`psnr`] takes the mean squared error over all pairs first. By the concavity of the
+/// logarithm it is never below [`psnr`]; a hard view weighs in by its decibels here, by its
+/// squared error there. Infinite when a pair is exact.
+///
+/// ```
+/// use fogray_fit::metrics::{mean_view_psnr, psnr};
+/// use ndarray::Array3;
+///
+/// // Errors of 0.1 and 0.001 everywhere: 20 dB and 60 dB, a mean of 40 dB; the MSE over both,
+/// // (0.01 + 1e-6) / 2, is 23.01 dB.
+/// let exact = Array3::from_elem((2, 2, 3), 0.5);
+/// let (a, b) = (Array3::from_elem((2, 2, 3), 0.6), Array3::from_elem((2, 2, 3), 0.501));
+/// let (r, e) = ([a.view(), b.view()], [exact.view(), exact.view()]);
+/// assert!((mean_view_psnr(&r, &e)? - 40.0).abs() < 1e-9);
+/// assert!((psnr(&r, &e)? - 23.0099).abs() < 1e-4);
+/// assert!(mean_view_psnr(&[], &[]).is_err() && mean_view_psnr(&r[..1], &e).is_err());
+/// # Ok::<(), fogray_fit::images::ImageError>(())
+/// ```
+///
+/// Errors: as [`psnr`]'s.
+pub fn mean_view_psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
+    let scores = view_scores(renders, exacts)?;
+    Ok(scores.iter().map(|s| s.psnr).sum::<f64>() / scores.len() as f64)
+}
+
 /// The sum over a pair's values of `(clamp(render, 0, 1) - exact)^2`.
 fn squared_error(render: &ArrayView3<'_, f64>, exact: &ArrayView3<'_, f64>) -> f64 {
     Zip::from(render)
