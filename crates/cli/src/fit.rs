@@ -153,7 +153,7 @@ pub struct FitSummary<'a> {
     /// PSNR (dB) over all held-out views at the end: of the mean squared error over them.
     pub final_test_psnr: f64,
     /// The mean of the held-out views' own PSNRs (dB) at the end ([`mean_view_psnr`]): the
-    /// figure the NeRF literature and nerfstudio report; never below `final_test_psnr`.
+    /// figure the NeRF literature and nerfstudio report; never below `final_test_psnr` for views of one size.
     pub final_test_psnr_view_mean: f64,
     /// SSIM (Gaussian window 11, sigma 1.5) over the held-out views at the end; null for views
     /// smaller than its window.

@@ -223,7 +223,7 @@ continues it.
 "steps", "log": [{"step", "seconds", "train_loss", "test_psnr", "samples"}], "views", "size",
 "load_seconds"}: final_test_psnr is the PSNR of the mean squared error over the held-out views,
 final_test_psnr_view_mean the mean of their own PSNRs (the figure papers and nerfstudio report;
-never lower); train_views_psnr is the PSNR on as many training views as held-out ones, and its gap to
+never lower for views of one size); train_views_psnr is the PSNR on as many training views as held-out ones, and its gap to
 final_test_psnr how much the fit learnt its own views rather than the scene; a progress bar on
 stderr otherwise. A bad dataset: exit status 2, one line on stderr naming the file."#;
 

@@ -63,7 +63,12 @@ fn check_report(dir: &Path, json: &Value) {
     let psnr = json["final_test_psnr"].as_f64().unwrap();
     let ssim = json["final_test_ssim"].as_f64().unwrap();
     assert!(0.5 < ssim && ssim < 1.0, "SSIM {ssim}");
-    assert!(md.contains(&format!("| held-out PSNR | {psnr:.2} dB |")), "{md}");
+    assert!(md.contains(&format!("over the views) | {psnr:.2} dB |")), "{md}");
+    let view_mean = json["final_test_psnr_view_mean"].as_f64().unwrap();
+    assert!(
+        md.contains(&format!("nerfstudio's figure) | {view_mean:.2} dB |")),
+        "{md}"
+    );
     assert!(md.contains(&format!("| held-out SSIM | {ssim:.4} |")), "{md}");
     // The training views' PSNR: a fit of the ball reproduces its own views at least as well as
     // new ones (within a little: the views differ).
@@ -90,7 +95,7 @@ fn check_report(dir: &Path, json: &Value) {
     // mean squared error (same-sized views) gives the held-out PSNR.
     let views = json["held_out_views"].as_array().unwrap();
     assert_eq!(views.len(), 3);
-    let (mut share, mut mse) = (0.0, 0.0);
+    let (mut share, mut mse, mut db_sum) = (0.0, 0.0, 0.0);
     for v in views {
         let (name, db, part) = (
             v["name"].as_str().unwrap(),
@@ -100,9 +105,13 @@ fn check_report(dir: &Path, json: &Value) {
         assert!(md.contains(&format!("| {name} | {db:.2} | {part:.3} |")), "{md}");
         share += part;
         mse += 10f64.powf(-db / 10.0) / views.len() as f64;
+        db_sum += db;
     }
     assert!((share - 1.0).abs() < 1e-12, "{share}");
     assert!((-10.0 * mse.log10() - psnr).abs() < 1e-9);
+    // The mean of the views' PSNRs, never below the PSNR of their mean squared error.
+    assert!((db_sum / views.len() as f64 - view_mean).abs() < 1e-9);
+    assert!(view_mean >= psnr, "{view_mean} < {psnr}");
     let log = json["log"].as_array().unwrap();
     let last = log.last().unwrap()["test_ssim"].as_f64().unwrap();
     assert_eq!(last, ssim);

@@ -82,8 +82,8 @@ pub fn view_scores(
 /// The mean of the image pairs' own PSNRs (dB), with [`psnr`]'s clamping: the convention of
 /// the NeRF literature and its tools (nerfstudio's evaluation, instant-ngp, DVGO, Plenoxels),
 /// where [`psnr`] takes the mean squared error over all pairs first. By the concavity of the
-/// logarithm it is never below [`psnr`]; a hard view weighs in by its decibels here, by its
-/// squared error there. Infinite when a pair is exact.
+/// logarithm it is never below [`psnr`] for views of one size; a hard view weighs in by its
+/// decibels here, by its squared error there. Infinite when a pair is exact.
 ///
 /// ```
 /// use fogray_fit::metrics::{mean_view_psnr, psnr};
