@@ -4,8 +4,8 @@
 //! A camera's pixel gathers the light over its area, and so do the NeRF-synthetic renders (an
 //! antialiased path tracer). One ray through each pixel's centre instead gives every view's
 //! silhouettes a staircase of its own, which no field can match from the views between them:
-//! fits of such photographs learnt their views and missed the held-out ones by 9-10 dB, most of
-//! it at the silhouettes (`reports/grid/dark-scenes.md`).
+//! the same fits scored lower on every scene's held-out views, most of the error at the
+//! silhouettes (the figures are in `reports/grid/dark-scenes.md`).
 //!
 //! ```
 //! use fogray_grid::photographs::photographs;
