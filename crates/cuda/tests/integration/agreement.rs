@@ -254,11 +254,14 @@ fn every_staging_layout_gives_the_same_bits() {
         (0.05 + (k % 13) as f64 * 0.4, 0.01 + (k % 5) as f64 * 0.002)
     });
     cases.push(Case::new("a long ray between short ones", &long, &mut r));
+    let build = |layouts: &[KernelTuning]| -> Vec<CudaComposite> {
+        layouts
+            .iter()
+            .map(|&t| CudaComposite::with_tuning(0, t).unwrap_or_else(|e| panic!("{t:?}: {e}")))
+            .collect()
+    };
     let layouts = KernelTuning::every();
-    let others: Vec<CudaComposite> = layouts
-        .iter()
-        .map(|&t| CudaComposite::with_tuning(0, t).unwrap_or_else(|e| panic!("{t:?}: {e}")))
-        .collect();
+    let others = build(&layouts);
     for c in &cases {
         same_bits::<f32>(&default, &others, &layouts, c);
         same_bits::<f64>(&default, &others, &layouts, c);
@@ -269,10 +272,7 @@ fn every_staging_layout_gives_the_same_bits() {
     };
     let default = CudaComposite::with_tuning(0, split(KernelTuning::default())).expect("SplitSingle");
     let layouts: Vec<KernelTuning> = layouts.into_iter().map(split).collect();
-    let others: Vec<CudaComposite> = layouts
-        .iter()
-        .map(|&t| CudaComposite::with_tuning(0, t).unwrap_or_else(|e| panic!("{t:?}: {e}")))
-        .collect();
+    let others = build(&layouts);
     for c in &cases {
         same_bits::<f32>(&default, &others, &layouts, c);
     }

@@ -60,11 +60,9 @@ fn look_at_directions_match_the_field_of_view_formula() {
     }
 }
 
-#[test]
-fn general_intrinsics_and_transform() {
-    // Identity rotation, centre (1, 2, 3): the camera frame is the world frame shifted.
-    // Pixel (row 1, col 3) with fx = 2, fy = 4, cx = 1, cy = 0.5: camera direction
-    // ((3.5 - 1) / 2, (1.5 - 0.5) / 4, 1) = (1.25, 0.25, 1), length sqrt(2.625).
+/// Intrinsics fx = 2, fy = 4, cx = 1, cy = 0.5 of a 5 x 3 image, and the identity rotation
+/// at centre (1, 2, 3): the camera frame is the world frame shifted.
+fn shifted_camera() -> (Intrinsics, [[f64; 4]; 4]) {
     let k = Intrinsics {
         fx: 2.0,
         fy: 4.0,
@@ -79,6 +77,15 @@ fn general_intrinsics_and_transform() {
         [0.0, 0.0, 1.0, 3.0],
         [0.0, 0.0, 0.0, 1.0],
     ];
+    (k, m)
+}
+
+#[test]
+fn general_intrinsics_and_transform() {
+    // Identity rotation, centre (1, 2, 3): the camera frame is the world frame shifted.
+    // Pixel (row 1, col 3) with fx = 2, fy = 4, cx = 1, cy = 0.5: camera direction
+    // ((3.5 - 1) / 2, (1.5 - 0.5) / 4, 1) = (1.25, 0.25, 1), length sqrt(2.625).
+    let (k, m) = shifted_camera();
     let cam = PinholeCamera::new(k, m).unwrap();
     let n = 2.625f64.sqrt();
     let d = cam.direction(1, 3);
@@ -100,20 +107,7 @@ fn general_intrinsics_and_transform() {
 /// bit, through a lens too.
 #[test]
 fn a_point_of_the_image_has_the_direction_through_it() {
-    let k = Intrinsics {
-        fx: 2.0,
-        fy: 4.0,
-        cx: 1.0,
-        cy: 0.5,
-        width: 5,
-        height: 3,
-    };
-    let m = [
-        [1.0, 0.0, 0.0, 1.0],
-        [0.0, 1.0, 0.0, 2.0],
-        [0.0, 0.0, 1.0, 3.0],
-        [0.0, 0.0, 0.0, 1.0],
-    ];
+    let (k, m) = shifted_camera();
     let cam = PinholeCamera::new(k, m).unwrap();
     let n = (1.375f64 * 1.375 + 0.0625 * 0.0625 + 1.0).sqrt();
     let d = cam.direction_at(0.25, 3.75);
