@@ -10,7 +10,7 @@ use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
 use fogray_fit::dispatch::{with_model, ModelWork};
 use fogray_fit::interrupt::StopFlag;
-use fogray_fit::metrics::{haze_fraction, mean_view_psnr, view_scores, ViewScore};
+use fogray_fit::metrics::{haze_fraction, mean_psnr, view_scores, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
 use fogray_fit::settings::{Budget, FitSettings, SceneBox};
@@ -152,7 +152,7 @@ pub struct FitArgs {
 pub struct FitSummary<'a> {
     /// PSNR (dB) over all held-out views at the end: of the mean squared error over them.
     pub final_test_psnr: f64,
-    /// The mean of the held-out views' own PSNRs (dB) at the end ([`mean_view_psnr`]): the
+    /// The mean of the held-out views' own PSNRs (dB) at the end ([`mean_psnr`]): the
     /// figure the NeRF literature and nerfstudio report; never below `final_test_psnr` for views of one size.
     pub final_test_psnr_view_mean: f64,
     /// SSIM (Gaussian window 11, sigma 1.5) over the held-out views at the end; null for views
@@ -442,8 +442,11 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
         return Ok(FitOutcome::Interrupted(path));
     }
     let held_out = held_out_views(&result, data, settings)?;
-    let renders: Vec<_> = result.renders.iter().map(|r| r.view()).collect();
-    let pictures: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
+    // Each held-out view scored once: its row, and the mean of the views' PSNRs.
+    let scores = view_scores(
+        &result.renders.iter().map(|r| r.view()).collect::<Vec<_>>(),
+        &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
+    )?;
     let summary = FitSummary {
         held_out_haze: haze_fraction(
             &held_out.iter().map(|v| v.opacity.view()).collect::<Vec<_>>(),
@@ -451,7 +454,8 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
             0.95,
         ),
         peak_resident_bytes: crate::memory::peak_resident_bytes(),
-        held_out_views: view_scores(&renders, &pictures)?
+        final_test_psnr_view_mean: mean_psnr(&scores),
+        held_out_views: scores
             .into_iter()
             .zip(&data.test)
             .map(|(score, t)| HeldOutScore {
@@ -460,7 +464,6 @@ fn fit_and_report<F: Float, M: RadianceField<F>>(
             })
             .collect(),
         final_test_psnr: result.final_test_psnr,
-        final_test_psnr_view_mean: mean_view_psnr(&renders, &pictures)?,
         final_test_ssim: result.final_test_ssim,
         train_views_psnr: result.training_views_psnr(data, settings)?,
         seconds: result.seconds,

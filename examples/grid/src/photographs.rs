@@ -43,9 +43,7 @@ pub fn photograph(scene: &Scene, camera: &PinholeCamera) -> Array3<f64> {
 /// the pixel, in parallel over pixels.
 pub fn picture(camera: &PinholeCamera, shade: impl Fn(&Ray) -> [f64; 3] + Sync) -> Array3<f64> {
     let (w, h) = (camera.intrinsics().width, camera.intrinsics().height);
-    let offsets: Vec<f64> = (0..RAYS_PER_SIDE)
-        .map(|i| (i as f64 + 0.5) / RAYS_PER_SIDE as f64)
-        .collect();
+    let offsets: [f64; RAYS_PER_SIDE] = std::array::from_fn(|i| (i as f64 + 0.5) / RAYS_PER_SIDE as f64);
     let rays = (RAYS_PER_SIDE * RAYS_PER_SIDE) as f64;
     let pixels: Vec<f64> = (0..w * h)
         .into_par_iter()

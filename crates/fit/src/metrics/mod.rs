@@ -102,8 +102,13 @@ pub fn view_scores(
 ///
 /// Errors: as [`psnr`]'s.
 pub fn mean_view_psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
-    let scores = view_scores(renders, exacts)?;
-    Ok(scores.iter().map(|s| s.psnr).sum::<f64>() / scores.len() as f64)
+    Ok(mean_psnr(&view_scores(renders, exacts)?))
+}
+
+/// The mean of `scores`' PSNRs: [`mean_view_psnr`] of views already scored by [`view_scores`]
+/// (NaN for no scores).
+pub fn mean_psnr(scores: &[ViewScore]) -> f64 {
+    scores.iter().map(|s| s.psnr).sum::<f64>() / scores.len() as f64
 }
 
 /// The sum over a pair's values of `(clamp(render, 0, 1) - exact)^2`.
