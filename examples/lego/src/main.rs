@@ -90,6 +90,13 @@ struct Profile {
 #[derive(Debug, Clone, Deserialize, Serialize)]
 struct FitJson {
     final_test_psnr: f64,
+    /// The mean of the held-out views' own PSNRs (the anchors' convention); null in runs
+    /// from before `fogray fit` printed it.
+    #[serde(default)]
+    final_test_psnr_view_mean: Option<f64>,
+    /// The PSNR on as many training views as held-out ones; null in runs from before.
+    #[serde(default)]
+    train_views_psnr: Option<f64>,
     #[serde(default)]
     final_test_ssim: Option<f64>,
     seconds: f64,
