@@ -19,6 +19,16 @@ use fogray_tape::Float;
 use crate::error::CliError;
 use crate::fit::{FitPlan, FitSummary};
 
+/// The narrowest a held-out view's panel is drawn, in pixels: its title ("|render - exact| x 4"
+/// in an 18-pixel font) takes about 180, and a narrower view's titles run into each other.
+const MIN_PANEL_WIDTH: usize = 200;
+
+/// How many times a view `width` pixels wide is magnified in its panels: the least whole
+/// factor that makes it [`MIN_PANEL_WIDTH`] wide (1 for views at least that wide).
+fn panel_scale(width: usize) -> u32 {
+    MIN_PANEL_WIDTH.div_ceil(width.max(1)) as u32
+}
+
 /// Writes `DIR/test/<name>.png` (photograph | render | error x4) and `DIR/test/<name>-depth.png`
 /// for each held-out view (`held_out`: its render with depth), `DIR/psnr.{png,svg}`,
 /// `DIR/ssim.{png,svg}`, `DIR/fit.json` (the summary) and `DIR/report.md`.
@@ -36,15 +46,21 @@ pub fn write_out<F: Float, M>(
     let views = dir.join("test");
     std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
     for ((t, render), view) in data.test.iter().zip(&result.renders).zip(held_out) {
+        let scale = panel_scale(t.size()[1]);
         write_comparison_png(
             &views.join(format!("{}.png", t.name)),
             t.image.view(),
             render.view(),
             4.0,
-            1,
+            scale,
         )?;
         if let Some(depth) = &view.depth {
-            write_depth_png(&views.join(format!("{}-depth.png", t.name)), depth.view(), &t.name, 1)?;
+            write_depth_png(
+                &views.join(format!("{}-depth.png", t.name)),
+                depth.view(),
+                &t.name,
+                scale,
+            )?;
         }
     }
     let curve = [Curve {
@@ -204,4 +220,19 @@ fn markdown(
     .map_err(w_)?;
     writeln!(md, "```json\n{}\n```", serde_json::to_string_pretty(settings)?).map_err(w_)?;
     Ok(md)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn narrow_views_are_magnified_until_their_titles_fit() {
+        // Lego at --downscale 4 stays as it is; the capture's 120-pixel views double.
+        assert_eq!(panel_scale(200), 1);
+        assert_eq!(panel_scale(800), 1);
+        assert_eq!(panel_scale(120), 2);
+        assert_eq!(panel_scale(199), 2);
+        assert_eq!(panel_scale(50), 4);
+    }
 }
