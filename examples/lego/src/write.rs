@@ -111,9 +111,10 @@ pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>, stamp: &Stamp
         md,
         "Each row is one `fogray fit --data <lego> --downscale {} --seconds S` process with the flags shown \
          beside the defaults, trained on {} views of {}x{} and judged on {} views it never saw (every 8th \
-         frame of the training file: r_0 r_9 r_18 ... r_98). PSNR is over all held-out pixels (\"final dB\"; \
-         the anchors' papers report the mean of each view's own PSNR, the views' mean), the training views' over \
-         as many training views, and SSIM the mean over the held-out views (Gaussian window 11, sigma 1.5), all measured off the training clock. Memory is the process's peak resident set; haze is the fraction of held-out \
+         frame of the training file: r_0 r_9 r_18 ... r_98). \"final dB\" is the PSNR of the squared error over \
+         all held-out pixels; \"views' mean\" the mean of each held-out view's own PSNR, as the anchors' papers \
+         report it; \"training views dB\" the PSNR on as many training views, rendered alike; SSIM the mean over \
+         the held-out views (Gaussian window 11, sigma 1.5). All are measured off the training clock. Memory is the process's peak resident set; haze is the fraction of held-out \
          pixels whose opacity lies in (0.05, 0.95); ms/step are the step's phases averaged over the fit.\n",
         args.downscale, first.views[0], first.size[1], first.size[0], first.views[1]
     )?;
