@@ -136,6 +136,8 @@ fn fit_prints_its_log_and_writes_renders_and_pictures() {
         }
     }
     assert!(v["final_test_psnr"].as_f64().unwrap() > 5.0);
+    // The mean of the two held-out views' PSNRs, checked below against the saved renders.
+    let view_mean = v["final_test_psnr_view_mean"].as_f64().unwrap();
     assert!(v["seconds"].as_f64().unwrap() > 0.0);
     assert!(v["samples_per_ray_mean"].as_f64().unwrap() > 1.0);
     assert_eq!(v["occupied_fraction"], 1.0);
@@ -147,6 +149,17 @@ fn fit_prints_its_log_and_writes_renders_and_pictures() {
     assert_eq!(images[1].as_array().unwrap().len(), 10);
     assert_eq!(images[1][9].as_array().unwrap().len(), 10);
     assert_eq!(images[1][9][9].as_array().unwrap().len(), 3);
+    // Each held-out view's PSNR from its saved render and its photograph, then their mean.
+    let exact = photographs(&Scene::default(), &Ring::new(8, 2, 10).unwrap()).unwrap();
+    let view_psnr = |k: usize, view: usize| {
+        let mut sum = 0.0;
+        for ((a, b, c), value) in exact[view].indexed_iter() {
+            sum += (images[k][a][b][c].as_f64().unwrap() - value).powi(2);
+        }
+        -10.0 * (sum / exact[view].len() as f64).log10()
+    };
+    let mean = (view_psnr(0, 2) + view_psnr(1, 7)) / 2.0;
+    assert!((view_mean - mean).abs() < 1e-9, "{view_mean} against {mean}");
     for name in ["test-view-002.png", "test-view-007.png", "psnr.png", "psnr.svg"] {
         assert!(dir.join(name).exists(), "{name}");
     }
