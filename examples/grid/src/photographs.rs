@@ -45,6 +45,7 @@ pub fn picture(camera: &PinholeCamera, shade: impl Fn(&Ray) -> [f64; 3] + Sync) 
     let (w, h) = (camera.intrinsics().width, camera.intrinsics().height);
     let offsets: [f64; RAYS_PER_SIDE] = std::array::from_fn(|i| (i as f64 + 0.5) / RAYS_PER_SIDE as f64);
     let rays = (RAYS_PER_SIDE * RAYS_PER_SIDE) as f64;
+    let origin = camera.centre();
     let pixels: Vec<f64> = (0..w * h)
         .into_par_iter()
         .flat_map_iter(|p| {
@@ -53,7 +54,7 @@ pub fn picture(camera: &PinholeCamera, shade: impl Fn(&Ray) -> [f64; 3] + Sync) 
             for dy in &offsets {
                 for dx in &offsets {
                     let ray = Ray {
-                        origin: camera.centre(),
+                        origin,
                         direction: camera.direction_at(row + dy, col + dx),
                     };
                     let c = shade(&ray);
