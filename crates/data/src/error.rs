@@ -1,11 +1,15 @@
 //! Why a dataset could not be read or written: every variant names the file at fault, and its
-//! message is one line, so that a user with hundreds of frames knows which one to fix.
+//! message is one line, so that a user with hundreds of frames knows which one to fix. Paths
+//! are shown with their control characters escaped ([`escape_controls`](crate::escape_controls)):
+//! a name read from a file cannot drive the terminal that shows the error.
 
 use std::fmt;
 use std::path::PathBuf;
 
 use fogray_ops::OpsError;
 use thiserror::Error;
+
+use crate::escape::shown;
 
 /// What is wrong with a `transform_matrix`.
 #[derive(Debug, Clone, PartialEq)]
@@ -55,7 +59,7 @@ impl fmt::Display for MatrixProblem {
 #[non_exhaustive]
 pub enum DataError {
     /// A file or folder that could not be read or written.
-    #[error("{path}: {message}", path = .path.display())]
+    #[error("{path}: {message}", path = shown(.path))]
     Io {
         /// The file.
         path: PathBuf,
@@ -63,7 +67,7 @@ pub enum DataError {
         message: String,
     },
     /// A transforms file that is not valid JSON (truncated, a stray comma...).
-    #[error("{path}: invalid JSON at line {line}, column {column}: {message}", path = .path.display())]
+    #[error("{path}: invalid JSON at line {line}, column {column}: {message}", path = shown(.path))]
     Json {
         /// The transforms file.
         path: PathBuf,
@@ -75,7 +79,7 @@ pub enum DataError {
         message: String,
     },
     /// A key that the format requires is absent.
-    #[error("{path}: missing key `{key}`", path = .path.display())]
+    #[error("{path}: missing key `{key}`", path = shown(.path))]
     MissingKey {
         /// The transforms file.
         path: PathBuf,
@@ -83,7 +87,7 @@ pub enum DataError {
         key: String,
     },
     /// A key whose value has the wrong type (a string where a number belongs...).
-    #[error("{path}: `{key}` must be {expected}", path = .path.display())]
+    #[error("{path}: `{key}` must be {expected}", path = shown(.path))]
     WrongType {
         /// The transforms file.
         path: PathBuf,
@@ -93,7 +97,7 @@ pub enum DataError {
         expected: &'static str,
     },
     /// A camera pose that is not a rigid camera-to-world transform.
-    #[error("{path}: `{key}` {problem}", path = .path.display())]
+    #[error("{path}: `{key}` {problem}", path = shown(.path))]
     BadMatrix {
         /// The transforms file.
         path: PathBuf,
@@ -105,7 +109,7 @@ pub enum DataError {
     /// A number outside its domain: a focal length or field of view that is not positive and
     /// finite, an image size that is not a positive integer, a principal point that is not
     /// finite...
-    #[error("{path}: `{key}` is {value} ({rule})", path = .path.display())]
+    #[error("{path}: `{key}` is {value} ({rule})", path = shown(.path))]
     BadValue {
         /// The transforms file.
         path: PathBuf,
@@ -117,19 +121,19 @@ pub enum DataError {
         rule: &'static str,
     },
     /// A transforms file whose `frames` list is empty.
-    #[error("{path}: no frames", path = .path.display())]
+    #[error("{path}: no frames", path = shown(.path))]
     NoFrames {
         /// The transforms file.
         path: PathBuf,
     },
     /// A folder with no transforms file in it.
-    #[error("{path}: no transforms file (expected transforms.json or transforms_train.json)", path = .path.display())]
+    #[error("{path}: no transforms file (expected transforms.json or transforms_train.json)", path = shown(.path))]
     NoTransforms {
         /// The folder.
         path: PathBuf,
     },
     /// Image files named by frames that do not exist (and the load did not ask to skip them).
-    #[error("{path}: {count} image file(s) missing: {}{}", list(.first), if *.count > .first.len() { ", ..." } else { "" }, path = .path.display())]
+    #[error("{path}: {count} image file(s) missing: {}{}", list(.first), if *.count > .first.len() { ", ..." } else { "" }, path = shown(.path))]
     MissingImages {
         /// The transforms file.
         path: PathBuf,
@@ -139,7 +143,7 @@ pub enum DataError {
         first: Vec<PathBuf>,
     },
     /// An image file that exists but does not decode.
-    #[error("{path}: cannot decode image: {message}", path = .path.display())]
+    #[error("{path}: cannot decode image: {message}", path = shown(.path))]
     Decode {
         /// The image file.
         path: PathBuf,
@@ -148,7 +152,7 @@ pub enum DataError {
     },
     /// An image whose size differs from the first image of its Blender split (the format has
     /// one `camera_angle_x` per split, so one size).
-    #[error("{path}: image is {}x{} but {first} in the same split is {}x{}", .size.0, .size.1, .first_size.0, .first_size.1, path = .path.display(), first = .first.display())]
+    #[error("{path}: image is {}x{} but {first} in the same split is {}x{}", .size.0, .size.1, .first_size.0, .first_size.1, path = shown(.path), first = shown(.first))]
     MixedSizes {
         /// The image file.
         path: PathBuf,
@@ -160,7 +164,7 @@ pub enum DataError {
         first_size: (usize, usize),
     },
     /// An image whose size disagrees with the `w` / `h` of its transforms file.
-    #[error("{path}: image is {}x{} but {transforms} says w = {}, h = {}", .size.0, .size.1, .expected.0, .expected.1, path = .path.display(), transforms = .transforms.display())]
+    #[error("{path}: image is {}x{} but {transforms} says w = {}, h = {}", .size.0, .size.1, .expected.0, .expected.1, path = shown(.path), transforms = shown(.transforms))]
     SizeMismatch {
         /// The image file.
         path: PathBuf,
@@ -173,13 +177,13 @@ pub enum DataError {
     },
     /// No image size could be found for cameras read without their images: no image file
     /// exists and the transforms file has no `w` / `h`.
-    #[error("{path}: no image size: no image file of its frames exists and it has no `w` and `h`", path = .path.display())]
+    #[error("{path}: no image size: no image file of its frames exists and it has no `w` and `h`", path = shown(.path))]
     NoImageSize {
         /// The transforms file.
         path: PathBuf,
     },
     /// A `downscale` of 0, or one larger than an image.
-    #[error("{path}: downscale {downscale} {problem}", path = .path.display())]
+    #[error("{path}: downscale {downscale} {problem}", path = shown(.path))]
     BadDownscale {
         /// The dataset (or the image too small for it).
         path: PathBuf,
@@ -189,7 +193,7 @@ pub enum DataError {
         problem: &'static str,
     },
     /// A feature of the file that this crate does not read (a fisheye `camera_model`...).
-    #[error("{path}: {what} is not supported", path = .path.display())]
+    #[error("{path}: {what} is not supported", path = shown(.path))]
     Unsupported {
         /// The transforms file.
         path: PathBuf,
@@ -197,7 +201,7 @@ pub enum DataError {
         what: String,
     },
     /// A camera that fogray-ops refused (an intrinsic or distortion value outside its domain).
-    #[error("{path}: {key}: {source}", path = .path.display())]
+    #[error("{path}: {key}: {source}", path = shown(.path))]
     Camera {
         /// The transforms file.
         path: PathBuf,
@@ -207,9 +211,19 @@ pub enum DataError {
         /// and every result of the crate would carry its size).
         source: Box<OpsError>,
     },
+    /// An output path refused before any work (see [`check_outputs`](crate::check_outputs)):
+    /// it would overwrite one of the command's inputs, it is a folder where a file is
+    /// expected, its folder cannot be written...
+    #[error("{path}: refused as an output: {problem}", path = shown(.path))]
+    Output {
+        /// The output, as the command was given it.
+        path: PathBuf,
+        /// Why it was refused.
+        problem: crate::output::OutputProblem,
+    },
     /// Something given to a writer that cannot be written (an image whose shape differs from
     /// its camera's, a non-finite value, no frames...).
-    #[error("{path}: {message}", path = .path.display())]
+    #[error("{path}: {message}", path = shown(.path))]
     BadInput {
         /// The file that was to be written.
         path: PathBuf,
@@ -221,7 +235,7 @@ pub enum DataError {
 fn list(paths: &[PathBuf]) -> String {
     paths
         .iter()
-        .map(|p| p.display().to_string())
+        .map(|p| shown(p).to_string())
         .collect::<Vec<_>>()
         .join(", ")
 }

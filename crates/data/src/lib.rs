@@ -26,7 +26,10 @@
 //! [`LoadOptions::background`] with straight alpha, kept as stored (sRGB values), and
 //! optionally downscaled by an integer factor (block means; see [`downscale_picture`]).
 //!
-//! Every failure is a [`DataError`] whose one-line message names the file at fault.
+//! Every failure is a [`DataError`] whose one-line message names the file at fault, its
+//! control characters escaped ([`escape_controls`]). Every file written is written whole or
+//! not at all ([`write_atomic`]), and a command checks its outputs against its inputs before
+//! any work ([`check_outputs`]).
 //!
 //! ```
 //! use fogray_data::{load, write_blender, Format, LoadOptions};
@@ -61,10 +64,14 @@
 mod blender;
 mod downscale;
 mod error;
+mod escape;
+mod files;
 mod json;
 mod load;
 mod ngp;
+mod output;
 mod picture;
+mod png;
 mod pose;
 mod resolve;
 mod spec;
@@ -74,9 +81,16 @@ mod write;
 pub use blender::BLENDER_SCENE_BOX;
 pub use downscale::{downscale_intrinsics, downscale_picture};
 pub use error::{DataError, MatrixProblem};
+pub use escape::{escape_controls, shown, Shown};
+pub use files::{dataset_files, DatasetFiles};
 pub use load::{load, load_cameras, Format, Frame, LoadOptions, NamedCamera, SceneData};
 pub use ngp::{ngp_scene_box, NGP_DEFAULT_OFFSET, NGP_DEFAULT_SCALE};
+pub use output::{
+    check_outputs, live_temporaries, plan_fit_outputs, remove_temporaries_and_exit, resolved, write_atomic, AtomicFile,
+    Inputs, Output, OutputProblem,
+};
 pub use picture::Picture;
+pub use png::{write_png8, PngChannels};
 pub use split::{holdout, HOLDOUT_EVERY};
 pub use write::{write_blender, write_instant_ngp, FrameToWrite};
 

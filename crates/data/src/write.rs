@@ -4,7 +4,8 @@
 //!
 //! Images are `[height][width][3]` (RGB) or `[height][width][4]` (RGBA, straight alpha) arrays
 //! in `[0, 1]`, clamped and rounded to 8 bits. Poses are written as OpenGL camera-to-world
-//! matrices (the camera's y and z axes negated from fogray's OpenCV ones).
+//! matrices (the camera's y and z axes negated from fogray's OpenCV ones). Every file is
+//! written whole or not at all ([`write_atomic`](crate::write_atomic)).
 
 use std::path::{Path, PathBuf};
 
@@ -13,6 +14,8 @@ use ndarray::Array3;
 use serde_json::{json, Map, Value};
 
 use crate::error::DataError;
+use crate::output::write_atomic;
+use crate::png::{write_png8, PngChannels};
 use crate::pose::flip_yz;
 
 /// One view to write: its name (the image file's stem), camera and image.
@@ -191,16 +194,19 @@ fn write_png(path: &Path, image: &Array3<f64>) -> Result<(), DataError> {
         .iter()
         .map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
         .collect();
-    let color = if c == 4 {
-        image::ExtendedColorType::Rgba8
-    } else {
-        image::ExtendedColorType::Rgb8
+    let channels = if c == 4 { PngChannels::Rgba } else { PngChannels::Rgb };
+    let too_large = |_| DataError::BadInput {
+        path: path.to_path_buf(),
+        message: format!("a {w}x{h} picture is larger than PNG holds"),
     };
-    image::save_buffer_with_format(path, &bytes, w as u32, h as u32, color, image::ImageFormat::Png)
-        .map_err(|e| DataError::io(path, e))
+    let (w, h) = (
+        u32::try_from(w).map_err(too_large)?,
+        u32::try_from(h).map_err(too_large)?,
+    );
+    write_png8(path, &bytes, w, h, channels)
 }
 
 fn write_json(path: &Path, doc: &Value) -> Result<(), DataError> {
     let text = serde_json::to_string_pretty(doc).map_err(|e| DataError::io(path, e))?;
-    std::fs::write(path, text + "\n").map_err(|e| DataError::io(path, e))
+    write_atomic(path, |out| out.write_all((text + "\n").as_bytes()))
 }
