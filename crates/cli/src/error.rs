@@ -139,6 +139,9 @@ pub enum CliError {
     /// An image that could not be written.
     #[error("{0}")]
     Image(#[from] fogray_fit::images::ImageError),
+    /// A fit session that could not run (settings, model file, data).
+    #[error("{0}")]
+    Session(#[from] fogray_fit::session::SessionError),
     /// A command-line option outside its domain, or a combination of options not offered.
     #[error("{0}")]
     Option(String),

@@ -8,71 +8,52 @@ use std::time::Instant;
 use fogray_data::{load, LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::dispatch::{with_model, ModelWork};
-use fogray_fit::interrupt::StopFlag;
-use fogray_fit::metrics::{haze_fraction, mean_psnr, view_scores, ViewScore};
+use fogray_fit::metrics::{haze_fraction, ViewScore};
 use fogray_fit::profile::ProfileTable;
-use fogray_fit::render::{render_picture, RenderOptions, RenderedView};
-use fogray_fit::settings::{Budget, FitSettings, SceneBox};
-use fogray_fit::train::{fit_from, FitResult, LogEntry, Progress};
-use fogray_fit::RadianceField;
-use fogray_tape::Float;
+use fogray_fit::session::{self, FitReport, SessionOutcome, SessionPlan};
+use fogray_fit::settings::{FitSettings, SceneBox};
+use fogray_fit::train::LogEntry;
 use serde::Serialize;
 
 use crate::error::CliError;
 
-/// The degree of spherical harmonics `fogray fit` uses unless `--sh-degree` is given: real
-/// objects shine, and degree 1 buys more on held-out views than its cost per step takes.
-pub const RECOMMENDED_SH_DEGREE: &str = "1";
-
-/// The model `fogray fit` trains unless `--model` is given: a real scene fills a small part of
-/// its box, and the sparse grid keeps only that part.
-pub const RECOMMENDED_MODEL: &str = "sparse";
-
-/// The total-variation weight `fogray fit` uses unless `--tv` is given: none. Tens of views
-/// constrain a scene enough, and the prior costs a step as much as the lookup's backward
-/// without buying held-out PSNR (the lego comparison in reports/lego/report.md).
-pub const RECOMMENDED_TV: &str = "0";
-
-/// Adam's learning rate `fogray fit` uses unless `--lr` is given, and where it anneals to
-/// unless `--lr-final` is: twice the library's. The grid example's few hundred rays a pixel
-/// settle at the library's rate; tens of photographs seen through a sparse grid with
-/// view-dependent colour gain held-out PSNR step for step at this one, and no more above it
-/// (lego, fits of a fixed number of steps).
-pub const RECOMMENDED_LR: &str = "0.4";
-/// See [`RECOMMENDED_LR`].
-pub const RECOMMENDED_LR_FINAL: &str = "0.04";
-
-/// The distortion-loss weight `fogray fit` uses unless `--distortion` is given: a little of
-/// mip-NeRF 360's loss pulls each ray's weights onto its surface, which clears the haze a
-/// photograph cannot tell from a sheet and gains held-out PSNR at short and long budgets
-/// alike; ten times more costs PSNR (lego, reports/lego/report.md).
-pub const RECOMMENDED_DISTORTION: &str = "0.01";
-
-/// The lattice `fogray fit` grows to unless `--grid` is given: 128 nodes per axis (32, 64,
-/// then 128), the finest that a minute's fit on two cores still trains well; from
-/// [`LONG_FIT_SECONDS`] of training on, [`RECOMMENDED_GRID_LONG`] ([`long_fit_grid`]).
-pub const RECOMMENDED_GRID: &str = "128";
-
-/// The lattice of a long fit unless `--grid` is given (48, 96, then 192): its finer nodes
-/// cost a step twice as much, which a long budget pays back in held-out PSNR and a short one
-/// does not (lego, reports/lego/report.md).
-pub const RECOMMENDED_GRID_LONG: usize = 192;
-
-/// The training seconds from which [`RECOMMENDED_GRID_LONG`] is the recommended lattice.
-pub const LONG_FIT_SECONDS: f64 = 150.0;
+/// The value of the setting `field` (its name in [`FitSettings`]) in
+/// [`FitSettings::RECOMMENDED`], as a flag's default on the command line.
+///
+/// Panics: a name that is not a field of [`FitSettings`] (a programming error, caught by the
+/// test of the flags' defaults).
+pub fn recommended(field: &str) -> &'static str {
+    let settings = serde_json::to_value(FitSettings::RECOMMENDED).expect("settings are plain values");
+    let text = match &settings[field] {
+        serde_json::Value::String(s) => s.clone(),
+        serde_json::Value::Null => panic!("FitSettings has no recommended {field:?}"),
+        other => other.to_string(),
+    };
+    // Read once each at start-up, for the life of the process.
+    Box::leak(text.into_boxed_str())
+}
 
 /// `fogray fit --grid`'s help, which says how its default depends on the budget.
 pub const GRID_HELP: &str =
     "Nodes per axis of the grid (of its last growth stage); unless given, 128, or 192 for --seconds 150 and more";
 
-/// The lattice a fit of `budget` grows to when `--grid` is not given, where it is not
-/// [`RECOMMENDED_GRID`]: [`RECOMMENDED_GRID_LONG`] for a budget of [`LONG_FIT_SECONDS`] or
-/// more; `None` for shorter ones and for a budget of steps, which says nothing of time.
-pub fn long_fit_grid(budget: Budget) -> Option<usize> {
-    match budget {
-        Budget::Seconds(s) if s >= LONG_FIT_SECONDS => Some(RECOMMENDED_GRID_LONG),
-        _ => None,
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_flags_defaults_are_the_recommended_settings_and_the_help_says_the_grid_rule() {
+        assert_eq!(recommended("model"), "sparse");
+        assert_eq!(recommended("grid"), "128");
+        assert_eq!(recommended("lr").parse::<f64>().unwrap(), FitSettings::RECOMMENDED.lr);
+        assert_eq!(recommended("smoothness").parse::<f64>().unwrap(), 0.0);
+        let said = format!(
+            "unless given, {}, or {} for --seconds {} and more",
+            FitSettings::RECOMMENDED.grid,
+            FitSettings::RECOMMENDED_GRID_LONG,
+            FitSettings::LONG_FIT_SECONDS
+        );
+        assert!(GRID_HELP.ends_with(&said), "{GRID_HELP:?} against {said:?}");
     }
 }
 
@@ -253,9 +234,9 @@ pub struct FitPlan {
 }
 
 /// The plan of `fogray fit` with `args`, where `given(id)` says whether the flag of clap id
-/// `id` was given on the command line. A fresh fit of a long budget grows to
-/// [`RECOMMENDED_GRID_LONG`] unless `--grid` is given ([`long_fit_grid`]); a resumed one keeps
-/// the file's lattice.
+/// `id` was given on the command line. A fresh fit of a long budget grows to the finer lattice
+/// unless `--grid` is given ([`FitSettings::recommended_grid`]); a resumed one keeps the
+/// file's lattice.
 ///
 /// Errors: a model file that cannot be read or that another lattice or precision was asked
 /// of, a saved dataset entry that cannot be read (naming the file).
@@ -266,8 +247,8 @@ pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, Cli
             .clone()
             .ok_or_else(|| CliError::Option("give --data PATH, or --resume FILE".into()))?;
         let mut settings = args.settings;
-        if let (false, Some(n)) = (given("grid"), long_fit_grid(settings.budget())) {
-            settings.grid = n;
+        if !given("grid") {
+            settings.grid = FitSettings::recommended_grid(settings.budget());
         }
         return Ok(FitPlan {
             data,
@@ -276,9 +257,7 @@ pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, Cli
             resume: None,
         });
     };
-    let info = checkpoint::read_info(file)?;
-    let settings = args.settings.given_over(&info.settings, given)?;
-    info.check_matches(file, settings.precision, settings.grid)?;
+    let (settings, info) = session::resume_settings(file, &args.settings, given)?;
     let entry = |key: &str| {
         info.extra.get(key).ok_or_else(|| {
             CliError::Option(format!(
@@ -312,7 +291,8 @@ pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, Cli
 }
 
 /// Runs `fogray fit`, where `given(id)` says whether the flag of clap id `id` was given on the
-/// command line ([`plan`]).
+/// command line ([`plan`]): the dataset loaded, a [`session`] run, the summary printed and the
+/// report written.
 ///
 /// Errors: a bad dataset or model file (naming the file), bad settings, a file that cannot be
 /// written.
@@ -331,27 +311,82 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
     if let Some(dir) = &args.out {
         std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
     }
-    let stop = StopFlag::on_ctrl_c()?;
-    let work = FitWork {
-        args,
-        plan: &plan,
-        settings: &settings,
-        data: &data,
-        stop: &stop,
-        clock,
+    let load_seconds = clock.elapsed().as_secs_f64();
+    let name = "fogray-model.safetensors";
+    let session_plan = SessionPlan {
+        settings,
+        resume: plan.resume.clone(),
+        save_model: args.save_model.clone(),
+        save_on_interrupt: args.out.as_ref().map_or_else(|| PathBuf::from(name), |dir| dir.join(name)),
+        entries: entries(&plan)?,
+        tool: "fogray fit".into(),
+        progress_bar: !args.json,
+        announce: !args.json,
     };
-    with_model(settings.precision, settings.model, work)
+    let report = match session::run(&data, &session_plan)? {
+        SessionOutcome::Interrupted { saved, .. } => return Ok(FitOutcome::Interrupted(saved)),
+        SessionOutcome::Finished(report) => report,
+    };
+    let summary = summary(&report, &data, load_seconds);
+    if let Some(dir) = &args.out {
+        crate::fit_report::write_out(dir, &plan, &settings, &data, &summary, &report.held_out)?;
+    }
+    if args.json {
+        return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
+    }
+    let mut text = String::from("step      seconds  train loss  test PSNR (dB)  test SSIM\n");
+    for e in &report.log {
+        text += &format!(
+            "{:>6} {:>10.1} {:>11.3e} {:>15.2} {:>10.4}\n",
+            e.step, e.seconds, e.train_loss, e.test_psnr, e.test_ssim
+        );
+    }
+    text += &format!(
+        "final test PSNR {:.2} dB (mean of the views' {:.2}), SSIM {:.4}, over {} held-out views after {:.1} s ({} steps); {:.2} dB on as many training views",
+        report.final_test_psnr,
+        report.final_test_psnr_view_mean,
+        report.final_test_ssim,
+        data.test.len(),
+        report.seconds,
+        report.steps,
+        report.train_views_psnr
+    );
+    Ok(FitOutcome::Done(text))
 }
 
-fn progress_bar(hidden: bool) -> indicatif::ProgressBar {
-    if hidden {
-        return indicatif::ProgressBar::hidden();
+/// What `fogray fit --json` prints and `--out` keeps, from the session's report; `load_seconds`
+/// is the time before the session started (reading and decoding).
+fn summary<'a>(report: &'a FitReport, data: &Dataset, load_seconds: f64) -> FitSummary<'a> {
+    let [h, w] = data.train[0].size();
+    FitSummary {
+        held_out_haze: haze_fraction(
+            &report.held_out.iter().map(|v| v.opacity.view()).collect::<Vec<_>>(),
+            0.05,
+            0.95,
+        ),
+        peak_resident_bytes: crate::memory::peak_resident_bytes(),
+        final_test_psnr_view_mean: report.final_test_psnr_view_mean,
+        held_out_views: report
+            .view_scores
+            .iter()
+            .zip(&data.test)
+            .map(|(score, t)| HeldOutScore {
+                name: t.name.clone(),
+                score: *score,
+            })
+            .collect(),
+        final_test_psnr: report.final_test_psnr,
+        final_test_ssim: report.final_test_ssim,
+        train_views_psnr: report.train_views_psnr,
+        seconds: report.seconds,
+        steps: report.steps,
+        log: &report.log,
+        views: [data.train.len(), data.test.len()],
+        size: [h, w],
+        load_seconds,
+        profile: report.profile.clone(),
+        parameters: report.parameters,
     }
-    let bar = indicatif::ProgressBar::new(1000);
-    if let Ok(style) = indicatif::ProgressStyle::with_template("fit [{bar:40}] {msg} ({elapsed})") {
-        bar.set_style(style.progress_chars("=> "));
-    }
-    bar
 }
 
 /// The checkpoint's own entries: what `fogray render` and `fogray fit --resume` need beside
@@ -372,184 +407,4 @@ fn entries(plan: &FitPlan) -> Result<BTreeMap<String, String>, CliError> {
         ),
         ("downscale".to_string(), plan.data_args.downscale.to_string()),
     ]))
-}
-
-/// A fit of one model type, as fogray-fit's dispatch runs it.
-struct FitWork<'a> {
-    args: &'a FitArgs,
-    plan: &'a FitPlan,
-    settings: &'a FitSettings,
-    data: &'a Dataset,
-    stop: &'a StopFlag,
-    clock: Instant,
-}
-
-impl ModelWork for FitWork<'_> {
-    type Output = Result<FitOutcome, CliError>;
-
-    fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
-        fit_and_report::<F, M>(self.args, self.plan, self.settings, self.data, self.stop, self.clock)
-    }
-}
-
-fn fit_and_report<F: Float, M: RadianceField<F>>(
-    args: &FitArgs,
-    plan: &FitPlan,
-    settings: &FitSettings,
-    data: &Dataset,
-    stop: &StopFlag,
-    clock: Instant,
-) -> Result<FitOutcome, CliError> {
-    let bar = progress_bar(args.json);
-    let mut load_seconds = f64::NAN;
-    let mut progress = |p: Progress| {
-        if load_seconds.is_nan() {
-            load_seconds = clock.elapsed().as_secs_f64();
-        }
-        bar.set_position((p.fraction * 1000.0) as u64);
-        bar.set_message(format!("step {}", p.step));
-    };
-    let [h, w] = data.train[0].size();
-    let start = match &plan.resume {
-        Some(file) => Some(checkpoint::load::<F, M>(file)?.start),
-        None => None,
-    };
-    if !args.json {
-        let from = match (&plan.resume, &start) {
-            (Some(file), Some(s)) => format!(", from step {} of {}", s.training.step, file.display()),
-            _ => String::new(),
-        };
-        eprintln!(
-            "fogray fit: {} training and {} held-out views of {w}x{h}{from}; Ctrl-C stops and saves",
-            data.train.len(),
-            data.test.len()
-        );
-    }
-    let result = fit_from::<F, M>(data, settings, start, Some(stop.flag()), &mut progress)?;
-    bar.finish_and_clear();
-    let save_path = match (&args.save_model, result.interrupted) {
-        (Some(p), _) => Some(p.clone()),
-        (None, true) => Some(match &args.out {
-            Some(dir) => dir.join("fogray-model.safetensors"),
-            None => PathBuf::from("fogray-model.safetensors"),
-        }),
-        (None, false) => None,
-    };
-    if let Some(path) = &save_path {
-        checkpoint::save(path, &result.model, &result.training, settings, &entries(plan)?)?;
-    }
-    if let (true, Some(path)) = (result.interrupted, save_path) {
-        return Ok(FitOutcome::Interrupted(path));
-    }
-    let held_out = held_out_views(&result, data, settings)?;
-    // Each held-out view scored once: its row, and the mean of the views' PSNRs.
-    let scores = view_scores(
-        &result.renders.iter().map(|r| r.view()).collect::<Vec<_>>(),
-        &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
-    )?;
-    let summary = FitSummary {
-        held_out_haze: haze_fraction(
-            &held_out.iter().map(|v| v.opacity.view()).collect::<Vec<_>>(),
-            0.05,
-            0.95,
-        ),
-        peak_resident_bytes: crate::memory::peak_resident_bytes(),
-        final_test_psnr_view_mean: mean_psnr(&scores),
-        held_out_views: scores
-            .into_iter()
-            .zip(&data.test)
-            .map(|(score, t)| HeldOutScore {
-                name: t.name.clone(),
-                score,
-            })
-            .collect(),
-        final_test_psnr: result.final_test_psnr,
-        final_test_ssim: result.final_test_ssim,
-        train_views_psnr: result.training_views_psnr(data, settings)?,
-        seconds: result.seconds,
-        steps: result.training.step,
-        log: &result.log,
-        views: [data.train.len(), data.test.len()],
-        size: [h, w],
-        load_seconds,
-        profile: result.profile.table(),
-        parameters: result
-            .model
-            .params()
-            .ids()
-            .filter_map(|id| result.model.params().get(id).ok())
-            .map(|v| v.len())
-            .sum(),
-    };
-    if let Some(dir) = &args.out {
-        crate::fit_report::write_out(dir, plan, settings, data, &result, &held_out, &summary)?;
-    }
-    if args.json {
-        return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
-    }
-    let mut text = String::from("step      seconds  train loss  test PSNR (dB)  test SSIM\n");
-    for e in &result.log {
-        text += &format!(
-            "{:>6} {:>10.1} {:>11.3e} {:>15.2} {:>10.4}\n",
-            e.step, e.seconds, e.train_loss, e.test_psnr, e.test_ssim
-        );
-    }
-    text += &format!(
-        "final test PSNR {:.2} dB (mean of the views' {:.2}), SSIM {:.4}, over {} held-out views after {:.1} s ({} steps); {:.2} dB on as many training views",
-        result.final_test_psnr,
-        summary.final_test_psnr_view_mean,
-        result.final_test_ssim,
-        data.test.len(),
-        result.seconds,
-        result.training.step,
-        summary.train_views_psnr
-    );
-    Ok(FitOutcome::Done(text))
-}
-
-/// The fitted model's held-out views rendered with their opacity and depth (off the clock).
-fn held_out_views<F: Float, M: RadianceField<F>>(
-    result: &FitResult<F, M>,
-    data: &Dataset,
-    settings: &FitSettings,
-) -> Result<Vec<RenderedView>, CliError> {
-    let options = RenderOptions {
-        background: data.background,
-        method: settings.method,
-        depth: true,
-    };
-    let mut views = Vec::new();
-    for t in &data.test {
-        let (origins, directions) = t.rays();
-        let view = render_picture(
-            &result.model,
-            result.occupancy.as_ref(),
-            &origins,
-            &directions,
-            t.size(),
-            &options,
-        )?;
-        views.push(view);
-    }
-    Ok(views)
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_long_budget_of_seconds_grows_to_the_finer_lattice() {
-        assert_eq!(long_fit_grid(Budget::Seconds(60.0)), None);
-        assert_eq!(long_fit_grid(Budget::Seconds(LONG_FIT_SECONDS - 1e-9)), None);
-        assert_eq!(long_fit_grid(Budget::Seconds(LONG_FIT_SECONDS)), Some(192));
-        assert_eq!(long_fit_grid(Budget::Seconds(300.0)), Some(192));
-        // Steps say nothing of time.
-        assert_eq!(long_fit_grid(Budget::Steps(1_000_000)), None);
-        // The help states the same three numbers.
-        let said = format!(
-            "unless given, {RECOMMENDED_GRID}, or {RECOMMENDED_GRID_LONG} for --seconds {LONG_FIT_SECONDS} and more"
-        );
-        assert!(GRID_HELP.ends_with(&said), "{GRID_HELP:?} against {said:?}");
-    }
 }

@@ -13,8 +13,6 @@ use fogray_fit::images::write_comparison_png;
 use fogray_fit::plots::{self, Curve, Metric, XAxis};
 use fogray_fit::render::RenderedView;
 use fogray_fit::settings::FitSettings;
-use fogray_fit::train::FitResult;
-use fogray_tape::Float;
 
 use crate::error::CliError;
 use crate::fit::{FitPlan, FitSummary};
@@ -34,18 +32,18 @@ fn panel_scale(width: usize) -> u32 {
 /// `DIR/ssim.{png,svg}`, `DIR/fit.json` (the summary) and `DIR/report.md`.
 ///
 /// Errors: a file that cannot be written, naming it.
-pub fn write_out<F: Float, M>(
+pub fn write_out(
     dir: &Path,
     plan: &FitPlan,
     settings: &FitSettings,
     data: &Dataset,
-    result: &FitResult<F, M>,
-    held_out: &[RenderedView],
     summary: &FitSummary,
+    held_out: &[RenderedView],
 ) -> Result<(), CliError> {
     let views = dir.join("test");
     std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
-    for ((t, render), view) in data.test.iter().zip(&result.renders).zip(held_out) {
+    for (t, view) in data.test.iter().zip(held_out) {
+        let render = &view.color;
         let scale = panel_scale(t.size()[1]);
         write_comparison_png(
             &views.join(format!("{}.png", t.name)),
@@ -65,7 +63,7 @@ pub fn write_out<F: Float, M>(
     }
     let curve = [Curve {
         label: "fogray fit".into(),
-        log: &result.log,
+        log: summary.log,
     }];
     plots::psnr_curves(&dir.join("psnr"), &curve)?;
     plots::metric_curves(&dir.join("ssim"), &curve, XAxis::Seconds, Metric::Ssim, &[])?;

@@ -60,13 +60,13 @@ enum Command {
     // a small part of their box: the recommended model is the sparse grid.
     #[command(
         long_about = FIT_HELP,
-        mut_arg("sh_degree", |a| a.default_value(fit::RECOMMENDED_SH_DEGREE)),
-        mut_arg("model", |a| a.default_value(fit::RECOMMENDED_MODEL)),
-        mut_arg("grid", |a| a.default_value(fit::RECOMMENDED_GRID).help(fit::GRID_HELP)),
-        mut_arg("smoothness", |a| a.default_value(fit::RECOMMENDED_TV)),
-        mut_arg("lr", |a| a.default_value(fit::RECOMMENDED_LR)),
-        mut_arg("lr_final", |a| a.default_value(fit::RECOMMENDED_LR_FINAL)),
-        mut_arg("distortion", |a| a.default_value(fit::RECOMMENDED_DISTORTION))
+        mut_arg("sh_degree", |a| a.default_value(fit::recommended("sh_degree"))),
+        mut_arg("model", |a| a.default_value(fit::recommended("model"))),
+        mut_arg("grid", |a| a.default_value(fit::recommended("grid")).help(fit::GRID_HELP)),
+        mut_arg("smoothness", |a| a.default_value(fit::recommended("smoothness"))),
+        mut_arg("lr", |a| a.default_value(fit::recommended("lr"))),
+        mut_arg("lr_final", |a| a.default_value(fit::recommended("lr_final"))),
+        mut_arg("distortion", |a| a.default_value(fit::recommended("distortion")))
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms

@@ -88,6 +88,7 @@ pub mod profile;
 pub mod render;
 pub mod sampling;
 pub mod schedule;
+pub mod session;
 pub mod settings;
 pub mod shading;
 pub mod slices;
@@ -97,6 +98,7 @@ pub mod sweep;
 #[cfg(test)]
 mod testing;
 pub mod train;
+pub mod trainer;
 
 pub use error::FitError;
 pub use model::RadianceField;

@@ -1,33 +1,23 @@
-//! The training loop: Adam on a model's parameters, minimising the mean squared error of random
-//! batches of training rays (plus the model's priors), each ray over the dataset's background
-//! or, for pictures with alpha and [`FitSettings::random_background`], over a random colour of
-//! its own against its picture composited over that colour, with the schedules of
-//! [`schedule`](crate::schedule) (learning rate, coarse-to-fine growth), the occupancy grid's
-//! own refresh policy, and the test PSNR on the held-out views measured at intervals (outside
-//! the training clock).
+//! A fit to a budget: [`fit_from`] steps a [`Trainer`] until its budget is spent or a stop
+//! flag is raised, with the test PSNR on the held-out views measured at intervals (outside the
+//! training clock), and returns the fitted model with its log ([`FitResult`]).
 
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Instant;
 
-use fogray_ops::sample::{CellPoints, OccupancyGrid};
-use fogray_tape::optim::{Adam, AdamConfig};
-use fogray_tape::{Float, Tape};
-use ndarray::{Array2, Array3};
-use rand::{Rng, SeedableRng};
-use rand_chacha::ChaCha12Rng;
+use fogray_ops::sample::OccupancyGrid;
+use fogray_tape::Float;
+use ndarray::Array3;
 use serde::Serialize;
 
-use crate::batch::TrainingTable;
 use crate::dataset::{Dataset, View};
 use crate::error::FitError;
 use crate::metrics::{psnr, ssim, SSIM_WINDOW};
-use crate::model::{RadianceField, TrainingBackground};
-use crate::profile::{Phases, StepProfile};
-use crate::render::{render_picture, RenderOptions};
-use crate::sampling::{occupancy_grid, sample_rays};
-use crate::schedule::{growth_stages, learning_rate};
-use crate::settings::{Budget, FitSettings, Sampling};
+use crate::model::RadianceField;
+use crate::profile::StepProfile;
+use crate::render::{render_picture, RenderOptions, RenderedView};
+use crate::settings::FitSettings;
 use crate::state::{Start, TrainingState};
+use crate::trainer::Trainer;
 
 /// One line of the log.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -64,6 +54,8 @@ pub struct FitResult<F: Float, M> {
     pub occupied_fraction: f64,
     /// Final renders of the test views `[H][W][3]`, unclamped, in view order.
     pub renders: Vec<Array3<f64>>,
+    /// The same final renders with their opacity and depth, in view order.
+    pub held_out: Vec<RenderedView>,
     /// The fitted model.
     pub model: M,
     /// Where the fit stopped, beyond the model: with it, [`fit_from`] continues the fit.
@@ -215,18 +207,16 @@ pub fn fit<F: Float, M: RadianceField<F>>(
 /// Fits a model to `data` from `start` (a saved fit: model, Adam's moments, step, training
 /// seconds, growth stage and position in the batch stream) or afresh, until the budget, which
 /// counts the steps and seconds of `start` too, is spent or `stop` is raised (checked before
-/// each step, so the step under way is finished). Calls `progress` after every step.
+/// each step, so the step under way is finished): a [`Trainer`] stepped through its budget,
+/// evaluated `settings.evaluations` times on the way and once at the end (with depth, for a
+/// report). Calls `progress` after every step.
 ///
 /// Continuing a fit stopped at step `k` takes the same steps, bit for bit, as the fit that
 /// was never stopped, given the same settings (growth and the learning rate's anneal happen at
 /// fractions of the budget, so the first part must have had the same budget, or no growth and
 /// a constant rate) and a budget of steps (a budget of seconds stops where the clock says).
-/// The occupancy grid is part of the state; a start without one begins with every cell
-/// occupied until the next refresh.
 ///
-/// Errors: a setting out of range or a learned background for views with alpha
-/// ([`FitError::Config`]), a start whose model is not a growth
-/// stage of these settings, or an error of the ops.
+/// Errors: as [`Trainer::new`] and [`Trainer::step`].
 pub fn fit_from<F: Float, M: RadianceField<F>>(
     data: &Dataset,
     settings: &FitSettings,
@@ -234,219 +224,53 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
     stop: Option<&AtomicBool>,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<FitResult<F, M>, FitError> {
-    settings.check()?;
-    if settings.learn_background && data.train.iter().any(|v| v.alpha.is_some()) {
-        // Its pictures say where the background shows; a learned one would only see the
-        // colour they were composited over.
-        return Err(FitError::Config(
-            "--learn-background is for views without alpha: these have alpha (their training rays are \
-             composited over random colours instead, --random-background)"
-                .into(),
-        ));
-    }
-    let stages = growth_stages(settings);
-    let (mut model, resumed) = match start {
-        Some(s) => (s.model, Some(s.training)),
-        None => (M::fresh(settings, stages[0].1)?, None),
-    };
-    let stage = resumed.as_ref().map_or(0, |t| t.stage);
-    if stages.get(stage).map(|s| s.1) != Some(model.nodes()) {
-        return Err(FitError::Config(format!(
-            "the saved grid ({} nodes per axis, growth stage {stage}) is not a stage of this fit's --grid {}",
-            model.nodes(),
-            settings.grid
-        )));
-    }
-    let mut next_stage = stage + 1;
-    let bounds = model.bounds();
-    let mut occupancy = match settings.sampling {
-        Sampling::Uniform => None,
-        Sampling::Occupancy => Some(occupancy_grid(bounds, settings.grid)?),
-    };
-    if let (Some(grid), Some(state)) = (&mut occupancy, resumed.as_ref().and_then(|t| t.occupancy.as_ref())) {
-        grid.restore(state)?;
-    }
-    if let Some(grid) = &mut occupancy {
-        grid.set_known_cells(model.known_cells(grid)?)?;
-    }
-    let adam_config = AdamConfig {
-        lr: settings.lr,
-        ..AdamConfig::default()
-    };
-    let mut adam = Adam::new(adam_config)?;
-    // StdRng's generator, named so that its position in the stream can be saved.
-    let mut rng = ChaCha12Rng::seed_from_u64(settings.seed);
-    let (mut seconds, mut step) = (0.0, 0usize);
-    if let Some(t) = resumed {
-        rng.set_word_pos(t.batch_stream);
-        (seconds, step) = (t.seconds, t.step);
-        for (name, state) in t.adam {
-            let id = model
-                .params()
-                .id(&name)
-                .ok_or_else(|| FitError::Config(format!("Adam's state names no parameter of the model: {name:?}")))?;
-            adam.restore(model.params(), id, state)?;
-        }
-    }
-    let first_step = step;
-    // A model pruned by the occupancy grid grows to stage k no sooner than k first refreshes
-    // in: a short budget's growth would otherwise come before the first refresh and keep the
-    // whole lattice. (A function of the step alone, so that a resumed fit grows where the
-    // uninterrupted one did.)
-    let first_refresh = occupancy
-        .as_ref()
-        .filter(|_| M::PRUNED_BY_OCCUPANCY)
-        .map(|grid| grid.config().refresh().first_due());
-    let grown_enough = |stage: usize, step: usize| first_refresh.is_none_or(|first| step >= stage * first);
+    let mut trainer = Trainer::<F, M>::new(data, settings, start)?;
+    let evaluations = settings.evaluations as f64;
+    let mut log = vec![trainer.evaluate(false)?.entry];
+    let mut next_eval = (trainer.fraction() * evaluations).floor() as usize + 1;
     let mut interrupted = false;
-    let mut tape = Tape::<F>::new();
-    // A few clock reads a step: nothing beside a step's milliseconds.
-    tape.set_profiling(true);
-    let mut phases = Phases::default();
-    let table = TrainingTable::new(data);
-    let pixels = table.pixels();
-    let (mut loss, mut samples_total) = (f64::NAN, 0usize);
-    let fraction = |step: usize, seconds: f64| match settings.budget() {
-        Budget::Steps(n) => step as f64 / n as f64,
-        Budget::Seconds(s) => seconds / s,
-    };
-    let evaluate = |model: &M, occupancy: Option<&OccupancyGrid>, step, seconds, loss, samples| {
-        let renders = render_test_views(model, data, settings, occupancy)?;
-        Ok::<_, FitError>(LogEntry {
-            step,
-            seconds,
-            train_loss: loss,
-            test_psnr: test_psnr(&renders, data)?,
-            test_ssim: test_ssim(&renders, data)?,
-            samples,
-        })
-    };
-    let mut log = vec![evaluate(
-        &model,
-        occupancy.as_ref(),
-        step,
-        seconds,
-        loss,
-        samples_total,
-    )?];
-    let mut next_eval = (fraction(step, seconds) * settings.evaluations as f64).floor() as usize + 1;
-    while fraction(step, seconds) < 1.0 {
+    let mut last = None;
+    while !trainer.is_done() {
         if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
             interrupted = true;
             break;
         }
-        let start = Instant::now();
-        if next_stage < stages.len()
-            && fraction(step, seconds) >= stages[next_stage].0
-            && grown_enough(next_stage, step)
-        {
-            model = model.resampled(stages[next_stage].1, occupancy.as_ref())?;
-            if let Some(grid) = &mut occupancy {
-                grid.set_known_cells(model.known_cells(grid)?)?;
-            }
-            adam = Adam::new(adam_config)?;
-            next_stage += 1;
-        }
-        adam.set_lr(learning_rate(settings, fraction(step, seconds)))?;
-        let mut clock = Instant::now();
-        let mut lap = |phase: &mut std::time::Duration| {
-            let now = Instant::now();
-            *phase += now - clock;
-            clock = now;
-        };
-        let rows: Vec<usize> = (0..settings.batch).map(|_| rng.gen_range(0..pixels)).collect();
-        let batch = table.gather::<F>(&rows)?;
-        // A random colour per ray, from the same stream after the rows (none without alpha,
-        // so that a fit of opaque pictures draws the stream it always drew).
-        let (background, colors) = match (&batch.alpha, settings.random_background) {
-            (Some(_), true) => {
-                let drawn = Array2::from_shape_simple_fn((rows.len(), 3), || F::lit(rng.gen::<f64>()));
-                let colors = batch.colors_over(data.background, drawn.view())?;
-                (TrainingBackground::PerRay(drawn), colors)
-            }
-            _ => (TrainingBackground::Shared(data.background), batch.colors),
-        };
-        lap(&mut phases.batch);
-        let samples = sample_rays(&bounds, occupancy.as_ref(), &batch.rays, model.sample_step())?;
-        samples_total += samples.len();
-        lap(&mut phases.sample);
-        let target = tape.constant(colors);
-        let objective = model.training_loss(&mut tape, &batch.rays, samples, background, target, settings.method)?;
-        loss = tape
-            .value(objective.photometric)?
-            .iter()
-            .next()
-            .map_or(f64::NAN, |v| v.as_f64());
-        lap(&mut phases.forward);
-        let grads = tape.backward(objective.objective)?;
-        lap(&mut phases.backward);
-        tape.clear();
-        adam.step(model.params_mut(), &grads)?;
-        tape.recycle(grads);
-        lap(&mut phases.optimiser);
-        step += 1;
-        if let Some(grid) = &mut occupancy {
-            let m = &model;
-            let points = CellPoints::CentreAndRandom { seed: step as u64 };
-            let refreshed = grid.update_every_n_steps(step, |p| m.densities(p), points)?;
-            // A refresh before any density has reached the threshold (a slow learning rate, a
-            // faint scene) would empty every cell, and a grid with no sample left never trains
-            // again: until some cell is above the threshold, every cell stays occupied.
-            if refreshed && grid.occupied_fraction() == 0.0 {
-                grid.occupy_all();
-            }
-        }
-        lap(&mut phases.occupancy);
-        seconds += start.elapsed().as_secs_f64();
+        let report = trainer.step()?;
         progress(Progress {
-            step,
-            fraction: fraction(step, seconds).min(1.0),
+            step: report.step,
+            fraction: report.fraction,
         });
-        let done = fraction(step, seconds) >= 1.0;
-        if done || fraction(step, seconds) * settings.evaluations as f64 >= next_eval as f64 {
-            log.push(evaluate(
-                &model,
-                occupancy.as_ref(),
-                step,
-                seconds,
-                loss,
-                samples_total,
-            )?);
-            next_eval = (fraction(step, seconds) * settings.evaluations as f64).floor() as usize + 1;
+        if trainer.is_done() || trainer.fraction() * evaluations >= next_eval as f64 {
+            let evaluation = trainer.evaluate(trainer.is_done())?;
+            log.push(evaluation.entry);
+            last = Some(evaluation);
+            next_eval = (trainer.fraction() * evaluations).floor() as usize + 1;
         }
     }
-    let renders = render_test_views(&model, data, settings, occupancy.as_ref())?;
-    let mut adam_states = Vec::new();
-    for id in model.params().ids() {
-        if let Some(state) = adam.state(model.params(), id)? {
-            adam_states.push((model.params().name(id)?.to_string(), state));
-        }
-    }
-    let training = TrainingState {
-        step,
-        seconds,
-        stage: next_stage - 1,
-        batch_stream: rng.get_word_pos(),
-        adam: adam_states,
-        occupancy: occupancy.as_ref().map(OccupancyGrid::state),
+    // The last evaluation is the final one when it saw the last step.
+    let last = match last.filter(|e| e.entry.step == trainer.steps() && e.views.iter().all(|v| v.depth.is_some())) {
+        Some(e) => e,
+        None => trainer.evaluate(true)?,
     };
-    let occupied_fraction = occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction());
+    let steps_taken = trainer.steps_taken();
+    let samples_per_ray_mean = trainer.samples() as f64 / (steps_taken * settings.batch) as f64;
+    let training = trainer.state()?;
+    let profile = trainer.profile();
+    let seconds = trainer.seconds();
+    let (model, occupancy) = trainer.into_parts();
     Ok(FitResult {
-        final_test_psnr: test_psnr(&renders, data)?,
-        final_test_ssim: test_ssim(&renders, data)?,
+        final_test_psnr: last.entry.test_psnr,
+        final_test_ssim: last.entry.test_ssim,
         log,
         seconds,
-        samples_per_ray_mean: samples_total as f64 / ((step - first_step) * settings.batch) as f64,
-        occupied_fraction,
-        renders,
+        samples_per_ray_mean,
+        occupied_fraction: occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction()),
+        renders: last.views.iter().map(|v| v.color.clone()).collect(),
+        held_out: last.views,
         model,
         training,
         interrupted,
         occupancy,
-        profile: StepProfile {
-            steps: step - first_step,
-            phases,
-            ops: tape.take_profile().unwrap_or_default(),
-        },
+        profile,
     })
 }

@@ -19,12 +19,12 @@ use fogray::fit::dataset::Dataset;
 use fogray::fit::depth::write_depth_png;
 use fogray::fit::dispatch::{with_model, ModelWork};
 use fogray::fit::images::{nested, write_comparison_png, write_png};
-use fogray::fit::interrupt::StopFlag;
-use fogray::fit::metrics::{mean_view_psnr, psnr};
+use fogray::fit::metrics::psnr;
 use fogray::fit::plots;
 use fogray::fit::render::{render_picture, RenderOptions};
 use fogray::fit::settings::{FitSettings, ModelKind};
-use fogray::fit::train::{fit_from, FitResult, Progress};
+use fogray::fit::session::{self, FitReport, SessionOutcome, SessionPlan};
+use fogray::fit::train::Progress;
 use fogray::fit::RadianceField;
 use fogray_grid::capture::{self, CaptureSettings};
 use fogray_grid::photographs::{photograph, photographs};
@@ -380,8 +380,8 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
 struct FitSummary<'a> {
     log: &'a [fogray::fit::train::LogEntry],
     final_test_psnr: f64,
-    /// The mean of the held-out views' own PSNRs (the NeRF papers' convention;
-    /// `metrics::mean_view_psnr`), beside the PSNR of their pooled squared error.
+    /// The mean of the held-out views' own PSNRs (the NeRF papers' convention), beside the
+    /// PSNR of their pooled squared error.
     final_test_psnr_view_mean: f64,
     /// PSNR on as many training views as held-out ones (`training_views_psnr`).
     train_views_psnr: f64,
@@ -438,34 +438,33 @@ fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     if let Some(dir) = &args.out {
         create_dir(dir)?;
     }
-    if let Some(file) = &args.save_model {
-        checkpoint::check_destination(file)?;
-    }
     let data = dataset(&problem.scene, &ring)?;
-    let stop = StopFlag::on_ctrl_c()?;
-    let work = FitWork {
-        args: &args,
-        data: &data,
-        settings: &settings,
-        problem: &problem,
-        resume: resume.as_ref(),
-        stop: &stop,
+    let plan = SessionPlan {
+        settings,
+        resume: args.resume.clone(),
+        save_model: args.save_model.clone(),
+        save_on_interrupt: default_model_path(&args),
+        entries: problem.entries(),
+        tool: "fogray-grid".into(),
+        progress_bar: !args.json,
+        announce: true,
     };
-    with_model(settings.precision, settings.model, work)
+    match session::run(&data, &plan)? {
+        SessionOutcome::Interrupted { step, saved } => {
+            eprintln!(
+                "fogray-grid: interrupted after step {step}: the fit is saved to {} (continue it with --resume)",
+                saved.display()
+            );
+            std::process::exit(session::INTERRUPTED_EXIT.into());
+        }
+        SessionOutcome::Finished(report) => report_fit(&args, &settings, &data, &report),
+    }
 }
 
 /// A resumed fit's settings, scene and cameras: the file's, except those given on the command
 /// line; --grid and --precision, if given, must be the file's.
 fn resumed_settings(args: &FitArgs, resume: &Resume, given: &dyn Fn(&str) -> bool) -> Result<(FitSettings, Problem)> {
-    let saved = &resume.info.settings;
-    let asked_precision = if given("precision") {
-        args.settings.precision
-    } else {
-        saved.precision
-    };
-    let asked_grid = if given("grid") { args.settings.grid } else { saved.grid };
-    resume.info.check_matches(&resume.path, asked_precision, asked_grid)?;
-    let settings = args.settings.given_over(saved, given)?;
+    let (settings, _) = session::resume_settings(&resume.path, &args.settings, given)?;
     let extra = &resume.info.extra;
     let file_ring = RingArgs::saved(extra, &resume.path)?;
     let ring = RingArgs {
@@ -506,110 +505,18 @@ fn default_model_path(args: &FitArgs) -> PathBuf {
     }
 }
 
-/// Exit status of a fit stopped by Ctrl-C (after saving it): 128 + SIGINT, as a shell reports.
-const INTERRUPTED: i32 = 130;
-
-/// A fit with the model its settings name, as fogray-fit's dispatch runs it.
-struct FitWork<'a> {
-    args: &'a FitArgs,
-    data: &'a Dataset,
-    settings: &'a FitSettings,
-    problem: &'a Problem,
-    resume: Option<&'a Resume>,
-    stop: &'a StopFlag,
-}
-
-impl ModelWork for FitWork<'_> {
-    type Output = Result<()>;
-
-    fn run<F: fogray::tape::Float, M: RadianceField<F>>(self) -> Result<()> {
-        fit_and_save::<F, M>(
-            self.args,
-            self.data,
-            self.settings,
-            self.problem,
-            self.resume,
-            self.stop,
-        )
-    }
-}
-
-fn fit_and_save<F: fogray::tape::Float, M: RadianceField<F>>(
-    args: &FitArgs,
-    data: &Dataset,
-    settings: &FitSettings,
-    problem: &Problem,
-    resume: Option<&Resume>,
-    stop: &StopFlag,
-) -> Result<()> {
-    let start = match resume {
-        Some(r) => Some(checkpoint::load::<F, M>(&r.path)?.start),
-        None => None,
-    };
-    let save_path = args.save_model.clone().unwrap_or_else(|| default_model_path(args));
-    let first_step = start.as_ref().map_or(0, |s| s.training.step);
-    let bar = if args.json {
-        indicatif::ProgressBar::hidden()
-    } else {
-        let bar = indicatif::ProgressBar::new(1000);
-        if let Ok(style) = indicatif::ProgressStyle::with_template("fit [{bar:40}] {msg} ({elapsed})") {
-            bar.set_style(style.progress_chars("=> "));
-        }
-        bar
-    };
-    let mut progress = |p: Progress| {
-        if p.step == first_step + 1 {
-            bar.suspend(|| {
-                eprintln!(
-                    "fogray-grid: training; Ctrl-C stops after the current step and saves the fit to {}",
-                    save_path.display()
-                )
-            });
-        }
-        bar.set_position((p.fraction * 1000.0) as u64);
-        bar.set_message(format!("step {}", p.step));
-    };
-    let result = fit_from::<F, M>(data, settings, start, Some(stop.flag()), &mut progress)?;
-    if args.save_model.is_some() || result.interrupted {
-        checkpoint::save(
-            &save_path,
-            &result.model,
-            &result.training,
-            settings,
-            &problem.entries(),
-        )?;
-    }
-    if result.interrupted {
-        bar.finish_and_clear();
-        eprintln!(
-            "fogray-grid: interrupted after step {}: the fit is saved to {} (continue it with --resume)",
-            result.training.step,
-            save_path.display()
-        );
-        std::process::exit(INTERRUPTED);
-    }
-    report_fit(args, settings, data, result, &bar)
-}
-
-fn report_fit<F: fogray::tape::Float, M: fogray::fit::RadianceField<F>>(
-    args: &FitArgs,
-    settings: &FitSettings,
-    data: &Dataset,
-    result: FitResult<F, M>,
-    bar: &indicatif::ProgressBar,
-) -> Result<()> {
-    bar.finish_and_clear();
+fn report_fit(args: &FitArgs, settings: &FitSettings, data: &Dataset, report: &FitReport) -> Result<()> {
     if let Some(file) = &args.save_renders {
         let images = Images {
-            images: result.renders.iter().map(|im| nested(im.view())).collect(),
+            images: report.held_out.iter().map(|v| nested(v.color.view())).collect(),
         };
         let text = serde_json::to_string(&images)?;
         std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))?;
     }
     if let Some(dir) = &args.out {
-        for (t, render) in data.test.iter().zip(&result.renders) {
+        for (t, render) in data.test.iter().zip(&report.held_out) {
             let path = dir.join(format!("test-view-{}.png", t.name));
-            write_comparison_png(&path, t.image.view(), render.view(), 4.0, 4)?;
+            write_comparison_png(&path, t.image.view(), render.color.view(), 4.0, 4)?;
         }
         let label = format!(
             "{} {} {}",
@@ -621,27 +528,24 @@ fn report_fit<F: fogray::tape::Float, M: fogray::fit::RadianceField<F>>(
             &dir.join("psnr"),
             &[plots::Curve {
                 label,
-                log: &result.log,
+                log: &report.log,
             }],
         )?;
     }
     let summary = FitSummary {
-        log: &result.log,
-        final_test_psnr: result.final_test_psnr,
-        final_test_psnr_view_mean: mean_view_psnr(
-            &result.renders.iter().map(|r| r.view()).collect::<Vec<_>>(),
-            &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
-        )?,
-        train_views_psnr: result.training_views_psnr(data, settings)?,
-        seconds: result.seconds,
-        samples_per_ray_mean: result.samples_per_ray_mean,
-        occupied_fraction: result.occupied_fraction,
-        profile: args.profile.then(|| result.profile.table()),
+        log: &report.log,
+        final_test_psnr: report.final_test_psnr,
+        final_test_psnr_view_mean: report.final_test_psnr_view_mean,
+        train_views_psnr: report.train_views_psnr,
+        seconds: report.seconds,
+        samples_per_ray_mean: report.samples_per_ray_mean,
+        occupied_fraction: report.occupied_fraction,
+        profile: args.profile.then(|| report.profile.clone()),
     };
     if args.json {
         return write_stdout(|w| Ok(serde_json::to_writer(w, &summary)?));
     }
-    for e in &result.log {
+    for e in &report.log {
         // Before the first step there is no training loss (NaN in the log, null in JSON).
         let loss = if e.train_loss.is_nan() {
             "-".to_string()
@@ -655,12 +559,12 @@ fn report_fit<F: fogray::tape::Float, M: fogray::fit::RadianceField<F>>(
     }
     println!(
         "final test PSNR {:.2} dB (mean of the views' {:.2}; {:.2} on as many training views) after {:.1} s of training; {:.1} samples per ray; {:.1} % of cells occupied",
-        result.final_test_psnr,
+        report.final_test_psnr,
         summary.final_test_psnr_view_mean,
         summary.train_views_psnr,
-        result.seconds,
-        result.samples_per_ray_mean,
-        100.0 * result.occupied_fraction
+        report.seconds,
+        report.samples_per_ray_mean,
+        100.0 * report.occupied_fraction
     );
     if let Some(table) = &summary.profile {
         print!("{table}");
