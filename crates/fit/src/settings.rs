@@ -325,16 +325,6 @@ impl FitSettings {
         background_degree: 3,
     };
 
-    /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].
-    pub fn model_box(&self) -> SceneBox {
-        self.scene_box.unwrap_or(SceneBox::UNIT)
-    }
-
-    /// `steps` if set, else `seconds` (60 if neither).
-    pub fn budget(&self) -> Budget {
-        match (self.steps, self.seconds) {
-            (Some(n), _) => Budget::Steps(n),
-            (None, s) => Budget::Seconds(s.unwrap_or(DEFAULT_SECONDS)),
     /// What `fogray fit` trains unless a flag says otherwise: [`FitSettings::DEFAULT`] with
     /// the choices a dataset of real photographs is fitted best with, each measured on lego at
     /// equal steps or seconds (reports/lego/report.md):
@@ -381,6 +371,16 @@ impl FitSettings {
         }
     }
 
+    /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].
+    pub fn model_box(&self) -> SceneBox {
+        self.scene_box.unwrap_or(SceneBox::UNIT)
+    }
+
+    /// `steps` if set, else `seconds` (60 if neither).
+    pub fn budget(&self) -> Budget {
+        match (self.steps, self.seconds) {
+            (Some(n), _) => Budget::Steps(n),
+            (None, s) => Budget::Seconds(s.unwrap_or(DEFAULT_SECONDS)),
         }
     }
 
