@@ -1,13 +1,14 @@
 //! An animated GIF of rendered frames, looping forever, written whole: the frames go to a
-//! partial file beside the final name, which is renamed only once the last frame is in, so an
-//! interrupted render leaves no truncated GIF under that name.
+//! fresh temporary beside the final name ([`AtomicFile`]), renamed only once the last frame is
+//! in; an error, a drop and Ctrl-C remove it, so an interrupted render leaves no GIF, whole or
+//! truncated, and no temporary.
 //!
 //! Each frame gets its own 256-colour palette, quantised by the `gif` crate (NeuQuant).
 
-use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
+use fogray_data::{shown, AtomicFile};
 use fogray_fit::images::to_u8;
 use ndarray::ArrayView3;
 
@@ -22,8 +23,7 @@ const QUANTISE_SPEED: i32 = 10;
 
 /// A GIF being written.
 pub struct GifWriter {
-    encoder: gif::Encoder<BufWriter<File>>,
-    partial: PathBuf,
+    encoder: gif::Encoder<BufWriter<AtomicFile>>,
     path: PathBuf,
     size: [u16; 2],
 }
@@ -39,18 +39,12 @@ impl GifWriter {
                 "--gif: {width}x{height} frames, the format holds at most 65535 pixels each way"
             )));
         };
-        let name = path
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_default();
-        let partial = path.with_file_name(format!(".{name}.partial"));
-        let file = File::create(&partial).map_err(CliError::file("create", path))?;
-        let gif_error = |e: gif::EncodingError| CliError::Option(format!("cannot write {}: {e}", path.display()));
+        let file = AtomicFile::create(path)?;
+        let gif_error = |e: gif::EncodingError| CliError::Option(format!("cannot write {}: {e}", shown(path)));
         let mut encoder = gif::Encoder::new(BufWriter::new(file), w, h, &[]).map_err(gif_error)?;
         encoder.set_repeat(gif::Repeat::Infinite).map_err(gif_error)?;
         Ok(GifWriter {
             encoder,
-            partial,
             path: path.to_path_buf(),
             size: [w, h],
         })
@@ -64,7 +58,7 @@ impl GifWriter {
         if image.dim() != (usize::from(h), usize::from(w), 3) {
             return Err(CliError::Option(format!(
                 "{}: a frame of {:?}, the GIF's are {h}x{w}x3",
-                self.path.display(),
+                shown(&self.path),
                 image.dim()
             )));
         }
@@ -73,24 +67,19 @@ impl GifWriter {
         frame.delay = FRAME_DELAY;
         self.encoder
             .write_frame(&frame)
-            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", self.path.display())))
+            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", shown(&self.path))))
     }
 
     /// Ends the GIF and gives it its name; returns it.
     ///
-    /// Errors: a failed write or rename.
+    /// Errors: a failed write, sync or rename (no file is then left).
     pub fn finish(self) -> Result<PathBuf, CliError> {
         let path = self.path;
-        let writer = self
-            .encoder
-            .into_inner()
-            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", path.display())))?;
+        let writer = self.encoder.into_inner().map_err(CliError::file("write", &path))?;
         writer
             .into_inner()
-            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", path.display())))?
-            .sync_all()
-            .map_err(CliError::file("write", &path))?;
-        std::fs::rename(&self.partial, &path).map_err(CliError::file("write", &path))?;
+            .map_err(|e| CliError::file("write", &path)(e.into_error()))?
+            .commit()?;
         Ok(path)
     }
 }

@@ -158,7 +158,7 @@ impl CliError {
     pub fn file<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> CliError + 'a {
         move |source| CliError::File {
             action,
-            path: path.display().to_string(),
+            path: fogray_data::shown(path).to_string(),
             source,
         }
     }

@@ -1,10 +1,13 @@
 //! `fogray export`: a saved model as a file other tools open; `--mesh OUT.ply`, the surface
 //! where its density crosses a level (marching cubes, [`fogray_fit::mesh`]) as binary PLY with
 //! vertex colours.
+//!
+//! The mesh may not be the model file (checked before any work), and is written whole: to a
+//! fresh temporary beside it, renamed once complete.
 
-use std::fs::File;
 use std::path::{Path, PathBuf};
 
+use fogray_data::{check_outputs, shown, AtomicFile, Inputs, Output};
 use fogray_fit::checkpoint;
 use fogray_fit::mesh::{extract, write_ply, Extraction, Level, MeshOptions, DEFAULT_OPACITY};
 use fogray_fit::model::RadianceField;
@@ -71,32 +74,20 @@ impl ExportArgs {
 /// know), a level outside the density's range on the lattice, a file that cannot be written.
 pub fn run(args: &ExportArgs) -> Result<String, CliError> {
     let options = args.options()?;
-    let saved = SavedModel::open(&args.model, "fogray export")?;
     let destination = &args.mesh;
-    let partial = partial_name(destination);
-    // Opened before the work, so that an unwritable destination is refused at once.
-    let file = File::create(&partial).map_err(CliError::file("write", destination))?;
-    let written = saved
-        .with(ExportMesh {
-            options,
-            file,
-            destination,
-        })
-        .and_then(|e| {
-            std::fs::rename(&partial, destination).map_err(CliError::file("write", destination))?;
-            Ok(e)
-        });
-    let e = match written {
-        Ok(e) => e,
-        Err(err) => {
-            // The error is the one to report; a partial file left behind is only clutter.
-            let _ = std::fs::remove_file(&partial);
-            return Err(err);
-        }
-    };
+    check_outputs(&Inputs::new().file(&args.model), &[Output::File(destination)])?;
+    let saved = SavedModel::open(&args.model, "fogray export")?;
+    // Created before the work, so that an unwritable destination is refused at once; removed
+    // on any error (and on Ctrl-C).
+    let file = AtomicFile::create(destination)?;
+    let e = saved.with(ExportMesh {
+        options,
+        file,
+        destination,
+    })?;
     Ok(format!(
         "{}: {} vertices, {} triangles, density level {} on a {}^3 lattice",
-        destination.display(),
+        shown(destination),
         e.mesh.positions.len(),
         e.mesh.triangles.len(),
         e.level,
@@ -104,20 +95,10 @@ pub fn run(args: &ExportArgs) -> Result<String, CliError> {
     ))
 }
 
-/// The name the mesh is written under before it is renamed to `path`, beside it: an
-/// interrupted export leaves no truncated file under the name asked for.
-fn partial_name(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    path.with_file_name(format!(".{name}.partial"))
-}
-
-/// The mesh of the model, written to `file`.
+/// The mesh of the model, written to `file` and renamed into place.
 struct ExportMesh<'a> {
     options: MeshOptions,
-    file: File,
+    file: AtomicFile,
     destination: &'a Path,
 }
 
@@ -134,9 +115,9 @@ impl WithModel for ExportMesh<'_> {
             extraction.resolution
         )
         .replace(['\n', '\r'], " ");
-        write_ply(&extraction.mesh, &comment, &self.file)
-            .and_then(|()| self.file.sync_all())
-            .map_err(CliError::file("write", self.destination))?;
+        let mut file = self.file;
+        write_ply(&extraction.mesh, &comment, &mut file).map_err(CliError::file("write", self.destination))?;
+        file.commit()?;
         Ok(extraction)
     }
 }

@@ -12,6 +12,7 @@ pub mod evaluate;
 pub mod export;
 pub mod fit;
 pub mod fit_report;
+pub mod flag_error;
 pub mod framing;
 pub mod gradcheck;
 pub mod grid_bench;

@@ -11,7 +11,10 @@ use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use fogray_cli::error::CliError;
 use fogray_cli::evaluate::Method;
-use fogray_cli::{bench, composite, export, fit, gradcheck, grid_bench, heap, input, markdown, render, tape_cost};
+use fogray_cli::{
+    bench, composite, export, fit, flag_error, gradcheck, grid_bench, heap, input, markdown, render, tape_cost,
+};
+use fogray_fit::interrupt::exit_on_ctrl_c;
 
 /// Counts allocated bytes, so that `fogray bench` can report each method's peak extra memory.
 /// (A counter that forwards `alloc_zeroed` and `realloc` to the system allocator: one that
@@ -198,7 +201,8 @@ impl Publish<'_> {
         let stamp = fogray::stamp::Stamp::now(&self.command);
         std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
         let path = dir.join(format!("bench-{name}.md"));
-        std::fs::write(&path, markdown::report(title, &stamp, tables)).map_err(CliError::file("write", &path))?;
+        let report = markdown::report(title, &stamp, tables);
+        fogray_data::write_atomic(&path, |out| out.write_all(report.as_bytes()))?;
         match self.readme {
             Some(readme) => markdown::update_readme(readme, name, &headline(&stamp)),
             None => Ok(()),
@@ -379,11 +383,28 @@ fn publish<'a>(markdown: &'a Option<PathBuf>, readme: &'a Option<PathBuf>) -> Pu
     }
 }
 
+/// A flag error in one line on stderr, exit status 2 (help and version: clap's own output).
+fn refuse_flags(error: clap::Error) -> ExitCode {
+    if flag_error::is_help(&error) {
+        error.exit()
+    }
+    let names: Vec<String> = Cli::command()
+        .get_subcommands()
+        .map(|c| c.get_name().to_string())
+        .collect();
+    let subcommand = std::env::args().skip(1).find(|a| names.contains(a));
+    eprintln!("{}", flag_error::one_line(&error, subcommand.as_deref()));
+    ExitCode::from(2)
+}
+
 fn main() -> ExitCode {
-    let matches = Cli::command().get_matches();
+    let matches = match Cli::command().try_get_matches() {
+        Ok(matches) => matches,
+        Err(e) => return refuse_flags(e),
+    };
     let cli = match Cli::from_arg_matches(&matches) {
         Ok(cli) => cli,
-        Err(e) => e.exit(),
+        Err(e) => return refuse_flags(e),
     };
     let (name, result) = match &cli.command {
         Command::Fit(args) => match fit::run(args, &|id| {
@@ -393,15 +414,26 @@ fn main() -> ExitCode {
             Ok(fit::FitOutcome::Interrupted(path)) => {
                 eprintln!(
                     "fogray fit: interrupted: the fit is saved to {0} (continue it with fogray fit --resume {0})",
-                    path.display()
+                    fogray_data::shown(&path)
                 );
                 // 128 + SIGINT, as a shell reports a command stopped by Ctrl-C.
                 return ExitCode::from(130);
             }
             Err(e) => ("fit", Err(e)),
         },
-        Command::Render(args) => ("render", render::run(args)),
-        Command::Export(args) => ("export", export::run(args)),
+        // Nothing to save on Ctrl-C: exit 130 at once, leaving whole files only.
+        Command::Render(args) => (
+            "render",
+            exit_on_ctrl_c()
+                .map_err(CliError::from)
+                .and_then(|()| render::run(args)),
+        ),
+        Command::Export(args) => (
+            "export",
+            exit_on_ctrl_c()
+                .map_err(CliError::from)
+                .and_then(|()| export::run(args)),
+        ),
         Command::Bench {
             op,
             quick,
@@ -479,8 +511,10 @@ fn main() -> ExitCode {
             ExitCode::SUCCESS
         }
         Err(e) => {
-            // One line: the reason, with any newline of a nested message folded.
-            eprintln!("fogray {name}: error: {}", e.to_string().replace('\n', " "));
+            // One line: the reason, with any newline of a nested message folded and the control
+            // characters of a name read from a file escaped.
+            let message = e.to_string().replace('\n', " ");
+            eprintln!("fogray {name}: error: {}", fogray_data::escape_controls(&message));
             ExitCode::from(2)
         }
     }

@@ -96,7 +96,10 @@ pub fn update_readme(readme: &Path, name: &str, block: &str) -> Result<(), CliEr
         start: start.clone(),
         end: end.clone(),
     })?;
-    std::fs::write(readme, updated).map_err(CliError::file("write", readme))
+    // Whole or not at all: a README is the user's, and a half-written one loses their text.
+    Ok(fogray_data::write_atomic(readme, |out| {
+        out.write_all(updated.as_bytes())
+    })?)
 }
 
 fn replace_between(text: &str, start: &str, end: &str, block: &str) -> Option<String> {

@@ -1,10 +1,14 @@
 //! `fogray render`: a saved model rendered from every camera of a transforms file (either
 //! format) or from an orbit around its scene box, one 8-bit RGB PNG per frame, and on request
 //! each frame's depth map and (an orbit) an animated GIF.
+//!
+//! Every output is checked before the first frame renders ([`check_outputs`]): none may be the
+//! model, the dataset's transforms files or pictures, or lie inside a dataset folder given to
+//! `--cameras`; each file is written whole (a fresh temporary renamed into place).
 
 use std::path::{Path, PathBuf};
 
-use fogray_data::load_cameras;
+use fogray_data::{check_outputs, load_cameras, shown, Inputs, Output as Destination};
 use fogray_fit::checkpoint::{self, ModelInfo};
 use fogray_fit::dataset::camera_rays;
 use fogray_fit::depth::write_depth_png;
@@ -131,12 +135,13 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
             if clash {
                 return Err(CliError::Option(format!(
                     "{}: two frames' files are named {:?} (their PNGs would overwrite each other)",
-                    cameras.display(),
+                    shown(cameras),
                     v.name
                 )));
             }
         }
     }
+    check_render_outputs(args, &views)?;
     let background = match info.extra.get("background") {
         Some(text) => serde_json::from_str::<[f64; 3]>(text)
             .map_err(|e| CliError::Option(format!("{}: its background {text:?}: {e}", args.model.display())))?,
@@ -157,6 +162,32 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
         gif,
         views: &views,
     })
+}
+
+/// Refuses, before any work, outputs that would land on the model or the dataset of
+/// `--cameras` (a folder: anything inside it), a folder where a frame's file or the GIF goes,
+/// and folders that cannot be written.
+fn check_render_outputs(args: &RenderArgs, views: &[View]) -> Result<(), CliError> {
+    let mut inputs = Inputs::new().file(&args.model);
+    if let Some(cameras) = &args.cameras {
+        inputs = inputs.dataset(cameras)?;
+    }
+    let mut files = Vec::with_capacity(views.len() * 2);
+    for v in views {
+        files.push(frame_file(args, &v.name, ""));
+        if args.depth {
+            files.push(frame_file(args, &v.name, "-depth"));
+        }
+    }
+    let mut outputs = vec![Destination::Folder(&args.out)];
+    outputs.extend(files.iter().map(|f| Destination::File(f)));
+    outputs.extend(args.gif.as_deref().map(Destination::File));
+    Ok(check_outputs(&inputs, &outputs)?)
+}
+
+/// `DIR/<name><suffix>.png`.
+fn frame_file(args: &RenderArgs, name: &str, suffix: &str) -> PathBuf {
+    args.out.join(format!("{name}{suffix}.png"))
 }
 
 /// The views the flags ask for: every frame of `--cameras`, or the orbit's.
@@ -233,18 +264,16 @@ fn render_all<F: Float, M: RadianceField<F>>(mut output: Output<'_>, model: &Pat
             [k.height, k.width],
             &options,
         )?;
-        let path = args.out.join(format!("{}.png", v.name));
-        write_whole(&path, |partial| Ok(write_png(partial, picture.color.view())?))?;
-        written.push(path.display().to_string());
+        // Each written whole: an interrupted render leaves whole files only.
+        let path = frame_file(args, &v.name, "");
+        write_png(&path, picture.color.view())?;
+        written.push(shown(&path).to_string());
         if let Some(depth) = &picture.depth {
-            let path = args.out.join(format!("{}-depth.png", v.name));
+            let path = frame_file(args, &v.name, "-depth");
             // Magnified so that the bar's labels have room beside a small image.
             let scale = (DEPTH_MAP_SIDE / k.width.max(k.height)).max(1) as u32;
-            write_whole(&path, |partial| {
-                write_depth_png(partial, depth.view(), &v.name, scale)?;
-                Ok(())
-            })?;
-            written.push(path.display().to_string());
+            write_depth_png(&path, depth.view(), &v.name, scale)?;
+            written.push(shown(&path).to_string());
         }
         if let Some(gif) = output.gif.as_mut() {
             gif.push(picture.color.view())?;
@@ -253,22 +282,10 @@ fn render_all<F: Float, M: RadianceField<F>>(mut output: Output<'_>, model: &Pat
     }
     bar.finish_and_clear();
     if let Some(gif) = output.gif.take() {
-        written.push(gif.finish()?.display().to_string());
+        written.push(shown(&gif.finish()?).to_string());
     }
     Ok(written.join("\n"))
 }
 
 /// Depth maps of smaller images are magnified to about this many pixels on their longer side.
 const DEPTH_MAP_SIDE: usize = 256;
-
-/// Writes a PNG through `write` beside its final name and renames it, so that an interrupted
-/// render leaves whole files only.
-fn write_whole(path: &Path, write: impl FnOnce(&Path) -> Result<(), CliError>) -> Result<(), CliError> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_default();
-    let partial = path.with_file_name(format!(".{name}.partial.png"));
-    write(&partial)?;
-    std::fs::rename(&partial, path).map_err(CliError::file("write", path))
-}

@@ -20,7 +20,7 @@ use std::path::Path;
 use ndarray::ArrayView2;
 use plotters::prelude::*;
 
-use crate::images::ImageError;
+use crate::images::{canvas, save_canvas, ImageError};
 use crate::render::BACKGROUND_OPACITY;
 
 /// The colour of background pixels (no depth).
@@ -94,7 +94,9 @@ pub fn write_depth_png(
     // As wide as the heading, so that it is not cut off beside a small image.
     let heading_width = font.box_size(&heading).map_or(0, |(w, _)| w) + 2 * GAP;
     let width = (GAP + w + 2 * GAP + BAR_WIDTH + LABEL_WIDTH).max(heading_width);
-    let root = BitMapBackend::new(path, (width.max(300), h + TITLE_HEIGHT + GAP)).into_drawing_area();
+    let size = (width.max(300), h + TITLE_HEIGHT + GAP);
+    let mut pixels = canvas(size);
+    let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
     let draw = |r: Result<(), DrawingAreaErrorKind<_>>| r.map_err(|e| wrap(e.to_string()));
     draw(root.fill(&WHITE))?;
     draw(root.draw(&Text::new(heading, (GAP as i32, 4), font)))?;
@@ -131,5 +133,7 @@ pub fn write_depth_png(
         RGBColor(160, 160, 160),
     )))?;
     draw(root.present())?;
+    drop(root);
+    save_canvas(path, &pixels, size)?;
     Ok(range)
 }

@@ -15,6 +15,7 @@
 
 use std::path::{Path, PathBuf};
 
+use fogray_data::{write_png8, DataError, PngChannels};
 use ndarray::{Array3, ArrayView3, Zip};
 use plotters::prelude::*;
 use thiserror::Error;
@@ -42,8 +43,8 @@ pub enum ImageError {
     /// Nothing to compare or draw.
     #[error("no images given")]
     Empty,
-    /// The PNG could not be drawn or written.
-    #[error("cannot write {path}: {message}")]
+    /// The PNG could not be drawn or written (nothing is left under its name or beside it).
+    #[error("cannot write {path}: {message}", path = fogray_data::shown(.path))]
     Write {
         /// The file.
         path: PathBuf,
@@ -116,21 +117,45 @@ fn rgb(image: &ArrayView3<'_, f64>, row: usize, column: usize) -> RGBColor {
     RGBColor(c(0), c(1), c(2))
 }
 
-/// Writes one image as a PNG of its own size, one PNG pixel per image pixel.
+/// An RGB canvas of `size` (width, height) for plotters' [`BitMapBackend::with_buffer`], all
+/// black; [`save_canvas`] writes it.
+pub(crate) fn canvas((w, h): (u32, u32)) -> Vec<u8> {
+    vec![0; w as usize * h as usize * 3]
+}
+
+/// Writes a canvas of `size` drawn by plotters as an 8-bit RGB PNG, whole or not at all (a
+/// fresh temporary renamed into place, see [`fogray_data::write_atomic`]).
+///
+/// Errors: [`ImageError::Write`].
+pub(crate) fn save_canvas(path: &Path, pixels: &[u8], (w, h): (u32, u32)) -> Result<(), ImageError> {
+    write_png8(path, pixels, w, h, PngChannels::Rgb).map_err(|e| not_written(path, e))
+}
+
+/// A failed write of fogray-data's as an [`ImageError::Write`] (naming the file once).
+pub(crate) fn not_written(path: &Path, e: DataError) -> ImageError {
+    ImageError::Write {
+        path: path.to_path_buf(),
+        message: match e {
+            DataError::Io { message, .. } => message,
+            other => other.to_string(),
+        },
+    }
+}
+
+/// Writes one image as a PNG of its own size, one PNG pixel per image pixel, whole or not at
+/// all.
 ///
 /// Errors: [`ImageError::Shape`] unless `[rows >= 1][columns >= 1][3]`, [`ImageError::Write`].
 pub fn write_png(path: &Path, image: ArrayView3<'_, f64>) -> Result<(), ImageError> {
     check_rgb("image", &image)?;
     let (h, w) = (image.shape()[0], image.shape()[1]);
-    let wrap = write_error(path);
-    let root = BitMapBackend::new(path, (w as u32, h as u32)).into_drawing_area();
-    for a in 0..h {
-        for b in 0..w {
-            root.draw_pixel((b as i32, a as i32), &rgb(&image, a, b))
-                .map_err(|e| wrap(e.to_string()))?;
-        }
-    }
-    root.present().map_err(|e| wrap(e.to_string()))
+    let size = (u32::try_from(w), u32::try_from(h));
+    let (Ok(w), Ok(h)) = size else {
+        return Err(write_error(path)(format!("a {w}x{h} image is larger than PNG holds")));
+    };
+    // `iter` walks rows, columns, channels: the PNG's order.
+    let pixels: Vec<u8> = image.iter().map(|&v| to_u8(v)).collect();
+    save_canvas(path, &pixels, (w, h))
 }
 
 /// Writes images side by side, each magnified `scale` times (nearest neighbour) under its
@@ -154,7 +179,8 @@ pub fn write_row_png(path: &Path, panels: &[Panel<'_>], scale: u32) -> Result<()
     );
     let n = panels.len() as u32;
     let size = (n * w + (n + 1) * GAP, h + TITLE_HEIGHT + GAP);
-    let root = BitMapBackend::new(path, size).into_drawing_area();
+    let mut pixels = canvas(size);
+    let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
     root.fill(&WHITE).map_err(|e| wrap(e.to_string()))?;
     for (k, p) in panels.iter().enumerate() {
         let x0 = GAP + k as u32 * (w + GAP);
@@ -178,7 +204,9 @@ pub fn write_row_png(path: &Path, panels: &[Panel<'_>], scale: u32) -> Result<()
             }
         }
     }
-    root.present().map_err(|e| wrap(e.to_string()))
+    root.present().map_err(|e| wrap(e.to_string()))?;
+    drop(root);
+    save_canvas(path, &pixels, size)
 }
 
 /// Writes the exact photograph, the render and `|render - exact|` times `gain` side by side

@@ -1,5 +1,6 @@
 //! Ctrl-C as a stop flag: a long fit checks it before each step, finishes the step under way
-//! and returns what it has, so that the caller can save it.
+//! and returns what it has, so that the caller can save it. Commands with nothing to save
+//! exit instead, leaving no temporary file behind ([`exit_on_ctrl_c`]).
 //!
 //! ```no_run
 //! use fogray_fit::interrupt::StopFlag;
@@ -13,6 +14,21 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 
 use crate::error::FitError;
+
+/// The exit status of a command stopped by Ctrl-C: 128 + SIGINT, as a shell reports it.
+pub const INTERRUPTED_STATUS: i32 = 130;
+
+/// Has Ctrl-C (SIGINT) end the process at once with [`INTERRUPTED_STATUS`], after removing
+/// every temporary file it is writing ([`fogray_data::remove_temporaries_and_exit`]): for
+/// commands with nothing to save (a render, an export), which then leave whole files only.
+///
+/// Errors: [`FitError::Config`] if the process's handler is already set (once a process).
+pub fn exit_on_ctrl_c() -> Result<(), FitError> {
+    ctrlc::set_handler(|| {
+        fogray_data::remove_temporaries_and_exit(INTERRUPTED_STATUS);
+    })
+    .map_err(|e| FitError::Config(format!("cannot catch Ctrl-C: {e}")))
+}
 
 /// A flag raised by Ctrl-C (or by [`StopFlag::raise`]).
 #[derive(Debug, Clone, Default)]

@@ -1,5 +1,5 @@
 //! Test PSNR (or SSIM) against training seconds (or steps), one curve per configuration, as SVG
-//! and PNG.
+//! and PNG, each written whole or not at all.
 //!
 //! ```
 //! use fogray_fit::train::LogEntry;
@@ -25,7 +25,9 @@ use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
-use crate::images::ImageError;
+use fogray_data::write_atomic;
+
+use crate::images::{canvas, not_written, save_canvas, ImageError};
 use crate::train::LogEntry;
 
 const FONT: &str = "sans-serif";
@@ -295,12 +297,18 @@ pub fn metric_curves(
         let path = path.to_path_buf();
         move |message| ImageError::Write { path, message }
     };
+    let mut text = String::new();
     {
-        let root = SVGBackend::new(&svg, size).into_drawing_area();
+        let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
         draw(&root, curves, x, metric, dashed).map_err(wrap(&svg))?;
         root.present().map_err(|e| wrap(&svg)(e.to_string()))?;
     }
-    let root = BitMapBackend::new(&png, size).into_drawing_area();
-    draw(&root, curves, x, metric, dashed).map_err(wrap(&png))?;
-    root.present().map_err(|e| wrap(&png)(e.to_string()))
+    write_atomic(&svg, |out| out.write_all(text.as_bytes())).map_err(|e| not_written(&svg, e))?;
+    let mut pixels = canvas(size);
+    {
+        let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
+        draw(&root, curves, x, metric, dashed).map_err(wrap(&png))?;
+        root.present().map_err(|e| wrap(&png)(e.to_string()))?;
+    }
+    save_canvas(&png, &pixels, size)
 }

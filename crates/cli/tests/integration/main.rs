@@ -8,5 +8,7 @@ mod export;
 mod fit_render;
 mod interrupt;
 mod lego;
+mod one_line;
 mod orbit;
+mod outputs;
 mod resume;

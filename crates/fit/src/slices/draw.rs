@@ -7,7 +7,7 @@ use fogray_ops::sample::GridAxis;
 use plotters::prelude::*;
 
 use super::{axis_name, in_plane_axes, PlaneImage};
-use crate::images::ImageError;
+use crate::images::{canvas, save_canvas, ImageError};
 
 const FONT: &str = "sans-serif";
 const GAP: i32 = 10;
@@ -116,7 +116,9 @@ pub fn write_planes_png(
     let columns = rows.iter().map(|r| r.planes.len()).max().unwrap_or(1) as i32;
     let width = GAP + columns * (w + GAP) + GAP + BAR + BAR_LABELS;
     let height = GAP + rows.len() as i32 * (TITLE + h + GAP);
-    let root = BitMapBackend::new(path, (width as u32, height as u32)).into_drawing_area();
+    let size = (width as u32, height as u32);
+    let mut pixels = canvas(size);
+    let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
     let e = |e: DrawingAreaErrorKind<_>| wrap(e.to_string());
     root.fill(&WHITE).map_err(e)?;
     for (i, row) in rows.iter().enumerate() {
@@ -181,5 +183,7 @@ pub fn write_planes_png(
             }
         }
     }
-    root.present().map_err(e)
+    root.present().map_err(e)?;
+    drop(root);
+    save_canvas(path, &pixels, size)
 }
