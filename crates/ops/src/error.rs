@@ -38,6 +38,9 @@ pub enum Op {
     Sample,
     /// The occupancy grid ([`OccupancyGrid`](crate::sample::OccupancyGrid)).
     Occupancy,
+    /// The scene contraction and the framing of its inner region from cameras
+    /// ([`space`](crate::space)).
+    Contraction,
 }
 
 impl Op {
@@ -57,6 +60,7 @@ impl Op {
             Op::Rays => "rays",
             Op::Sample => "sample",
             Op::Occupancy => "occupancy",
+            Op::Contraction => "contraction",
         }
     }
 }

@@ -14,7 +14,10 @@
 //!   ray / ball hit test of a scene whose surface is a ball;
 //! - [`rays`]: pinhole cameras, batches of rays, and ray / box clipping;
 //! - [`sample`]: samplers that turn clipped rays into packed samples for the composite
-//!   (uniform, stratified, importance resampling) and an occupancy grid that skips empty space;
+//!   (uniform, stratified, importance resampling), an occupancy grid that skips empty space,
+//!   and a sampler of unbounded scenes in contracted space ([`sample::ContractedSampler`]);
+//! - [`space`]: the scene contraction of unbounded captures into `[-2, 2]^3`
+//!   ([`Contraction`]) and the framing of its inner region from cameras;
 //! - [`grid`]: a dense grid field over a box, looked up bilinearly (2-D) or trilinearly (3-D)
 //!   at packed positions, as a fused op ([`GridField`]) with a deterministic parallel backward
 //!   into the grid values and the positions, and its taped twin;
@@ -63,6 +66,7 @@ pub mod prior;
 pub mod rays;
 pub mod sample;
 pub mod sh;
+pub mod space;
 pub mod twins;
 
 pub use activation::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};
@@ -77,3 +81,4 @@ pub use rays::{
     rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, Orbit, PinholeCamera, RayBatch, RayIntervals,
 };
 pub use sh::ShColor;
+pub use space::{framing_from_cameras, Contraction, InnerRegion};

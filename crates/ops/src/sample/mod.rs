@@ -7,7 +7,9 @@
 //! under a previous pass's weights) and the [`OccupancyGrid`]'s two samplers of the occupied
 //! parts only: [`OccupancyGrid::march`] (the uniform pieces of the occupied runs, cut at their
 //! faces) and [`OccupancyGrid::march_midpoints`] (the uniform pieces whose midpoint is
-//! occupied, tested in vector lanes).
+//! occupied, tested in vector lanes). For unbounded scenes, [`ContractedSampler`] cuts rays
+//! into pieces of equal length in contracted space (positions contracted, depths and
+//! lengths in the world), with [`ContractedOccupancy`] to judge a contracted grid's cells.
 //!
 //! ```
 //! use fogray_ops::rays::{Aabb, Intrinsics, PinholeCamera};
@@ -41,6 +43,12 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod contracted;
+mod contracted_occupancy;
+#[cfg(test)]
+mod contracted_occupancy_tests;
+#[cfg(test)]
+mod contracted_tests;
 mod importance;
 #[cfg(test)]
 mod importance_tests;
@@ -63,6 +71,8 @@ mod visible;
 #[cfg(test)]
 mod visible_tests;
 
+pub use contracted::{ContractedSampler, DEFAULT_FAR_GAP, MAX_CONTRACTED_PATH, MAX_SAMPLES_PER_RAY, MIN_STEP};
+pub use contracted_occupancy::ContractedOccupancy;
 pub use importance::Importance;
 pub use occupancy::{GridAxis, KnownCells, OccupancyGrid, OccupancySlice, OccupancyState};
 pub use occupancy_config::{CellPoints, OccupancyConfig, Refresh, Threshold};
