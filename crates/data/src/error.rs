@@ -126,8 +126,8 @@ pub enum DataError {
         /// The transforms file.
         path: PathBuf,
     },
-    /// A folder with no transforms file in it.
-    #[error("{path}: no transforms file (expected transforms.json or transforms_train.json)", path = shown(.path))]
+    /// A folder with no dataset in it: no transforms file, COLMAP model or LLFF poses file.
+    #[error("{path}: no dataset (expected transforms.json, transforms_train.json, a COLMAP model in sparse/0, sparse or colmap/sparse/0, or poses_bounds.npy)", path = shown(.path))]
     NoTransforms {
         /// The folder.
         path: PathBuf,
@@ -220,6 +220,101 @@ pub enum DataError {
         path: PathBuf,
         /// Why it was refused.
         problem: crate::output::OutputProblem,
+    },
+    /// A binary file (a COLMAP `.bin`, an `.npy`) that ends before what it announces: cut
+    /// short, or a count in it that the rest of the file cannot hold (refused before anything
+    /// is allocated for it).
+    #[error("{path}: truncated or corrupt at byte {offset}: {what} needs {needed} bytes, {available} left", path = shown(.path))]
+    Truncated {
+        /// The file.
+        path: PathBuf,
+        /// Where the record that does not fit starts.
+        offset: u64,
+        /// What was being read.
+        what: String,
+        /// The bytes it needs.
+        needed: u64,
+        /// The bytes left from `offset`.
+        available: u64,
+    },
+    /// A COLMAP camera whose model fogray does not read (a fisheye, FULL_OPENCV...).
+    #[error("{path}: camera {camera} has model {model}, which is not supported (SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL and OPENCV are)", path = shown(.path))]
+    CameraModel {
+        /// The cameras file.
+        path: PathBuf,
+        /// The camera's id.
+        camera: i64,
+        /// The model's name (or its unknown id).
+        model: String,
+    },
+    /// A COLMAP image whose camera id is not among the model's cameras.
+    #[error("{path}: image `{image}` has camera id {camera}, which {cameras} does not hold", path = shown(.path), image = crate::escape_controls(.image), cameras = shown(.cameras))]
+    UnknownCamera {
+        /// The images file.
+        path: PathBuf,
+        /// The image's name.
+        image: String,
+        /// The camera id it names.
+        camera: i64,
+        /// The cameras file.
+        cameras: PathBuf,
+    },
+    /// A record of a COLMAP file that does not read: a missing field, a word where a number
+    /// belongs, an id given twice, bytes after the last record.
+    #[error("{path}: {at}: {message}", path = shown(.path))]
+    Malformed {
+        /// The file.
+        path: PathBuf,
+        /// Where (`line 12`, `byte 340`, `image 7`).
+        at: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// An `.npy` file that is not the array the format needs (its dtype, order, shape or
+    /// header).
+    #[error("{path}: {what} is {found}, expected {expected}", path = shown(.path))]
+    BadArray {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong (`the dtype`, `the shape`...).
+        what: &'static str,
+        /// What the file has.
+        found: String,
+        /// What it must have.
+        expected: &'static str,
+    },
+    /// A folder the dataset needs that does not exist.
+    #[error("{path}: folder not found ({what})", path = shown(.path))]
+    MissingFolder {
+        /// The folder.
+        path: PathBuf,
+        /// What it should hold.
+        what: &'static str,
+    },
+    /// An LLFF capture whose images folder holds another number of images than there are
+    /// poses.
+    #[error("{path}: {poses} poses but {folder} holds {images} images", path = shown(.path), folder = shown(.folder))]
+    ImageCount {
+        /// The poses file.
+        path: PathBuf,
+        /// How many poses.
+        poses: usize,
+        /// The images folder.
+        folder: PathBuf,
+        /// How many images it holds.
+        images: usize,
+    },
+    /// An image whose shape is not its camera's scaled (an LLFF image rotated or cropped).
+    #[error("{path}: image is {}x{}, not the shape of the {}x{} that {poses} gives its camera", .size.0, .size.1, .expected.0, .expected.1, path = shown(.path), poses = shown(.poses))]
+    AspectMismatch {
+        /// The image file.
+        path: PathBuf,
+        /// Its width and height.
+        size: (usize, usize),
+        /// The poses file.
+        poses: PathBuf,
+        /// The width and height the poses file gives.
+        expected: (f64, f64),
     },
     /// Something given to a writer that cannot be written (an image whose shape differs from
     /// its camera's, a non-finite value, no frames...).

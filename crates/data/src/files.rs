@@ -5,7 +5,9 @@
 use std::path::{Path, PathBuf};
 
 use crate::blender::{self, split_file, SPLITS};
+use crate::colmap;
 use crate::error::DataError;
+use crate::llff;
 use crate::ngp;
 use crate::resolve::{resolve, Source};
 
@@ -23,7 +25,9 @@ pub struct DatasetFiles {
 
 /// The files of the dataset at `path`, as [`load`](crate::load) and
 /// [`load_cameras`](crate::load_cameras) read it: a Blender folder's `train`, `val` and `test`
-/// files, an instant-ngp folder's `transforms.json`, or a transforms file alone.
+/// files, an instant-ngp folder's `transforms.json`, or a transforms file alone; a COLMAP
+/// capture's model files and registered full-size images; an LLFF capture's
+/// `poses_bounds.npy` and full-size images.
 ///
 /// Errors: as [`load_cameras`](crate::load_cameras) for a path that does not exist, a folder
 /// without a transforms file, a transforms file that does not parse.
@@ -52,6 +56,19 @@ pub fn dataset_files(path: &Path) -> Result<DatasetFiles, DataError> {
         Source::Ngp(file) => {
             files.pictures = ngp::read(&file)?.frames.into_iter().map(|s| s.file).collect();
             files.transforms.push(file);
+        }
+        Source::Colmap { dir, model } => {
+            let capture = colmap::capture(&dir, &model, 1, false)?;
+            files.pictures = capture.frames.into_iter().map(|f| f.spec.file).collect();
+            files.transforms = [model.cameras, model.images, model.points]
+                .into_iter()
+                .filter(|f| f.is_file())
+                .collect();
+        }
+        Source::Llff(dir) => {
+            let capture = llff::capture(&dir, 1)?;
+            files.pictures = capture.frames.into_iter().map(|f| f.spec.file).collect();
+            files.transforms.push(capture.registry);
         }
     }
     Ok(files)

@@ -1,8 +1,8 @@
 //! # fogray-data
 //!
-//! Real datasets for fogray: transforms files read into [`PinholeCamera`]s and their images
-//! into `f32` arrays, so that a fit can train on the scenes other NeRF tools train on, and
-//! scenes written back in the same formats.
+//! Real datasets for fogray: transforms files and captures (COLMAP models, LLFF poses) read
+//! into [`PinholeCamera`]s and their images into `f32` arrays, so that a fit can train on the
+//! scenes other NeRF tools train on, and scenes written back in the transforms formats.
 //!
 //! - **Blender / NeRF-synthetic** ([`Format::Blender`]): a folder with
 //!   `transforms_{train,val,test}.json` (train required). `camera_angle_x` gives
@@ -20,8 +20,27 @@
 //!   `[(0.5 - a/2 - offset_i) / scale, (0.5 + a/2 - offset_i) / scale]` (see [`ngp_scene_box`];
 //!   the default gives `[-1.515 a, 1.515 a]^3`).
 //!
-//! Poses in both formats are OpenGL camera-to-world matrices (camera looking down -Z, +Y up)
-//! and are checked to be rigid (a rotation to 1e-3 and a translation). Images (8- or 16-bit
+//! - **COLMAP** ([`Format::Colmap`]): a capture folder with a sparse model in `sparse/0`,
+//!   `sparse` or `colmap/sparse/0` (binary or text; cameras SIMPLE_PINHOLE, PINHOLE,
+//!   SIMPLE_RADIAL, RADIAL, OPENCV, others refused by name) and its photographs in `images/`
+//!   (or `images_K/` for a downscale of `K`, see [`ImageSource`]); `points3D` kept as a
+//!   [`PointCloud`]. Views in image-name order, every eighth held out.
+//! - **LLFF** ([`Format::Llff`]): a capture folder with `poses_bounds.npy` (`(N, 17)` float64:
+//!   `[R | c | hwf]` with `R`'s columns down, right, backward, then near and far bounds,
+//!   kept as [`DepthBounds`]) and `images/` (or `images_K/`), row `i` with the `i`-th picture
+//!   by file name. Every eighth view held out.
+//!
+//! A folder is recognised by what it holds, in this order: `transforms.json`,
+//! `transforms_train.json`, a COLMAP model, `poses_bounds.npy` (see [`load`]). A capture's
+//! world is its reconstruction's arbitrary one: its cameras are moved into a normalised world
+//! (mean up to +Z, mean centre to the origin, camera centres within `[-1, 1]^3`, as nerfstudio
+//! does; see [`world`]), and the transform applied is kept ([`SceneData::world`]) so that the
+//! file's points map to it and back. Scene box of a capture: `[-1, 1]^3`
+//! ([`CAPTURE_SCENE_BOX`]).
+//!
+//! Poses in the transforms formats are OpenGL camera-to-world matrices (camera looking down
+//! -Z, +Y up), COLMAP's are world-to-camera in OpenCV axes, LLFF's its own (see the format
+//! docs); all are checked to be rigid (a rotation to 1e-3 and a translation). Images (8- or 16-bit
 //! PNG, JPEG; grey, grey + alpha, RGB, RGBA) are decoded in parallel, composited over
 //! [`LoadOptions::background`] with straight alpha, kept as stored (sRGB values), and
 //! optionally downscaled by an integer factor (block means; see [`downscale_picture`]).
@@ -62,13 +81,17 @@
 #![warn(missing_docs)]
 
 mod blender;
+mod capture;
+mod colmap;
 mod downscale;
 mod error;
 mod escape;
 mod files;
 mod json;
+mod llff;
 mod load;
 mod ngp;
+mod npy;
 mod output;
 mod picture;
 mod png;
@@ -76,9 +99,11 @@ mod pose;
 mod resolve;
 mod spec;
 mod split;
+pub mod world;
 mod write;
 
 pub use blender::BLENDER_SCENE_BOX;
+pub use capture::{DepthBounds, FullSizeReason, ImageSource, PointCloud, CAPTURE_SCENE_BOX};
 pub use downscale::{downscale_intrinsics, downscale_picture};
 pub use error::{DataError, MatrixProblem};
 pub use escape::{escape_controls, shown, Shown};
@@ -92,6 +117,7 @@ pub use output::{
 pub use picture::Picture;
 pub use png::{write_png8, PngChannels};
 pub use split::{holdout, HOLDOUT_EVERY};
+pub use world::WorldTransform;
 pub use write::{write_blender, write_instant_ngp, FrameToWrite};
 
 /// Re-exported so that users name the camera types without depending on fogray-ops.

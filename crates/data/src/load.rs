@@ -6,28 +6,34 @@ use fogray_ops::PinholeCamera;
 use rayon::prelude::*;
 
 use crate::blender::{self, split_file, BLENDER_SCENE_BOX, SPLITS};
+use crate::capture::{self, DepthBounds, ImageSource, PointCloud};
+use crate::colmap;
 use crate::downscale::downscale_picture;
 use crate::error::DataError;
+use crate::llff;
 use crate::ngp;
 use crate::picture::{decode, dimensions, Picture};
 use crate::resolve::{resolve, Source};
 use crate::spec::FrameSpec;
 use crate::split::holdout;
+use crate::world::WorldTransform;
 
 /// How many missing image files an error lists by name (the count says how many in all).
-const MISSING_LISTED: usize = 5;
+pub(crate) const MISSING_LISTED: usize = 5;
 
 /// How to load a dataset.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LoadOptions {
     /// Integer factor (at least 1) by which images are shrunk, each `downscale x downscale`
     /// block averaged (see [`downscale_picture`](crate::downscale_picture)), and intrinsics
-    /// divided. Default 1.
+    /// divided. Default 1. A COLMAP or LLFF capture whose `images_K` folder (`K` this factor)
+    /// holds every picture is read from that folder as stored instead (see [`ImageSource`]).
     pub downscale: usize,
     /// RGB in `[0, 1]` that images with alpha are composited over. Default white.
     pub background: [f64; 3],
     /// Drop the frames whose image file does not exist (counted in
-    /// [`SceneData::skipped`]) instead of failing. Default false.
+    /// [`SceneData::skipped`]) instead of failing (a COLMAP image registered but not on
+    /// disk likewise). Default false.
     pub skip_missing: bool,
 }
 
@@ -49,6 +55,10 @@ pub enum Format {
     Blender,
     /// instant-ngp / nerfstudio: one `transforms.json`.
     InstantNgp,
+    /// A COLMAP sparse model (`sparse/0`, `sparse` or `colmap/sparse/0`) beside `images/`.
+    Colmap,
+    /// LLFF: `poses_bounds.npy` beside `images/`.
+    Llff,
 }
 
 /// One view: its camera and its image.
@@ -63,6 +73,8 @@ pub struct Frame {
     pub camera: PinholeCamera,
     /// The image, `camera.intrinsics().height x width`.
     pub picture: Picture,
+    /// The depths at which the view sees the scene, where the format stores them (LLFF).
+    pub depth_bounds: Option<DepthBounds>,
 }
 
 /// A loaded dataset.
@@ -75,11 +87,24 @@ pub struct SceneData {
     /// The held-out views.
     pub test: Vec<Frame>,
     /// The box (min, max corners, world coordinates) that holds the scene: `[-1.5, 1.5]^3`
-    /// for Blender, from `aabb_scale` for instant-ngp (see the crate docs).
+    /// for Blender, from `aabb_scale` for instant-ngp (see the crate docs), `[-1, 1]^3` for
+    /// COLMAP and LLFF ([`CAPTURE_SCENE_BOX`](crate::CAPTURE_SCENE_BOX)).
     pub scene_box: ([f64; 3], [f64; 3]),
     /// Frames dropped because their image file did not exist (only with
     /// [`LoadOptions::skip_missing`]).
     pub skipped: usize,
+    /// The transform from the file's world to the cameras' (and the box's and points'):
+    /// the identity for Blender and instant-ngp, the normalisation of a COLMAP or LLFF
+    /// capture's arbitrary world (see the crate docs).
+    pub world: WorldTransform,
+    /// COLMAP's sparse points (`points3D`), in the cameras' world; `None` for the other
+    /// formats or a model without a points file.
+    pub points: Option<PointCloud>,
+    /// Image files in a COLMAP capture's images folder that the model does not register
+    /// (they are not read); 0 for the other formats.
+    pub unregistered: usize,
+    /// Where the pictures were read from, and why (a capture's `images` or `images_K`).
+    pub images: ImageSource,
 }
 
 /// A camera of a transforms file, read without its image.
@@ -91,14 +116,17 @@ pub struct NamedCamera {
     pub camera: PinholeCamera,
 }
 
-/// Loads the dataset at `path`: a Blender folder, an instant-ngp / nerfstudio folder (with a
-/// `transforms.json`), or a transforms file (a `transforms_*.json` with `camera_angle_x` and no
-/// `fl_x` loads its folder as Blender; any other as instant-ngp). Images are decoded in
-/// parallel.
+/// Loads the dataset at `path`: a folder, recognised by what it holds, in this order: a
+/// `transforms.json` (instant-ngp / nerfstudio), a `transforms_train.json` (Blender), a COLMAP
+/// model (`sparse/0`, `sparse` or `colmap/sparse/0` holding `cameras.bin` or `cameras.txt`),
+/// a `poses_bounds.npy` (LLFF); or a transforms file (a `transforms_*.json` with
+/// `camera_angle_x` and no `fl_x` loads its folder as Blender; any other as instant-ngp); or a
+/// `poses_bounds.npy` (its folder as LLFF). Images are decoded in parallel.
 ///
 /// Splits: Blender's train is `transforms_train.json`, its test `transforms_test.json`, else
 /// `transforms_val.json`, else every eighth train frame (`i % 8 == 0`, then held out of
-/// train); instant-ngp's test is every eighth frame and its train the rest.
+/// train); instant-ngp's, COLMAP's and LLFF's test is every eighth frame (COLMAP's and LLFF's
+/// in image-name order) and their train the rest.
 ///
 /// Errors: see [`DataError`]; each names the file at fault.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneData, DataError> {
@@ -117,8 +145,18 @@ pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneData, DataError> 
                 test,
                 scene_box: parsed.scene_box,
                 skipped,
+                world: WorldTransform::IDENTITY,
+                points: None,
+                unregistered: 0,
+                images: ImageSource::Listed,
             })
         }
+        Source::Colmap { dir, model } => capture::load(
+            colmap::capture(&dir, &model, options.downscale, true)?,
+            options,
+            Format::Colmap,
+        ),
+        Source::Llff(dir) => capture::load(llff::capture(&dir, options.downscale)?, options, Format::Llff),
     }
 }
 
@@ -144,6 +182,10 @@ fn load_blender(folder: &Path, options: &LoadOptions) -> Result<SceneData, DataE
         test,
         scene_box: BLENDER_SCENE_BOX,
         skipped,
+        world: WorldTransform::IDENTITY,
+        points: None,
+        unregistered: 0,
+        images: ImageSource::Listed,
     })
 }
 
@@ -178,7 +220,11 @@ type Decoded = ((usize, usize), Picture);
 /// Decodes, checks and downscales every frame's image (in parallel) and builds its camera.
 /// With `same_size` (a Blender split) every image must have the first one's size; otherwise
 /// each must match its frame's `w` / `h` where given.
-fn load_frames(specs: &[FrameSpec], options: &LoadOptions, same_size: bool) -> Result<Vec<Frame>, DataError> {
+pub(crate) fn load_frames(
+    specs: &[FrameSpec],
+    options: &LoadOptions,
+    same_size: bool,
+) -> Result<Vec<Frame>, DataError> {
     let factor = options.downscale;
     let decoded: Vec<Result<Decoded, DataError>> = specs
         .par_iter()
@@ -205,6 +251,7 @@ fn load_frames(specs: &[FrameSpec], options: &LoadOptions, same_size: bool) -> R
             file: spec.file.clone(),
             camera: spec.camera(size.0, size.1, factor)?,
             picture,
+            depth_bounds: None,
         });
     }
     Ok(frames)
@@ -245,11 +292,14 @@ fn check_size<'a>(
 
 /// The cameras of every frame at `path`, without decoding any image, downscaled by
 /// `downscale`: a transforms file's frames, or a Blender folder's `train`, `val` and `test`
-/// files in that order (an instant-ngp folder: its `transforms.json`).
+/// files in that order (an instant-ngp folder: its `transforms.json`), or a COLMAP or LLFF
+/// capture's views in image-name order (the same cameras, in the same normalised world, as
+/// [`load`] gives; a capture's registered images need not exist, LLFF's must).
 ///
-/// Image sizes come from the file's `w` / `h` (instant-ngp), else from the header of the image
-/// file (for Blender, the first existing image of each split file, whose size the format says
-/// all its images share), else, for Blender, the top-level `w` / `h`.
+/// Image sizes come from the file's `w` / `h` (instant-ngp, COLMAP), else from the header of
+/// the image file (for Blender, the first existing image of each split file, whose size the
+/// format says all its images share; for a capture read from `images_K` and for LLFF, each
+/// image's), else, for Blender, the top-level `w` / `h`.
 ///
 /// Errors: as [`load`], and [`DataError::NoImageSize`] where no size can be found.
 pub fn load_cameras(path: &Path, downscale: usize) -> Result<Vec<NamedCamera>, DataError> {
@@ -278,6 +328,8 @@ pub fn load_cameras(path: &Path, downscale: usize) -> Result<Vec<NamedCamera>, D
                 named(spec, w, h, downscale)
             })
             .collect(),
+        Source::Colmap { dir, model } => capture::cameras(&colmap::capture(&dir, &model, downscale, false)?),
+        Source::Llff(dir) => capture::cameras(&llff::capture(&dir, downscale)?),
     }
 }
 

@@ -1,10 +1,14 @@
 //! The integration tests of fogray-data, as one binary.
 
+mod capture_files;
+mod colmap;
+mod colmap_errors;
 mod common;
 mod decode;
 mod downscale;
 mod errors;
 mod lego;
+mod llff;
 mod projection;
 mod roundtrip;
 mod scene_box;
