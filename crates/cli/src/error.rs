@@ -145,6 +145,10 @@ pub enum CliError {
     /// A command-line option outside its domain, or a combination of options not offered.
     #[error("{0}")]
     Option(String),
+    /// A size (of a render's frames, of the cameras' pictures) that needs more memory than
+    /// the machine has, refused before anything was allocated.
+    #[error(transparent)]
+    TooLarge(#[from] fogray_ops::limits::TooLarge),
     /// A computation that should have produced a value did not (a gradient missing...).
     #[error("{0}")]
     Missing(&'static str),

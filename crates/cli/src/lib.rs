@@ -22,5 +22,6 @@ pub mod markdown;
 pub mod memory;
 pub mod reference;
 pub mod render;
+pub mod render_memory;
 pub mod saved;
 pub mod tape_cost;

@@ -22,6 +22,7 @@ use fogray_tape::Float;
 use crate::animation::GifWriter;
 use crate::error::CliError;
 use crate::framing::{self, ImageSize};
+use crate::render_memory;
 use crate::saved::{SavedModel, WithModel};
 
 /// The flags of `fogray render`.
@@ -126,6 +127,7 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
     let saved = SavedModel::open(&args.model, "fogray render")?;
     let info = &saved.info;
     let views = views(args, info)?;
+    render_memory::check_cameras(info, args.cameras.as_deref(), views.iter().map(|v| &v.camera))?;
     // Only a transforms file's names can clash (frame `a-depth` beside frame `a`'s depth map
     // too); an orbit's are numbered.
     if let Some(cameras) = &args.cameras {
@@ -209,6 +211,7 @@ fn views(args: &RenderArgs, info: &ModelInfo) -> Result<Vec<View>, CliError> {
         .sqrt();
     let dataset = framing::dataset_views(&args.model, info, centre);
     let (orbit, k) = framing::orbit_of(args, dataset.as_ref(), centre, half_diagonal)?;
+    render_memory::check_orbit(info, orbit.frames, &k)?;
     let digits = (orbit.frames - 1).max(1).ilog10() as usize + 1;
     let cameras = orbit
         .cameras(k)

@@ -32,6 +32,12 @@ pub enum MatrixProblem {
         /// The determinant.
         det: f64,
     },
+    /// A translation entry beyond `1e6` in magnitude: no scene is that far from its cameras'
+    /// origin, and rays from there cannot resolve one.
+    FarTranslation {
+        /// The entry.
+        value: f64,
+    },
 }
 
 impl fmt::Display for MatrixProblem {
@@ -44,6 +50,9 @@ impl fmt::Display for MatrixProblem {
                 f,
                 "has a 3x3 part that is not a rotation: not orthonormal (max |R^T R - I| = {deviation:.3e} > 1e-3)"
             ),
+            MatrixProblem::FarTranslation { value } => {
+                write!(f, "has a translation entry {value:e}, beyond 1e6 from the origin")
+            }
             MatrixProblem::Reflection { det } => {
                 write!(
                     f,
@@ -109,7 +118,7 @@ pub enum DataError {
     /// A number outside its domain: a focal length or field of view that is not positive and
     /// finite, an image size that is not a positive integer, a principal point that is not
     /// finite...
-    #[error("{path}: `{key}` is {value} ({rule})", path = shown(.path))]
+    #[error("{path}: `{key}` is {value} ({rule})", path = shown(.path), value = number(*.value))]
     BadValue {
         /// The transforms file.
         path: PathBuf,
@@ -316,6 +325,26 @@ pub enum DataError {
         /// The width and height the poses file gives.
         expected: (f64, f64),
     },
+    /// Pictures (one frame's, or all of them together) that need more memory than the machine
+    /// has, refused before any is decoded.
+    #[error("{path}: {source}", path = shown(.path))]
+    TooLarge {
+        /// The transforms file.
+        path: PathBuf,
+        /// What would need how much, and what is available.
+        source: fogray_ops::limits::TooLarge,
+    },
+    /// A dataset with too few frames that have a picture to fit: one to train on and one held
+    /// out.
+    #[error("{path}: {frames} frame(s) with a picture{}; a fit needs at least two (one to train on, one held out)", skipped_note(*.skipped), path = shown(.path))]
+    TooFewFrames {
+        /// The transforms file (or the dataset's folder).
+        path: PathBuf,
+        /// Frames that have a picture.
+        frames: usize,
+        /// Frames dropped because their picture is missing.
+        skipped: usize,
+    },
     /// Something given to a writer that cannot be written (an image whose shape differs from
     /// its camera's, a non-finite value, no frames...).
     #[error("{path}: {message}", path = shown(.path))]
@@ -325,6 +354,23 @@ pub enum DataError {
         /// What is wrong.
         message: String,
     },
+}
+
+/// A number as a message writes it: in full up to 1e15, in scientific notation beyond (Rust
+/// writes 1e308 in all its 309 digits).
+fn number(value: f64) -> String {
+    if value.is_finite() && value.abs() >= 1e15 {
+        format!("{value:e}")
+    } else {
+        value.to_string()
+    }
+}
+
+fn skipped_note(skipped: usize) -> String {
+    match skipped {
+        0 => String::new(),
+        n => format!(" ({n} skipped: their picture is missing)"),
+    }
 }
 
 fn list(paths: &[PathBuf]) -> String {

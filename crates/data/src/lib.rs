@@ -87,6 +87,7 @@ mod downscale;
 mod error;
 mod escape;
 mod files;
+mod jpeg;
 mod json;
 mod llff;
 mod load;
@@ -94,8 +95,10 @@ mod ngp;
 mod npy;
 mod output;
 mod picture;
+mod pictures;
 mod png;
 mod pose;
+mod ranges;
 mod resolve;
 mod spec;
 mod split;
@@ -108,13 +111,14 @@ pub use downscale::{downscale_intrinsics, downscale_picture};
 pub use error::{DataError, MatrixProblem};
 pub use escape::{escape_controls, shown, Shown};
 pub use files::{dataset_files, DatasetFiles};
-pub use load::{load, load_cameras, Format, Frame, LoadOptions, NamedCamera, SceneData};
+pub use load::{load, load_cameras, load_with_progress, Format, Frame, LoadOptions, NamedCamera, SceneData};
 pub use ngp::{ngp_scene_box, NGP_DEFAULT_OFFSET, NGP_DEFAULT_SCALE};
 pub use output::{
     check_outputs, live_temporaries, plan_fit_outputs, remove_temporaries_and_exit, resolved, write_atomic, AtomicFile,
     Inputs, Output, OutputProblem,
 };
 pub use picture::Picture;
+pub use pictures::LoadProgress;
 pub use png::{write_png8, PngChannels};
 pub use split::{holdout, HOLDOUT_EVERY};
 pub use world::WorldTransform;

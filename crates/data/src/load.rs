@@ -3,16 +3,15 @@
 use std::path::{Path, PathBuf};
 
 use fogray_ops::PinholeCamera;
-use rayon::prelude::*;
 
 use crate::blender::{self, split_file, BLENDER_SCENE_BOX, SPLITS};
 use crate::capture::{self, DepthBounds, ImageSource, PointCloud};
 use crate::colmap;
-use crate::downscale::downscale_picture;
 use crate::error::DataError;
 use crate::llff;
 use crate::ngp;
-use crate::picture::{decode, dimensions, Picture};
+use crate::picture::{dimensions, Picture};
+use crate::pictures::{decode_pictures, LoadProgress};
 use crate::resolve::{resolve, Source};
 use crate::spec::FrameSpec;
 use crate::split::holdout;
@@ -128,8 +127,45 @@ pub struct NamedCamera {
 /// train); instant-ngp's, COLMAP's and LLFF's test is every eighth frame (COLMAP's and LLFF's
 /// in image-name order) and their train the rest.
 ///
-/// Errors: see [`DataError`]; each names the file at fault.
+/// Pictures are checked against the machine's memory before any is decoded (see
+/// [`fogray_ops::limits`]), and frames naming the same picture share one decoding.
+///
+/// Errors: see [`DataError`]; each names the file at fault: among them
+/// [`DataError::TooLarge`] for pictures the machine cannot hold and
+/// [`DataError::TooFewFrames`] for a dataset without a frame to train on and one to hold out.
 pub fn load(path: &Path, options: &LoadOptions) -> Result<SceneData, DataError> {
+    let scene = load_scene(path, options)?;
+    if scene.train.is_empty() || scene.test.is_empty() {
+        let named = match resolve(path)? {
+            Source::Ngp(file) | Source::BlenderFile(file) => file,
+            Source::BlenderFolder(folder) => split_file(&folder, "train"),
+            #[allow(unreachable_patterns)] // the formats read from a folder
+            _ => path.to_path_buf(),
+        };
+        return Err(DataError::TooFewFrames {
+            path: named,
+            frames: scene.train.len() + scene.test.len(),
+            skipped: scene.skipped,
+        });
+    }
+    Ok(scene)
+}
+
+/// [`load`], telling `progress` of each picture decoded (from the decoding threads; counted
+/// per transforms file, or per Blender split), so that a command line can show how far a
+/// load of many frames has come.
+///
+/// Errors: as [`load`].
+pub fn load_with_progress(
+    path: &Path,
+    options: &LoadOptions,
+    progress: impl Fn(LoadProgress) + Send + Sync + 'static,
+) -> Result<SceneData, DataError> {
+    crate::pictures::with_progress(std::sync::Arc::new(progress), || load(path, options))
+}
+
+/// [`load`] without its count of the frames.
+fn load_scene(path: &Path, options: &LoadOptions) -> Result<SceneData, DataError> {
     check_downscale(path, options.downscale)?;
     match resolve(path)? {
         Source::BlenderFolder(folder) => load_blender(&folder, options),
@@ -214,10 +250,8 @@ fn drop_missing(transforms: &Path, specs: Vec<FrameSpec>, skip: bool) -> Result<
     Ok((present, missing.len()))
 }
 
-/// A decoded image's full size, and the image downscaled.
-type Decoded = ((usize, usize), Picture);
-
-/// Decodes, checks and downscales every frame's image (in parallel) and builds its camera.
+/// Decodes, checks and downscales every frame's image (in parallel, each file once, within
+/// the machine's memory: [`decode_pictures`]) and builds its camera.
 /// With `same_size` (a Blender split) every image must have the first one's size; otherwise
 /// each must match its frame's `w` / `h` where given.
 pub(crate) fn load_frames(
@@ -226,25 +260,10 @@ pub(crate) fn load_frames(
     same_size: bool,
 ) -> Result<Vec<Frame>, DataError> {
     let factor = options.downscale;
-    let decoded: Vec<Result<Decoded, DataError>> = specs
-        .par_iter()
-        .map(|spec| {
-            let full = decode(&spec.file, options.background)?;
-            let size = (full.width(), full.height());
-            if size.0 / factor == 0 || size.1 / factor == 0 {
-                return Err(DataError::BadDownscale {
-                    path: spec.file.clone(),
-                    downscale: factor,
-                    problem: "is larger than the image",
-                });
-            }
-            Ok((size, downscale_picture(&full, factor)))
-        })
-        .collect();
+    let decoded = decode_pictures(specs, factor, options.background)?;
     let mut frames = Vec::with_capacity(specs.len());
     let mut first: Option<(&Path, (usize, usize))> = None;
-    for (spec, result) in specs.iter().zip(decoded) {
-        let (size, picture) = result?;
+    for (spec, (size, picture)) in specs.iter().zip(decoded) {
         check_size(spec, size, same_size, &mut first)?;
         frames.push(Frame {
             name: spec.name.clone(),

@@ -30,6 +30,7 @@ use fogray_ops::Distortion;
 
 use crate::error::DataError;
 use crate::json::{self, Obj};
+use crate::ranges::{MAX_AABB_SCALE, MAX_COORDINATE};
 use crate::spec::{image_path, FrameSpec, Lens};
 
 /// instant-ngp's default `scale` (its `NERF_SCALE`).
@@ -76,6 +77,9 @@ impl Camera {
         let mut k = [None; 6];
         for (slot, key) in k.iter_mut().zip(DISTORTION_KEYS) {
             *slot = obj.finite(key)?;
+            if let Some((v, rule)) = slot.and_then(|v| Some((v, crate::ranges::distortion_outside(key, v)?))) {
+                return Err(obj.bad_value(key, v, rule));
+            }
         }
         Ok(Camera {
             lens: Lens::read(obj)?,
@@ -163,6 +167,9 @@ fn with_found_extension(file: PathBuf) -> PathBuf {
 /// The scene box of the [module docs](self), from `aabb_scale`, `scale`, `offset` and `aabb`.
 fn scene_box(top: Obj<'_>) -> Result<([f64; 3], [f64; 3]), DataError> {
     let aabb_scale = top.positive("aabb_scale")?.unwrap_or(1.0);
+    if aabb_scale > MAX_AABB_SCALE {
+        return Err(top.bad_value("aabb_scale", aabb_scale, "must be at most 1024"));
+    }
     let mut scale = top.positive("scale")?.unwrap_or(NGP_DEFAULT_SCALE);
     let mut offset = match top.get("offset") {
         None => NGP_DEFAULT_OFFSET,
@@ -197,7 +204,16 @@ fn scene_box(top: Obj<'_>) -> Result<([f64; 3], [f64; 3]), DataError> {
     if let Some(i) = (0..3).find(|&i| !offset[i].is_finite()) {
         return Err(top.bad_value("offset", offset[i], "must be finite"));
     }
-    Ok(ngp_scene_box(aabb_scale, scale, offset))
+    let (min, max) = ngp_scene_box(aabb_scale, scale, offset);
+    // A tiny `scale` or a huge `offset` sends the box out of any scene's reach.
+    if let Some(&v) = min.iter().chain(&max).find(|v| v.is_nan() || v.abs() > MAX_COORDINATE) {
+        return Err(top.bad_value(
+            "aabb_scale",
+            v,
+            "the scene box it gives (with scale, offset, aabb) must lie within 1e6 of the origin",
+        ));
+    }
+    Ok((min, max))
 }
 
 /// The box in world coordinates that instant-ngp marches for `aabb_scale`, `scale` and

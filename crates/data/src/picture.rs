@@ -44,6 +44,12 @@ pub(crate) fn dimensions(path: &Path) -> Result<(usize, usize), DataError> {
 /// Decodes the image file at `path` and composites it over `background` (RGB in `[0, 1]`).
 pub(crate) fn decode(path: &Path, background: [f64; 3]) -> Result<Picture, DataError> {
     let bytes = std::fs::read(path).map_err(|e| DataError::io(path, e))?;
+    if crate::jpeg::is_jpeg(&bytes) && !crate::jpeg::is_complete(&bytes) {
+        return Err(DataError::Decode {
+            path: path.to_path_buf(),
+            message: "truncated JPEG: the file ends before its end-of-image marker".into(),
+        });
+    }
     let image = image::ImageReader::new(std::io::Cursor::new(bytes))
         .with_guessed_format()
         .map_err(|e| DataError::io(path, e))?

@@ -9,6 +9,7 @@ use serde_json::Value;
 
 use crate::error::{DataError, MatrixProblem};
 use crate::json::Obj;
+use crate::ranges::MAX_COORDINATE;
 
 /// Largest `|RᵀR - I|` entry accepted: poses stored as f32 (as Blender exports them) are
 /// orthonormal to about 1e-7, so 1e-3 only refuses matrices that are really not rotations.
@@ -47,6 +48,9 @@ pub(crate) fn check(m: &[[f64; 4]; 4]) -> Result<(), MatrixProblem> {
     }
     if m[3] != [0.0, 0.0, 0.0, 1.0] {
         return Err(MatrixProblem::LastRow);
+    }
+    if let Some(t) = (0..3).map(|i| m[i][3]).find(|t| t.abs() > MAX_COORDINATE) {
+        return Err(MatrixProblem::FarTranslation { value: t });
     }
     let mut deviation = 0.0f64;
     for i in 0..3 {
@@ -104,6 +108,11 @@ mod tests {
         let mut last = rot_z(0.3);
         last[3][0] = 0.5;
         assert_eq!(check(&last), Err(MatrixProblem::LastRow));
+        let mut far = rot_z(0.3);
+        far[0][3] = -1e308;
+        assert_eq!(check(&far), Err(MatrixProblem::FarTranslation { value: -1e308 }));
+        far[0][3] = -1e6;
+        assert_eq!(check(&far), Ok(()));
         let mut nan = rot_z(0.3);
         nan[1][3] = f64::NAN;
         assert_eq!(check(&nan), Err(MatrixProblem::NotFinite));

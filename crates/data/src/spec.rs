@@ -119,7 +119,23 @@ impl FrameSpec {
                 problem: "is larger than the image",
             });
         }
-        let k = downscale_intrinsics(&self.lens.intrinsics(width, height), factor);
+        let full = self.lens.intrinsics(width, height);
+        if let Some((key, value, rule)) = crate::ranges::intrinsics_outside(&full) {
+            // Named as the file gives it (a focal length may come from a field of view), for
+            // the frame it applies to (its own value or the file's global one).
+            let key = match (key, self.lens.fl_x, self.lens.fl_y) {
+                ("fl_x", None, _) => "fx (from camera_angle_x or fl_y)",
+                ("fl_y", _, None) => "fy (from camera_angle_y or fl_x)",
+                _ => key,
+            };
+            return Err(DataError::BadValue {
+                path: self.transforms.clone(),
+                key: format!("{key} of {}", self.key),
+                value,
+                rule,
+            });
+        }
+        let k = downscale_intrinsics(&full, factor);
         let wrap = |source| DataError::Camera {
             path: self.transforms.clone(),
             key: self.key.clone(),

@@ -386,8 +386,18 @@ impl Meta<'_> {
     }
 
     fn info(&self) -> Result<ModelInfo, CheckpointError> {
+        let settings = self.settings()?;
+        // The entry is written beside the settings for readers that do not parse them; the two
+        // must agree, or a reader trusting the entry would take the tensors for another type.
+        let precision = self.text("precision")?;
+        if precision != settings.precision.name() {
+            return Err(self.error(format!(
+                "metadata entry \"precision\" is {precision:?} but its settings say {:?}",
+                settings.precision.name()
+            )));
+        }
         Ok(ModelInfo {
-            settings: self.settings()?,
+            settings,
             kind: self.text("model")?.to_string(),
             nodes: self.parse("nodes")?,
             step: self.parse("step")?,

@@ -32,4 +32,8 @@ pub enum FitError {
     /// From an image (PSNR, PNG).
     #[error(transparent)]
     Image(#[from] ImageError),
+    /// A size (of the grid, of a batch) that needs more memory than the machine has, refused
+    /// before anything was allocated.
+    #[error(transparent)]
+    TooLarge(#[from] fogray_ops::limits::TooLarge),
 }

@@ -18,6 +18,8 @@
 use serde::{Deserialize, Serialize};
 use serde_json::{Map, Value};
 
+use fogray_ops::limits::{self, Bytes, GridShape};
+
 use crate::error::FitError;
 
 /// Which implementation of the grid lookup, the activation and the composite a step records.
@@ -202,6 +204,14 @@ pub enum Budget {
 
 /// Training seconds when neither `steps` nor `seconds` is set.
 pub const DEFAULT_SECONDS: f64 = 60.0;
+
+/// The longest training budget accepted, in seconds: one week (a longer one is a typo or a
+/// budget meant never to end).
+pub const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
+
+/// The most training steps accepted: a hundred million (more than a week of the fastest
+/// steps; a larger count is a typo or a budget meant never to end).
+pub const MAX_STEPS: usize = 100_000_000;
 
 /// Everything a fit is configured by (see the [module docs](self)).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -393,7 +403,11 @@ impl FitSettings {
         self
     }
 
-    /// Checks every setting's range. Errors: [`FitError::Config`] naming the flag.
+    /// Checks every setting's range, the budget against [`MAX_SECONDS`] and [`MAX_STEPS`], and
+    /// the grid and batch against the machine's memory ([`FitSettings::check_memory`]).
+    ///
+    /// Errors: [`FitError::Config`] naming the flag, [`FitError::TooLarge`] naming the flag and
+    /// the bytes it would need.
     pub fn check(&self) -> Result<(), FitError> {
         let bad = |what: &str| Err(FitError::Config(what.into()));
         if self.grid < 2 {
@@ -427,10 +441,63 @@ impl FitSettings {
             b.check()?;
         }
         match self.budget() {
-            Budget::Steps(0) => bad("--steps must be at least 1"),
-            Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => bad("--seconds must be finite and positive"),
-            _ => Ok(()),
+            Budget::Steps(0) => return bad("--steps must be at least 1"),
+            Budget::Steps(n) if n > MAX_STEPS => {
+                return Err(FitError::Config(format!(
+                    "--steps {n}: at most {MAX_STEPS} (a budget that can end)"
+                )))
+            }
+            Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => return bad("--seconds must be finite and positive"),
+            Budget::Seconds(s) if s > MAX_SECONDS => {
+                // Rust writes a large float in all its digits: 1e308 as 309 of them.
+                let s = if s < 1e9 { s.to_string() } else { format!("{s:e}") };
+                return Err(FitError::Config(format!(
+                    "--seconds {s}: at most {MAX_SECONDS} (one week; a budget that can end)"
+                )));
+            }
+            _ => {}
         }
+        self.check_memory(limits::available())
+    }
+
+    /// Checks that the grid (at its last stage, with the stage before it while it grows) and
+    /// a step's batch fit in `available` bytes, as [`limits`] counts them: a sparse grid as if
+    /// it kept every node, as it may.
+    ///
+    /// Errors: [`FitError::TooLarge`] naming the flag and the bytes it would need.
+    pub fn check_memory(&self, available: Bytes) -> Result<(), FitError> {
+        let shape = |nodes| GridShape {
+            nodes,
+            channels: limits::grid_channels(self.sh_degree),
+            float_bytes: match self.precision {
+                Precision::F32 => 4,
+                Precision::F64 => 8,
+            },
+        };
+        let model_bytes = |nodes| match self.model {
+            ModelKind::Dense => shape(nodes).dense_bytes(),
+            ModelKind::Sparse => shape(nodes).sparse_bytes(),
+        };
+        let stages = crate::schedule::growth_stages(self);
+        // A growth builds the finer grid while the coarser one still exists.
+        let grid = stages
+            .iter()
+            .rev()
+            .take(2)
+            .fold(Bytes(0), |sum, &(_, nodes)| sum.plus(model_bytes(nodes)));
+        let kind = format!(
+            "the {} grid ({}, {} channels a node)",
+            self.model.name(),
+            self.precision.name(),
+            shape(self.grid).channels
+        );
+        Bytes::check(grid, available, &format!("--grid {}", self.grid), &kind)?;
+        let batch = shape(self.grid).training_ray_bytes().times(self.batch as u64);
+        let rays = format!("a step's rays at --grid {}", self.grid);
+        Bytes::check(batch, available, &format!("--batch {}", self.batch), &rays)?;
+        let what = format!("--grid {} with --batch {}", self.grid, self.batch);
+        Bytes::check(grid.plus(batch), available, &what, "the grid and a step's rays")?;
+        Ok(())
     }
 
     /// A resumed fit's settings: `saved`'s, except the fields `given` names (by field name, as

@@ -30,7 +30,9 @@
 //! - [`distortion`]: the mip-NeRF 360 distortion loss of packed rays' weights, as a fused op
 //!   ([`DistortionLoss`]) with a hand-written O(n) backward into the densities, and its
 //!   taped (pairwise) twin;
-//! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]).
+//! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]);
+//! - [`limits`]: what a grid, a training batch, a render and a loaded frame will allocate,
+//!   checked against the machine's memory before anything is allocated.
 //!
 //! ```
 //! use fogray_ops::{Composite, CompositeInputs};
@@ -60,6 +62,7 @@ pub mod distortion;
 mod error;
 pub mod grid;
 pub mod hard;
+pub mod limits;
 mod math;
 mod prefetch;
 pub mod prior;

@@ -8,6 +8,7 @@ mod export;
 mod fit_render;
 mod interrupt;
 mod lego;
+mod limits;
 mod one_line;
 mod orbit;
 mod outputs;

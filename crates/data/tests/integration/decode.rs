@@ -8,12 +8,15 @@ use serde_json::json;
 
 use crate::common::{at, ngp_file, save, tempdir};
 
-/// Loads an instant-ngp file of one frame naming `file` (relative to `dir`).
+/// Loads an instant-ngp file of two frames naming `file` (relative to `dir`; a fit needs a
+/// frame to train on and one held out): the held-out one.
 pub fn load_single(dir: &Path, file: &str, options: &LoadOptions) -> Frame {
-    let frame = json!({ "file_path": file, "transform_matrix": at([0.0, 0.0, 3.0]) });
-    let path = ngp_file(dir, json!({ "fl_x": 4.0 }), vec![frame]);
+    let frames = [3.0, 4.0].map(|z| json!({ "file_path": file, "transform_matrix": at([0.0, 0.0, z]) }));
+    let path = ngp_file(dir, json!({ "fl_x": 4.0 }), frames.to_vec());
     let scene = load(&path, options).unwrap();
-    assert_eq!((scene.train.len(), scene.test.len()), (0, 1));
+    assert_eq!((scene.train.len(), scene.test.len()), (1, 1));
+    // Both frames name one file: decoded once, the same picture.
+    assert_eq!(scene.train[0].picture, scene.test[0].picture);
     scene.test.into_iter().next().unwrap()
 }
 

@@ -301,17 +301,33 @@ fn missing_images_are_listed_unless_skipped() {
     names(&err, &path);
     assert!(err.to_string().contains("f1.png") && err.to_string().contains("8 image"));
 
-    let scene = load(
-        &path,
-        &LoadOptions {
-            skip_missing: true,
-            ..opts()
-        },
-    )
-    .unwrap();
-    assert_eq!(scene.skipped, 8);
-    assert_eq!((scene.train.len(), scene.test.len()), (0, 1));
-    assert_eq!(scene.test[0].name, "f0");
+    // Skipped, they leave one frame: nothing to train on beside the held-out one.
+    let skip = LoadOptions {
+        skip_missing: true,
+        ..opts()
+    };
+    let err = load(&path, &skip).unwrap_err();
+    assert!(
+        matches!(
+            err,
+            DataError::TooFewFrames {
+                frames: 1,
+                skipped: 8,
+                ..
+            }
+        ),
+        "{err}"
+    );
+    names(&err, &path);
+    // With a second picture, two frames remain: f0 held out, f1 trained on.
+    solid_png(&dir.path().join("images/f1.png"), 4, 3, [1, 2, 3]);
+    let scene = load(&path, &skip).unwrap();
+    assert_eq!(scene.skipped, 7);
+    assert_eq!((scene.train.len(), scene.test.len()), (1, 1));
+    assert_eq!(
+        (scene.test[0].name.as_str(), scene.train[0].name.as_str()),
+        ("f0", "f1")
+    );
 }
 
 #[test]

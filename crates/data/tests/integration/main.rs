@@ -8,6 +8,7 @@ mod decode;
 mod downscale;
 mod errors;
 mod lego;
+mod limits;
 mod llff;
 mod projection;
 mod roundtrip;

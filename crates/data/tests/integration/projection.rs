@@ -18,7 +18,13 @@ fn a_blender_camera_projects_by_the_field_of_view() {
     // Camera at (0, 0, 4), identity OpenGL rotation: looks down -Z at the origin, +Y up.
     let dir = tempdir();
     let angle: f64 = 0.9;
-    blender_folder(dir.path(), angle, &[("r_0", [0.0, 0.0, 4.0])], 8, 6);
+    blender_folder(
+        dir.path(),
+        angle,
+        &[("r_0", [0.0, 0.0, 4.0]), ("r_1", [0.0, 0.0, 5.0])],
+        8,
+        6,
+    );
     let scene = load(dir.path(), &LoadOptions::default()).unwrap();
     let cam = &scene.test[0].camera;
     let f = 8.0 / (2.0 * (angle / 2.0).tan());

@@ -8,8 +8,8 @@ use crate::common::{at, blender_folder, ngp_file, solid_png, tempdir};
 fn ngp_box(top: serde_json::Value) -> ([f64; 3], [f64; 3]) {
     let dir = tempdir();
     solid_png(&dir.path().join("a.png"), 2, 2, [0, 0, 0]);
-    let frame = json!({ "file_path": "a.png", "transform_matrix": at([0.0, 0.0, 3.0]) });
-    let path = ngp_file(dir.path(), top, vec![frame]);
+    let frames = [3.0, 4.0].map(|z| json!({ "file_path": "a.png", "transform_matrix": at([0.0, 0.0, z]) }));
+    let path = ngp_file(dir.path(), top, frames.to_vec());
     load(&path, &LoadOptions::default()).unwrap().scene_box
 }
 
@@ -62,7 +62,13 @@ fn an_aabb_key_sets_scale_and_offset_as_instant_ngp_does() {
 #[test]
 fn blender_has_the_fixed_box() {
     let dir = tempdir();
-    blender_folder(dir.path(), 0.7, &[("r_0", [0.0, 0.0, 4.0])], 2, 2);
+    blender_folder(
+        dir.path(),
+        0.7,
+        &[("r_0", [0.0, 0.0, 4.0]), ("r_1", [0.0, 0.0, 5.0])],
+        2,
+        2,
+    );
     let scene = load(dir.path(), &LoadOptions::default()).unwrap();
     assert_eq!(scene.scene_box, ([-1.5; 3], [1.5; 3]));
     assert_eq!(scene.scene_box, BLENDER_SCENE_BOX);

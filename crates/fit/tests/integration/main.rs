@@ -9,6 +9,7 @@ mod common;
 mod dense;
 mod depth;
 mod environment;
+mod limits;
 mod mesh;
 mod metrics;
 mod negative;
