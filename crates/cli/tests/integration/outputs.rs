@@ -44,17 +44,35 @@ fn scene(dir: &Path) -> (PathBuf, PathBuf) {
     (data, model)
 }
 
-/// A fresh dense model of 8^3 nodes in f32.
+/// A dense model of 8^3 nodes in f32 over the box [-1.5, 1.5]^3: a dense ball of radius 1 at
+/// the origin (raw density 50 inside, -20 outside), so that it renders and has a surface.
 pub fn write_model(path: &Path) {
+    const NODES: usize = 8;
     let settings = FitSettings {
-        grid: 8,
+        grid: NODES,
         grow: false,
         sh_degree: 0,
         model: ModelKind::Dense,
         precision: Precision::F32,
         ..FitSettings::default()
     };
-    let model = DenseGrid::<f32>::fresh(&settings, 8).unwrap();
+    let mut model = DenseGrid::<f32>::fresh(&settings, NODES).unwrap();
+    let id = model.params().ids().next().unwrap();
+    let mut values = model.params_mut().get_mut(id).unwrap();
+    let shape = values.shape().to_vec();
+    let rows = ndarray::Array2::from_shape_fn((NODES * NODES * NODES, 4), |(l, c)| {
+        let i = [l / (NODES * NODES), l / NODES % NODES, l % NODES];
+        let r2: f32 = i
+            .iter()
+            .map(|&x| (-1.5 + 3.0 * x as f32 / (NODES - 1) as f32).powi(2))
+            .sum();
+        match c {
+            0 if r2 < 1.0 => 50.0,
+            0 => -20.0,
+            _ => 0.5,
+        }
+    });
+    values.assign(&rows.into_shape_with_order(shape).unwrap());
     save(path, &model, &TrainingState::fresh(), &settings, &BTreeMap::new()).unwrap();
 }
 
@@ -159,6 +177,11 @@ fn an_export_onto_its_model_and_a_gif_onto_a_folder_are_refused_before_any_work(
     let run = fogray(&["export", "--model", arg(&model), "--mesh", arg(&model)]);
     assert_refused(&run, "it is the input", "the mesh onto the model");
     assert_eq!(snapshot(dir.path()), before);
+    // The model has a surface: beside it, the same export writes a mesh.
+    let mesh = dir.path().join("mesh.ply");
+    let run = fogray(&["export", "--model", arg(&model), "--mesh", arg(&mesh)]);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    assert!(std::fs::read(&mesh).unwrap().starts_with(b"ply\n"));
     // A GIF named after a folder: refused before the first frame (none is written).
     let out = dir.path().join("orbit");
     let folder = dir.path().join("a-folder");
@@ -197,6 +220,14 @@ fn a_fit_saving_onto_its_transforms_or_reporting_into_its_dataset_is_refused_bef
     let mut args = vec!["fit", "--data", arg(&data), "--out", arg(&data)];
     args.extend(TINY_FIT);
     assert_refused(&fogray(&args), "refused as an output", "--out into the dataset");
+    // A folder where the model goes: refused before training, not after.
+    let mut args = vec!["fit", "--data", arg(&data), "--save-model", arg(dir.path())];
+    args.extend(TINY_FIT);
+    assert_refused(
+        &fogray(&args),
+        "it is a folder, where a file is expected",
+        "--save-model a folder",
+    );
     assert_eq!(snapshot(&data), before);
 }
 
@@ -351,25 +382,20 @@ fn a_read_only_output_folder_is_refused_before_rendering() {
     };
     let mesh = locked.path.join("mesh.ply");
     let export = fogray(&["export", "--model", arg(&model), "--mesh", arg(&mesh)]);
-    let gif = locked.path.join("orbit.gif");
-    let out = dir.path().join("orbit");
-    let render = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--orbit",
-        "2",
-        "--size",
-        "8x8",
-        "--out",
-        arg(&out),
-        "--gif",
-        arg(&gif),
-    ]);
+    let render = |out: &Path, gif: &Path| {
+        let args = ["--orbit", "2", "--size", "8x8", "--out", arg(out), "--gif", arg(gif)];
+        fogray(&[&["render", "--model", arg(&model)][..], &args].concat())
+    };
+    // Frames into the locked folder, the GIF beside it (started before the first frame).
+    let (out, gif) = (dir.path().join("orbit"), dir.path().join("orbit.gif"));
+    let frames = render(&locked.path, &gif);
+    let gif_there = render(&out, &locked.path.join("orbit.gif"));
     drop(locked);
     assert_refused(&export, "cannot be written", "a mesh in a read-only folder");
-    assert_refused(&render, "cannot be written", "a GIF in a read-only folder");
-    assert!(!out.exists(), "no frame rendered");
+    assert_refused(&frames, "cannot be written", "frames in a read-only folder");
+    assert_refused(&gif_there, "cannot be written", "a GIF in a read-only folder");
+    assert!(!out.exists() && !gif.exists(), "nothing rendered");
+    // Not even the GIF's temporary.
     assert_eq!(leftovers(dir.path()), Vec::<String>::new());
 }
 

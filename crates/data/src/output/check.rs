@@ -169,7 +169,7 @@ fn check_one(
         return Err(OutputProblem::InsideInput { folder: folder.clone() });
     }
     if let Output::SeparateFolder(_) = output {
-        let files = inputs.files.iter().map(|(r, given)| (r, given));
+        let files = inputs.files.iter();
         let folders = inputs.folders.iter().map(|(r, given)| (r, given));
         if let Some((_, input)) = files.chain(folders).find(|(r, _)| r.starts_with(&at)) {
             return Err(OutputProblem::HoldsInput { input: input.clone() });

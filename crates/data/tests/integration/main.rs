@@ -10,6 +10,7 @@ mod errors;
 mod lego;
 mod limits;
 mod llff;
+mod outputs;
 mod projection;
 mod roundtrip;
 mod scene_box;
