@@ -17,3 +17,8 @@ pub mod stamp;
 #[cfg(doctest)]
 #[doc = include_str!("../README.md")]
 pub struct ReadmeDoctests;
+
+/// docs/your-own-renderer.md's examples, compiled and run as doctests.
+#[cfg(doctest)]
+#[doc = include_str!("../docs/your-own-renderer.md")]
+pub struct YourOwnRendererDoctests;

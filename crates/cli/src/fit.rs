@@ -12,6 +12,7 @@ use fogray_fit::metrics::{haze_fraction, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::session::{self, FitReport, SessionOutcome, SessionPlan};
 use fogray_fit::settings::{FitSettings, SceneBox};
+use fogray_fit::space::SpaceDecision;
 use fogray_fit::train::LogEntry;
 use serde::Serialize;
 
@@ -47,6 +48,7 @@ mod tests {
         assert_eq!(recommended("grid"), "128");
         assert_eq!(recommended("lr").parse::<f64>().unwrap(), FitSettings::RECOMMENDED.lr);
         assert_eq!(recommended("smoothness").parse::<f64>().unwrap(), 0.0);
+        assert_eq!(recommended("space"), "auto");
         let said = format!(
             "unless given, {}, or {} for --seconds {} and more",
             FitSettings::RECOMMENDED.grid,
@@ -166,6 +168,9 @@ pub struct FitSummary<'a> {
     pub peak_resident_bytes: Option<u64>,
     /// Each held-out view's PSNR and share of the held-out squared error, in view order.
     pub held_out_views: Vec<HeldOutScore>,
+    /// The space the field was fitted in (`box` or `contracted`, with the inner region), and
+    /// why.
+    pub space: &'a SpaceDecision,
 }
 
 /// One held-out view's PSNR and its share of the squared error over all of them.
@@ -303,6 +308,15 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
     }
     let plan = plan(args, given)?;
     plan.settings.check()?;
+    // Before anything is read or trained: no output may be an input or collide with the
+    // dataset (a report's test/ folder over the dataset's own held-out pictures).
+    let mut inputs = fogray_data::Inputs::new().dataset(&plan.data)?;
+    if let Some(file) = &plan.resume {
+        if args.save_model.as_deref() != Some(file.as_path()) {
+            inputs = inputs.file(file);
+        }
+    }
+    fogray_data::plan_fit_outputs(&inputs, args.save_model.as_deref(), args.out.as_deref())?;
     let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args)?;
     let settings = FitSettings {
         scene_box: Some(plan.settings.scene_box.unwrap_or(scene_box)),
@@ -329,12 +343,13 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
     };
     let summary = summary(&report, &data, load_seconds);
     if let Some(dir) = &args.out {
-        crate::fit_report::write_out(dir, &plan, &settings, &data, &summary, &report.held_out)?;
+        crate::fit_report::write_out(dir, &plan, &report.settings, &data, &summary, &report.held_out)?;
     }
     if args.json {
         return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
     }
-    let mut text = String::from("step      seconds  train loss  test PSNR (dB)  test SSIM\n");
+    let mut text = format!("space: {} ({})\n", report.space.space, report.space.why);
+    text += "step      seconds  train loss  test PSNR (dB)  test SSIM\n";
     for e in &report.log {
         text += &format!(
             "{:>6} {:>10.1} {:>11.3e} {:>15.2} {:>10.4}\n",
@@ -386,6 +401,7 @@ fn summary<'a>(report: &'a FitReport, data: &Dataset, load_seconds: f64) -> FitS
         load_seconds,
         profile: report.profile.clone(),
         parameters: report.parameters,
+        space: &report.space,
     }
 }
 

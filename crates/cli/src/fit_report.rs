@@ -61,6 +61,9 @@ pub fn write_out(
             )?;
         }
     }
+    if let Some(framing) = &summary.space.framing {
+        fogray_fit::space_picture::write_framing_png(&dir.join("framing.png"), data, framing)?;
+    }
     let curve = [Curve {
         label: "fogray fit".into(),
         log: summary.log,
@@ -120,6 +123,21 @@ fn markdown(
         s.views[0], s.views[1]
     )
     .map_err(w_)?;
+    let framing = match &s.space.framing {
+        Some(f) => format!(
+            ", inner region centred at ({:.3}, {:.3}, {:.3}) with half-side {:.3}",
+            f.centre[0], f.centre[1], f.centre[2], f.radius
+        ),
+        None => String::new(),
+    };
+    writeln!(md, "Space: **{}**{framing}: {}.\n", s.space.space, s.space.why).map_err(w_)?;
+    if s.space.framing.is_some() {
+        writeln!(
+            md,
+            "![the cameras (training blue, held-out orange) and the inner region (green), seen from above](framing.png)\n"
+        )
+        .map_err(w_)?;
+    }
     writeln!(md, "| figure | value |\n|---|---|").map_err(w_)?;
     let rows = [
         (

@@ -69,7 +69,8 @@ enum Command {
         mut_arg("smoothness", |a| a.default_value(fit::recommended("smoothness"))),
         mut_arg("lr", |a| a.default_value(fit::recommended("lr"))),
         mut_arg("lr_final", |a| a.default_value(fit::recommended("lr_final"))),
-        mut_arg("distortion", |a| a.default_value(fit::recommended("distortion")))
+        mut_arg("distortion", |a| a.default_value(fit::recommended("distortion"))),
+        mut_arg("space", |a| a.default_value(fit::recommended("space")))
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms

@@ -26,6 +26,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use fogray_ops::space::Contraction;
 use fogray_ops::prior::TotalVariation;
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples};
@@ -38,6 +39,7 @@ use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
 use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
+use crate::space::FieldSpace;
 use crate::settings::{FitSettings, Method, SceneBox};
 use crate::shading::{Shading, VIEW_INDEPENDENT_CHANNELS};
 
@@ -59,9 +61,18 @@ pub struct DenseGrid<F: Float> {
     nodes: usize,
     /// Weight of the distortion loss in the training objective (0: none).
     distortion: f64,
+    /// The contraction its box is the image of, for a field of all of space.
+    contraction: Option<Contraction>,
 }
 
 impl<F: Float> DenseGrid<F> {
+    /// The same grid over the contracted cube of `contraction` (its box must be
+    /// [`Contraction::cube`]); `None` for a field of its box.
+    pub fn with_contraction(mut self, contraction: Option<Contraction>) -> Self {
+        self.contraction = contraction;
+        self
+    }
+
     /// The same grid with the distortion loss (mip-NeRF 360's, over each training ray's
     /// sample weights) weighted by `weight` in its training objective.
     ///
@@ -127,6 +138,7 @@ impl<F: Float> DenseGrid<F> {
             prior,
             nodes,
             distortion: 0.0,
+            contraction: None,
         })
     }
 
@@ -165,8 +177,11 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     const KIND: &'static str = "dense-grid";
 
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
-        DenseGrid::with_shading(settings.model_box(), nodes, Shading::of(settings)?, settings.smoothness)?
-            .with_distortion(settings.distortion)
+        Ok(
+            DenseGrid::with_shading(settings.model_box(), nodes, Shading::of(settings)?, settings.smoothness)?
+                .with_distortion(settings.distortion)?
+                .with_contraction(settings.field_space()?.contraction()),
+        )
     }
 
     /// Each new node takes the trilinear interpolation of this grid's raw values at its
@@ -174,7 +189,8 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     fn resampled(&self, nodes: usize, _occupancy: Option<&OccupancyGrid>) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
         let mut grown = DenseGrid::<F>::with_shading(scene_box, nodes, self.shading, self.prior.weight())?
-            .with_distortion(self.distortion)?;
+            .with_distortion(self.distortion)?
+            .with_contraction(self.contraction);
         let channels = self.channels();
         let at = |i: usize, axis: usize| {
             let (lo, hi) = (scene_box.min[axis], scene_box.max[axis]);
@@ -202,6 +218,13 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
 
     fn bounds(&self) -> Aabb {
         self.bounds
+    }
+
+    fn space(&self) -> FieldSpace {
+        match self.contraction {
+            Some(c) => FieldSpace::Contracted(c),
+            None => FieldSpace::Box(self.bounds),
+        }
     }
 
     /// Half the spacing of the nodes along the box's shortest side (`1 / (nodes - 1)` for

@@ -92,6 +92,8 @@ pub mod session;
 pub mod settings;
 pub mod shading;
 pub mod slices;
+pub mod space;
+pub mod space_picture;
 pub mod sparse;
 pub mod state;
 pub mod sweep;

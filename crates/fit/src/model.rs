@@ -13,6 +13,7 @@ use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView2};
 
 use crate::error::FitError;
+use crate::space::FieldSpace;
 use crate::settings::{FitSettings, Method};
 
 /// What a training step records: the photometric loss alone (for the log) and the objective
@@ -99,6 +100,12 @@ pub trait RadianceField<F: Float>: Sized + Sync {
 
     /// The box the field covers; it is empty outside.
     fn bounds(&self) -> Aabb;
+
+    /// The space the field lives in and samples in: its box by default, or the contracted
+    /// cube of an unbounded field ([`FieldSpace`]).
+    fn space(&self) -> FieldSpace {
+        FieldSpace::Box(self.bounds())
+    }
 
     /// The spacing of samples along a ray that resolves the field (half a voxel for a grid).
     fn sample_step(&self) -> f64;

@@ -27,7 +27,6 @@ use ndarray::{Array1, Array2, Array3};
 
 use crate::error::FitError;
 use crate::model::{RadianceField, RenderWanted};
-use crate::sampling::sample_rays;
 use crate::settings::Method;
 
 /// Pixels whose opacity is below this are background: their depth is NaN. The expected depth
@@ -110,7 +109,7 @@ pub fn render_rays<F: Float, M: RadianceField<F>>(
     let mut color = Array2::zeros((n, 3));
     let mut opacity = Array1::zeros(n);
     let mut depth = options.depth.then(|| Array1::zeros(n));
-    let bounds = model.bounds();
+    let space = model.space();
     let mut tape = Tape::<F>::new();
     // No backward: the ops keep no record and no residuals.
     tape.set_grad_enabled(false);
@@ -118,7 +117,7 @@ pub fn render_rays<F: Float, M: RadianceField<F>>(
     for start in (0..n).step_by(CHUNK) {
         let end = (start + CHUNK).min(n);
         let rays = RayBatch::new(rows_of::<F>(origins, start, end), rows_of::<F>(directions, start, end))?;
-        let samples = sample_rays(&bounds, occupancy, &rays, model.sample_step())?;
+        let samples = space.sample(occupancy, &rays, model.sample_step())?;
         let out = model.render(&mut tape, &rays, samples, options.background, options.method, wanted)?;
         let (c, o) = (tape.value(out.color)?, tape.value(out.opacity)?);
         for k in 0..end - start {

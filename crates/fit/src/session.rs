@@ -23,6 +23,7 @@ use crate::model::RadianceField;
 use crate::profile::ProfileTable;
 use crate::render::RenderedView;
 use crate::settings::FitSettings;
+use crate::space::{self, SpaceDecision};
 use crate::train::{fit_from, LogEntry, Progress};
 
 /// Why a session failed.
@@ -96,6 +97,10 @@ pub struct FitReport {
     pub first_step_seconds: f64,
     /// Where the model was saved, if it was.
     pub saved: Option<PathBuf>,
+    /// The space the field was fitted in, and why.
+    pub space: SpaceDecision,
+    /// The settings the fit ran with (its space decided).
+    pub settings: FitSettings,
 }
 
 /// How a session ended.
@@ -133,11 +138,17 @@ pub fn resume_settings(
 }
 
 /// Runs a session: the fit of `data` that `plan` describes, with the model type its settings
-/// name, stopped by Ctrl-C (which saves it).
+/// name and its space decided from the data ([`space::resolve`]), stopped by Ctrl-C (which
+/// saves it).
 ///
 /// Errors: bad settings, a model file that cannot be read or written, the ops' errors.
 pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, SessionError> {
-    plan.settings.check()?;
+    let (settings, space) = space::resolve(&plan.settings, data)?;
+    settings.check()?;
+    let plan = &SessionPlan {
+        settings,
+        ..plan.clone()
+    };
     if let Some(file) = &plan.save_model {
         checkpoint::check_destination(file)?;
     }
@@ -145,6 +156,7 @@ pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, Session
     let work = SessionWork {
         data,
         plan,
+        space: &space,
         stop: &stop,
     };
     with_model(plan.settings.precision, plan.settings.model, work)
@@ -154,6 +166,7 @@ pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, Session
 struct SessionWork<'a> {
     data: &'a Dataset,
     plan: &'a SessionPlan,
+    space: &'a SpaceDecision,
     stop: &'a StopFlag,
 }
 
@@ -161,13 +174,14 @@ impl ModelWork for SessionWork<'_> {
     type Output = Result<SessionOutcome, SessionError>;
 
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
-        run_typed::<F, M>(self.data, self.plan, self.stop)
+        run_typed::<F, M>(self.data, self.plan, self.space, self.stop)
     }
 }
 
 fn run_typed<F: Float, M: RadianceField<F>>(
     data: &Dataset,
     plan: &SessionPlan,
+    space: &SpaceDecision,
     stop: &StopFlag,
 ) -> Result<SessionOutcome, SessionError> {
     let clock = Instant::now();
@@ -236,6 +250,8 @@ fn run_typed<F: Float, M: RadianceField<F>>(
         parameters: params.ids().filter_map(|id| params.get(id).ok()).map(|v| v.len()).sum(),
         first_step_seconds,
         saved,
+        space: space.clone(),
+        settings: *settings,
         held_out: result.held_out,
         log: result.log,
     })))

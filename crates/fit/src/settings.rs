@@ -21,6 +21,7 @@ use serde_json::{Map, Value};
 use fogray_ops::limits::{self, Bytes, GridShape};
 
 use crate::error::FitError;
+use crate::space::{FieldSpace, Framing, SpaceChoice};
 
 /// Which implementation of the grid lookup, the activation and the composite a step records.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -306,6 +307,18 @@ pub struct FitSettings {
     #[cfg_attr(feature = "cli", arg(long, value_name = "DEGREE", default_value_t = FitSettings::DEFAULT.background_degree))]
     #[serde(default = "background_of_degree_2")]
     pub background_degree: usize,
+    /// Where the field lives: `auto` decides from the data (the box for pictures with alpha,
+    /// all of space contracted around what the cameras look at for pictures without), `box`
+    /// the scene box (--box, or the dataset's, e.g. instant-ngp's aabb_scale), `contracted`
+    /// all of space. A file written before this setting existed reads `box`.
+    #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.space))]
+    #[serde(default = "fitted_in_a_box")]
+    pub space: SpaceChoice,
+    /// The inner region of a contracted space; framed from the training cameras when not
+    /// given (a checkpoint keeps the one its fit used).
+    #[cfg_attr(feature = "cli", arg(skip))]
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub framing: Option<Framing>,
 }
 
 impl FitSettings {
@@ -333,6 +346,8 @@ impl FitSettings {
         distortion: 0.0,
         learn_background: false,
         background_degree: 3,
+        space: SpaceChoice::Box,
+        framing: None,
     };
 
     /// What `fogray fit` trains unless a flag says otherwise: [`FitSettings::DEFAULT`] with
@@ -351,7 +366,8 @@ impl FitSettings {
     ///   above it (the library's rate suits the grid example's hundreds of rays a pixel);
     /// - `distortion`: a little of mip-NeRF 360's loss pulls each ray's weights onto its
     ///   surface, which clears the haze a photograph cannot tell from a sheet; ten times more
-    ///   costs PSNR.
+    ///   costs PSNR;
+    /// - `space`: decided from the data ([`crate::space::resolve`]).
     pub const RECOMMENDED: FitSettings = FitSettings {
         grid: 128,
         model: ModelKind::Sparse,
@@ -360,6 +376,7 @@ impl FitSettings {
         lr: 0.4,
         lr_final: 0.04,
         distortion: 0.01,
+        space: SpaceChoice::Auto,
         ..FitSettings::DEFAULT
     };
 
@@ -381,9 +398,31 @@ impl FitSettings {
         }
     }
 
-    /// The box the model covers: `scene_box`, else [`SceneBox::UNIT`].
+    /// The box the model's grid covers: the contracted cube `[-2, 2]^3` in a contracted
+    /// space, else `scene_box`, else [`SceneBox::UNIT`].
     pub fn model_box(&self) -> SceneBox {
-        self.scene_box.unwrap_or(SceneBox::UNIT)
+        match self.space {
+            SpaceChoice::Contracted => SceneBox::cube(fogray_ops::space::CONTRACTED_HALF_WIDTH),
+            _ => self.scene_box.unwrap_or(SceneBox::UNIT),
+        }
+    }
+
+    /// The space the model samples in: the contracted one around `framing` for a contracted
+    /// space, else the model's box (`auto`, not yet decided from data, is the box).
+    ///
+    /// Errors: a contracted space without a framing, or a framing that is not finite and
+    /// positive.
+    pub fn field_space(&self) -> Result<FieldSpace, FitError> {
+        match (self.space, self.framing) {
+            (SpaceChoice::Contracted, Some(framing)) => Ok(FieldSpace::Contracted(framing.contraction()?)),
+            (SpaceChoice::Contracted, None) => Err(FitError::Config(
+                "--space contracted needs an inner region (framed from the cameras by fogray fit)".into(),
+            )),
+            _ => {
+                let b = self.model_box();
+                Ok(FieldSpace::Box(fogray_ops::rays::Aabb::new(b.min, b.max)?))
+            }
+        }
     }
 
     /// `steps` if set, else `seconds` (60 if neither).
@@ -529,6 +568,11 @@ fn trained_without_random_background() -> bool {
     false
 }
 
+/// `space` of settings written before it existed: their fits were in a box.
+fn fitted_in_a_box() -> SpaceChoice {
+    SpaceChoice::Box
+}
+
 /// `background_degree` of settings written before it existed: their learned backgrounds were
 /// of degree 2 (and their checkpoints hold that many coefficients).
 fn background_of_degree_2() -> usize {
@@ -544,6 +588,18 @@ impl Default for FitSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_long_budget_of_seconds_grows_to_the_finer_lattice() {
+        let long = FitSettings::LONG_FIT_SECONDS;
+        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(60.0)), 128);
+        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(long - 1e-9)), 128);
+        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(long)), 192);
+        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(300.0)), 192);
+        // Steps say nothing of time.
+        assert_eq!(FitSettings::recommended_grid(Budget::Steps(1_000_000)), 128);
+        assert!(FitSettings::RECOMMENDED.check().is_ok());
+    }
 
     #[test]
     fn given_flags_win_over_the_saved_settings_and_the_rest_is_saved() {
@@ -604,18 +660,6 @@ mod tests {
     }
 
     #[test]
-    #[test]
-    fn a_long_budget_of_seconds_grows_to_the_finer_lattice() {
-        let long = FitSettings::LONG_FIT_SECONDS;
-        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(60.0)), 128);
-        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(long - 1e-9)), 128);
-        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(long)), 192);
-        assert_eq!(FitSettings::recommended_grid(Budget::Seconds(300.0)), 192);
-        // Steps say nothing of time.
-        assert_eq!(FitSettings::recommended_grid(Budget::Steps(1_000_000)), 128);
-        assert!(FitSettings::RECOMMENDED.check().is_ok());
-    }
-
     fn every_setting_is_checked() {
         let ok = FitSettings::DEFAULT;
         assert!(ok.check().is_ok());

@@ -21,6 +21,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+use fogray_ops::space::Contraction;
 use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
@@ -34,6 +35,7 @@ use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
 use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
+use crate::space::FieldSpace;
 use crate::settings::{FitSettings, Method, SceneBox};
 use crate::shading::Shading;
 
@@ -58,6 +60,8 @@ pub struct SparseGrid<F: Float> {
     nodes: usize,
     /// Weight of the distortion loss in the training objective (0: none).
     distortion: f64,
+    /// The contraction its box is the image of, for a field of all of space.
+    contraction: Option<Contraction>,
 }
 
 /// Where node `i` of `nodes` sits along axis `a` of `scene_box`.
@@ -67,6 +71,13 @@ fn node_position(scene_box: &SceneBox, nodes: usize, a: usize, i: usize) -> f64 
 }
 
 impl<F: Float> SparseGrid<F> {
+    /// The same grid over the contracted cube of `contraction` (its box must be
+    /// [`Contraction::cube`]); `None` for a field of its box.
+    pub fn with_contraction(mut self, contraction: Option<Contraction>) -> Self {
+        self.contraction = contraction;
+        self
+    }
+
     /// The same grid with the distortion loss (mip-NeRF 360's, over each training ray's
     /// sample weights) weighted by `weight` in its training objective.
     ///
@@ -120,6 +131,7 @@ impl<F: Float> SparseGrid<F> {
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
             nodes,
             distortion: 0.0,
+            contraction: None,
         })
     }
 
@@ -159,7 +171,8 @@ impl<F: Float> SparseGrid<F> {
             self.shading,
             self.prior.weight(),
         )?
-        .with_distortion(self.distortion)?;
+        .with_distortion(self.distortion)?
+        .with_contraction(self.contraction);
         let kept = grown.index().kept_nodes();
         let positions = Array2::from_shape_fn((kept.len(), 3), |(r, a)| {
             let l = kept[r];
@@ -271,6 +284,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     /// Every node of the lattice stored.
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
         let shading = Shading::of(settings)?;
+        let contraction = settings.field_space()?.contraction();
         SparseGrid::new(
             settings.model_box(),
             nodes,
@@ -279,6 +293,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             settings.smoothness,
         )?
         .with_distortion(settings.distortion)
+        .map(|g| g.with_contraction(contraction))
     }
 
     /// Keeps the nodes within [`DILATION`] occupancy cells of a cell the fit's occupancy grid
@@ -308,6 +323,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
     ) -> Result<Self, FitError> {
         let keep = structure(KEPT).ok_or_else(|| FitError::Config(format!("no {KEPT:?} mask")))?;
         let shading = Shading::of(settings)?;
+        let contraction = settings.field_space()?.contraction();
         SparseGrid::new(
             settings.model_box(),
             nodes,
@@ -316,6 +332,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             settings.smoothness,
         )?
         .with_distortion(settings.distortion)
+        .map(|g| g.with_contraction(contraction))
     }
 
     /// The cells none of whose points' lookups reach a kept node: they read raw 0 everywhere,
@@ -333,6 +350,13 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
 
     fn bounds(&self) -> Aabb {
         self.bounds
+    }
+
+    fn space(&self) -> FieldSpace {
+        match self.contraction {
+            Some(c) => FieldSpace::Contracted(c),
+            None => FieldSpace::Box(self.bounds),
+        }
     }
 
     /// Half the lattice spacing along the box's shortest side, as the dense grid's.

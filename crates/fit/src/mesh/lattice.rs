@@ -5,6 +5,7 @@ use fogray_tape::Float;
 use ndarray::Array2;
 
 use super::MeshError;
+use crate::space::FieldSpace;
 use crate::error::FitError;
 use crate::model::RadianceField;
 
@@ -55,7 +56,12 @@ impl Lattice {
             .checked_pow(3)
             .filter(|&t| nodes >= 2 && t.checked_mul(4).is_some())
             .ok_or(MeshError::Resolution(nodes))?;
-        let bounds = model.bounds();
+        // A field of all of space is meshed over its inner region, where the contraction is
+        // the identity up to scale ([`crate::mesh::extract`] maps the vertices to the world).
+        let bounds = match model.space() {
+            FieldSpace::Box(bounds) => bounds,
+            FieldSpace::Contracted(_) => Aabb::new([-1.0; 3], [1.0; 3])?,
+        };
         let plane = nodes * nodes;
         let slabs = (CHUNK_NODES / plane).max(1);
         let mut values = Vec::new();

@@ -42,6 +42,7 @@ use fogray_tape::Float;
 use ndarray::Array2;
 use thiserror::Error;
 
+use fogray_ops::space::InnerRegion;
 use crate::error::FitError;
 use crate::model::RadianceField;
 pub use lattice::Lattice;
@@ -180,7 +181,8 @@ pub struct Extraction {
 }
 
 /// The surface of `model` where its density crosses `options.level` on a lattice of
-/// `options.resolution` nodes per axis over its box, each vertex coloured by the model's
+/// `options.resolution` nodes per axis over its box (over the inner region of a field of all
+/// of space, in world units), each vertex coloured by the model's
 /// view-independent colour there (rounded to 8 bits). Lattice and colours are looked up
 /// without a tape. The surface encloses the region of at least the level's density and is
 /// closed: where that region reaches the box, a cap just outside the box closes it.
@@ -217,6 +219,17 @@ pub fn extract<F: Float, M: RadianceField<F>>(model: &M, options: &MeshOptions) 
         e => e,
     })?;
     let colors = vertex_colors(model, &positions)?;
+    let positions = match model.space().contraction() {
+        None => positions,
+        // The inner region's contracted point u is the world point c + r u.
+        Some(contraction) => {
+            let InnerRegion { centre, radius } = contraction.region();
+            positions
+                .iter()
+                .map(|p| std::array::from_fn(|a| (centre[a] + radius * f64::from(p[a])) as f32))
+                .collect()
+        }
+    };
     Ok(Extraction {
         mesh: Mesh {
             positions,

@@ -61,7 +61,7 @@ use crate::metrics::{psnr, ssim, SSIM_WINDOW};
 use crate::model::{RadianceField, TrainingBackground};
 use crate::profile::{Phases, StepProfile};
 use crate::render::{render_picture, RenderOptions, RenderedView};
-use crate::sampling::{occupancy_grid, sample_rays};
+use crate::sampling::occupancy_grid;
 use crate::settings::{Budget, FitSettings, Sampling};
 use crate::state::{Start, TrainingState};
 use crate::train::LogEntry;
@@ -271,8 +271,8 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
             _ => (TrainingBackground::Shared(self.data.background), batch.colors),
         };
         lap(&mut self.phases.batch);
-        let bounds = self.model.bounds();
-        let samples = sample_rays(&bounds, self.occupancy.as_ref(), &batch.rays, self.model.sample_step())?;
+        let space = self.model.space();
+        let samples = space.sample(self.occupancy.as_ref(), &batch.rays, self.model.sample_step())?;
         let taken = samples.len();
         self.samples += taken;
         lap(&mut self.phases.sample);
