@@ -110,7 +110,7 @@ fn fit_refuses_a_zero_downscale_and_a_background_outside_0_1() {
     let run = fit(&data, &["--downscale", "0"]);
     assert_refused(&run, "options", "--downscale 0");
     assert!(run.stderr.contains("downscale 0"), "{}", run.stderr);
-    // Refused by clap's value parser (its usual error of a few lines, exit status 2).
+    // Refused by clap's value parser (its error folded to one line, exit status 2).
     let run = fit(&data, &["--background", "2,0,0"]);
     assert_eq!(run.code, 2, "{}", run.stderr);
     assert!(run.stdout.is_empty(), "{}", run.stdout);

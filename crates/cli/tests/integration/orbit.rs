@@ -212,7 +212,7 @@ fn bad_orbit_flags_are_refused_in_one_line() {
     assert_refused(&run, "not-a-model.safetensors", "not a model");
 
     // --orbit and --cameras together, or neither, or orbit flags without --orbit: usage
-    // errors (clap's, with its usage lines), status 2.
+    // errors (clap's, folded to one line), status 2.
     let usage: [&[&str]; 5] = [
         &["--orbit", "3", "--cameras", arg(&data)],
         &[],

@@ -106,7 +106,7 @@ fn a_resume_refuses_another_lattice_and_a_missing_file_naming_the_file() {
     let run = fogray(&["fit", "--resume", arg(&missing), "--steps", "4"]);
     assert_refused(&run, "missing.safetensors", "a missing file");
 
-    // Neither a dataset nor a fit to resume: clap's usage error, exit status 2.
+    // Neither a dataset nor a fit to resume: clap's usage error (one line), exit status 2.
     let run = fogray(&["fit", "--steps", "4"]);
     assert_eq!(run.code, 2, "{}", run.stderr);
     assert!(run.stderr.contains("--data"), "{}", run.stderr);
