@@ -219,6 +219,15 @@ pub fn load_fit_data(path: &Path, data_args: &DataArgs) -> Result<(Dataset, Scen
             scene.skipped
         );
     }
+    if scene.images != fogray_data::ImageSource::Listed {
+        eprintln!("fogray fit: {} ({:?} format)", scene.images, scene.format);
+    }
+    if scene.unregistered > 0 {
+        eprintln!(
+            "fogray fit: {} pictures in the images folder are not in the capture's model and were left out",
+            scene.unregistered
+        );
+    }
     let (min, max) = scene.scene_box;
     let data = Dataset::new(views(scene.train)?, views(scene.test)?, data_args.background)?;
     Ok((data, SceneBox { min, max }))

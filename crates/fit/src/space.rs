@@ -9,11 +9,12 @@
 //! is real) are contracted.
 
 use fogray_ops::rays::{Aabb, RayBatch};
-use fogray_ops::sample::{ContractedSampler, Jitter, OccupancyGrid, PackedSamples};
-use fogray_ops::space::{framing_from_cameras, Contraction, InnerRegion};
+use fogray_ops::sample::{OccupancyGrid, PackedSamples, DEFAULT_FAR_GAP, MAX_CONTRACTED_PATH};
+use fogray_ops::space::{framing_from_cameras, Contraction, InnerRegion, CONTRACTED_HALF_WIDTH};
 use fogray_tape::Float;
 use fogray_tape::Offsets;
 use ndarray::{Array1, Array2};
+use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
 use crate::dataset::Dataset;
@@ -118,8 +119,9 @@ impl FieldSpace {
     /// space), only where `occupancy` is occupied if given.
     ///
     /// In the contracted space each sample's position is contracted (what the grid looks
-    /// up), and its length and depth are measured in contracted units too: the `k`-th piece of
-    /// a ray has length `step` and depth `(k + 1/2) step`, so that the field's density is per
+    /// up), and its length and depth are measured in contracted units too: pieces of about
+    /// `step` along the contracted path, each of the length of its contracted chord and at the
+    /// contracted distance of its midpoint from the ray's origin ([`march_ray`]), so that the field's density is per
     /// unit of contracted length, as DVGO v2 and Plenoxels model unbounded scenes. Measured in
     /// world units instead, a step in the far shell stands for thousands of world units, the
     /// fresh grid's thin fog there is opaque, every shell cell stays occupied, and the
@@ -137,47 +139,103 @@ impl FieldSpace {
     ) -> Result<PackedSamples<F>, FitError> {
         match self {
             FieldSpace::Box(bounds) => sample_rays(bounds, occupancy, rays, step),
-            FieldSpace::Contracted(contraction) => {
-                let sampler = ContractedSampler::new(*contraction, step)?;
-                let near = vec![0.0; rays.len()];
-                let all = sampler.sample(rays, &near, Jitter::None, None)?;
-                Ok(in_contracted_units(all, occupancy, step))
-            }
+            FieldSpace::Contracted(contraction) => march_contracted(contraction, occupancy, rays, step),
         }
     }
 
 }
 
-/// `all` (every piece of each ray, in order, of contracted length `step`) with lengths and
-/// depths in contracted units ([`FieldSpace::sample`]), keeping only the samples whose
-/// contracted position lies in an occupied cell of `occupancy` if given.
-fn in_contracted_units<F: Float>(all: PackedSamples<F>, occupancy: Option<&OccupancyGrid>, step: f64) -> PackedSamples<F> {
-    let mut lengths = Vec::with_capacity(all.rays());
-    let mut kept = Vec::with_capacity(all.len());
-    for r in 0..all.rays() {
-        let range = all.range(r).unwrap_or(0..0);
-        let start = range.start;
-        let before = kept.len();
-        for k in range {
-            let p = all.positions.row(k);
-            let occupied = occupancy.is_none_or(|g| g.is_occupied_at([p[0].as_f64(), p[1].as_f64(), p[2].as_f64()]));
-            if occupied {
-                kept.push((k, k - start));
-            }
+/// The most pieces a ray is cut into in the contracted space: a ray's contracted path is at
+/// most [`MAX_CONTRACTED_PATH`] long, and a piece about `step` long.
+fn max_pieces(step: f64) -> usize {
+    (MAX_CONTRACTED_PATH / step).ceil() as usize + 1
+}
+
+/// One sample of a contracted march: its contracted midpoint, its distance along the
+/// contracted path to the midpoint, and its contracted length.
+type ContractedPiece = ([f64; 3], f64, f64);
+
+/// The pieces of one ray from its origin to the far gap: each about `step` long in contracted
+/// space, found by a secant march (the next world step is `step` over the contracted speed of
+/// the last piece, which starts at `r` inside the inner region), each piece's length the exact
+/// chord between the contracted images of its ends. The chord, not `step`, is the piece's
+/// length, so the optical depth of a piece is right however far its length strays from `step`
+/// where the speed changes fast (across the inner faces, far out); the secant keeps the march
+/// to about one piece per `step`, and out in the shell, where the speed falls like `1 / t^2`,
+/// each step halves what is left to the faces, so the far gap is reached in a few pieces.
+fn march_ray(contraction: &Contraction, origin: [f64; 3], direction: [f64; 3], step: f64) -> Vec<ContractedPiece> {
+    let at = |t: f64| contraction.contract([0, 1, 2].map(|a| origin[a] + t * direction[a]));
+    let limit = CONTRACTED_HALF_WIDTH - DEFAULT_FAR_GAP;
+    let mut pieces = Vec::new();
+    let (mut t, mut y) = (0.0, at(0.0));
+    let mut world_step = step * contraction.region().radius;
+    let mut walked = 0.0;
+    for _ in 0..max_pieces(step) {
+        if y.iter().any(|v| v.abs() >= limit) {
+            break;
         }
-        lengths.push(kept.len() - before);
+        let t_next = t + world_step;
+        let next = at(t_next);
+        let chord = (0..3).map(|a| (next[a] - y[a]).powi(2)).sum::<f64>().sqrt();
+        if !(chord.is_finite() && chord > 0.0 && t_next.is_finite()) {
+            break;
+        }
+        pieces.push((at(t + world_step / 2.0), walked + chord / 2.0, chord));
+        walked += chord;
+        (t, y) = (t_next, next);
+        // A speed that falls along the ray makes the chord short of `step`: the next world
+        // step is scaled by what this one gave, at most doubling or halving at once.
+        world_step *= (step / chord).clamp(0.5, 2.0);
     }
-    let positions = Array2::from_shape_fn((kept.len(), 3), |(i, a)| all.positions[[kept[i].0, a]]);
-    let t = Array1::from_iter(kept.iter().map(|&(_, j)| F::lit((j as f64 + 0.5) * step)));
-    let delta = Array1::from_elem(kept.len(), F::lit(step));
-    let ray = kept.iter().map(|&(k, _)| all.ray[k]).collect();
-    PackedSamples {
+    pieces
+}
+
+/// [`FieldSpace::sample`] in the contracted space: each ray marched by [`march_ray`] (in
+/// parallel over rays), the pieces whose contracted midpoint lies in an unoccupied cell of
+/// `occupancy` dropped.
+fn march_contracted<F: Float>(
+    contraction: &Contraction,
+    occupancy: Option<&OccupancyGrid>,
+    rays: &RayBatch<F>,
+    step: f64,
+) -> Result<PackedSamples<F>, FitError> {
+    if !(step.is_finite() && step > 0.0) {
+        return Err(FitError::Config(format!("contracted sample step {step}: must be finite and positive")));
+    }
+    let (origins, directions) = (rays.origins(), rays.directions());
+    let per_ray: Vec<Vec<ContractedPiece>> = (0..rays.len())
+        .into_par_iter()
+        .map(|r| {
+            let (o, d) = (origins.row(r), directions.row(r));
+            let origin = [o[0].as_f64(), o[1].as_f64(), o[2].as_f64()];
+            let direction = [d[0].as_f64(), d[1].as_f64(), d[2].as_f64()];
+            let mut pieces = march_ray(contraction, origin, direction, step);
+            if let Some(grid) = occupancy {
+                pieces.retain(|(y, _, _)| grid.is_occupied_at(*y));
+            }
+            pieces
+        })
+        .collect();
+    let n: usize = per_ray.iter().map(Vec::len).sum();
+    let mut positions = Array2::zeros((n, 3));
+    let (mut t, mut delta, mut ray) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
+    for (r, pieces) in per_ray.iter().enumerate() {
+        for (y, depth, length) in pieces {
+            for a in 0..3 {
+                positions[[ray.len(), a]] = F::lit(y[a]);
+            }
+            t.push(F::lit(*depth));
+            delta.push(F::lit(*length));
+            ray.push(r);
+        }
+    }
+    Ok(PackedSamples {
         positions,
-        t,
-        delta,
-        offsets: Offsets::from_lengths(lengths),
+        t: Array1::from(t),
+        delta: Array1::from(delta),
+        offsets: Offsets::from_lengths(per_ray.iter().map(Vec::len)),
         ray,
-    }
+    })
 }
 
 /// What a fit decided about its space, and why, for the report.
@@ -226,4 +284,94 @@ pub fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, S
         why,
     };
     Ok((resolved, decision))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn contraction() -> Contraction {
+        Framing {
+            centre: [0.0; 3],
+            radius: 2.0,
+        }
+        .contraction()
+        .unwrap()
+    }
+
+    #[test]
+    fn a_ray_from_the_centre_walks_the_contracted_path_to_the_far_gap() {
+        let c = contraction();
+        let step = 0.01;
+        let pieces = march_ray(&c, [0.0; 3], [1.0, 0.0, 0.0], step);
+        // Along +x from the centre the contracted path is the segment from 0 to 2: the
+        // lengths add up to where the march stopped, within a piece of the far gap.
+        let walked: f64 = pieces.iter().map(|p| p.2).sum();
+        assert!((walked - 2.0).abs() < DEFAULT_FAR_GAP + 2.0 * step, "{walked}");
+        // Inside the inner region (world |x| < 2) the map is x / r: pieces of exactly `step`.
+        for p in pieces.iter().take(50) {
+            assert!((p.2 - step).abs() < 1e-12, "{}", p.2);
+        }
+        // Depths are the distance walked to each midpoint, and positions lie on the axis.
+        let mut before = 0.0;
+        for p in &pieces {
+            assert!((p.1 - (before + p.2 / 2.0)).abs() < 1e-12);
+            assert!(p.0[1].abs() < 1e-15 && p.0[2].abs() < 1e-15);
+            // On the axis the contracted point lies within its piece of the path: at its
+            // middle inside the inner region, where the map is linear; between its ends in the
+            // shell (the image of the world midpoint).
+            if p.0[0] < 1.0 {
+                assert!((p.0[0] - p.1).abs() < 1e-9, "{:?}", p);
+            } else {
+                assert!(p.0[0] > before - 1e-12 && p.0[0] < before + p.2 + 1e-12, "{:?}", p);
+            }
+            before += p.2;
+        }
+        // Far out the march reaches the gap in few pieces, not thousands.
+        assert!(pieces.len() < (2.0 / step) as usize + 60, "{}", pieces.len());
+    }
+
+    #[test]
+    fn a_constant_density_per_contracted_unit_gives_the_closed_form_transmittance() {
+        // Optical depth is the density times the contracted length: along any ray from the
+        // centre to the far gap, sigma times the path length 2 - gap (in L-inf terms the path
+        // along an axis), whatever the world spacing of the pieces.
+        let c = contraction();
+        let pieces = march_ray(&c, [0.0; 3], [0.0, 0.0, -1.0], 0.02);
+        let sigma = 0.7;
+        let tau: f64 = pieces.iter().map(|p| sigma * p.2).sum();
+        let last = pieces.last().unwrap();
+        let reached = last.1 + last.2 / 2.0;
+        assert!((tau - sigma * reached).abs() < 1e-9);
+        assert!(reached > 2.0 - DEFAULT_FAR_GAP - 0.05 && reached <= 2.0, "{reached}");
+    }
+
+    #[test]
+    fn unoccupied_cells_drop_their_samples() {
+        use fogray_ops::sample::OccupancyConfig;
+        let c = contraction();
+        let rays = RayBatch::new(
+            ndarray::arr2(&[[0.0f64, 0.0, 0.0], [0.5, 0.5, 0.0]]),
+            ndarray::arr2(&[[1.0f64, 0.0, 0.0], [0.0, 1.0, 0.0]]),
+        )
+        .unwrap();
+        let all = march_contracted(&c, None, &rays, 0.05).unwrap();
+        let mut grid =
+            OccupancyGrid::new(Contraction::cube(), 8, OccupancyConfig::opacity(0.05, 0.01).unwrap()).unwrap();
+        // Occupied only where contracted x > 1 (the +x half of the shell).
+        grid.update(
+            |p: ndarray::ArrayView2<'_, f64>| {
+                Ok::<_, FitError>(Array1::from_iter(p.rows().into_iter().map(|q| if q[0] > 1.0 { 100.0 } else { 0.0 })))
+            },
+            fogray_ops::sample::CellPoints::Centre,
+        )
+        .unwrap();
+        let kept = march_contracted(&c, Some(&grid), &rays, 0.05).unwrap();
+        let expected = (0..all.len())
+            .filter(|&k| grid.is_occupied_at([0, 1, 2].map(|a| all.positions[[k, a]])))
+            .count();
+        assert_eq!(kept.len(), expected);
+        assert!(kept.len() > 0 && kept.len() < all.len());
+        assert!(kept.positions.column(0).iter().all(|&x| x > 1.0 - 1e-12));
+    }
 }
