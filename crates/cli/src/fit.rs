@@ -340,7 +340,10 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         settings,
         resume: plan.resume.clone(),
         save_model: args.save_model.clone(),
-        save_on_interrupt: args.out.as_ref().map_or_else(|| PathBuf::from(name), |dir| dir.join(name)),
+        save_on_interrupt: args
+            .out
+            .as_ref()
+            .map_or_else(|| PathBuf::from(name), |dir| dir.join(name)),
         entries: entries(&plan)?,
         tool: "fogray fit".into(),
         progress_bar: !args.json,

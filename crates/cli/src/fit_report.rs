@@ -4,6 +4,7 @@
 //! (`fit.json`).
 
 use std::fmt::Write as _;
+use std::io::Write as _;
 use std::path::Path;
 
 use fogray::stamp::Stamp;
@@ -71,12 +72,13 @@ pub fn write_out(
     plots::psnr_curves(&dir.join("psnr"), &curve)?;
     plots::metric_curves(&dir.join("ssim"), &curve, XAxis::Seconds, Metric::Ssim, &[])?;
     let path = dir.join("fit.json");
-    std::fs::write(&path, serde_json::to_string_pretty(summary)?).map_err(CliError::file("write", &path))?;
+    let json = serde_json::to_string_pretty(summary)?;
+    fogray_data::write_atomic(&path, |out| out.write_all(json.as_bytes()))?;
     let stamp = Stamp::now(&command_line());
     let names: Vec<&str> = data.test.iter().map(|t| t.name.as_str()).collect();
     let text = markdown(plan, settings, summary, &stamp, &names)?;
     let path = dir.join("report.md");
-    std::fs::write(&path, text).map_err(CliError::file("write", &path))
+    Ok(fogray_data::write_atomic(&path, |out| out.write_all(text.as_bytes()))?)
 }
 
 /// The command as it was typed, each argument quoted where a shell would need it.

@@ -58,9 +58,8 @@ enum Command {
     /// Fit a scene from a dataset on disk (Blender / NeRF-synthetic, instant-ngp or
     /// nerfstudio): train on its training views, measure the held-out views (the test split,
     /// else every 8th view) at intervals off the clock, and print the log.
-    // Photographs of real objects shine: the recommended colour for them is view dependent
-    // (the library's default, 0, suits the grid example's matte scene), and real scenes fill
-    // a small part of their box: the recommended model is the sparse grid.
+    // The defaults are the library's recommended settings (FitSettings::RECOMMENDED, which
+    // says why each differs from FitSettings::DEFAULT).
     #[command(
         long_about = FIT_HELP,
         mut_arg("sh_degree", |a| a.default_value(fit::recommended("sh_degree"))),

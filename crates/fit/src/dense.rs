@@ -26,10 +26,10 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use fogray_ops::space::Contraction;
 use fogray_ops::prior::TotalVariation;
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples};
+use fogray_ops::space::Contraction;
 use fogray_ops::{CompositeVars, GridBox, GridField};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -39,9 +39,9 @@ use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
 use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
-use crate::space::FieldSpace;
 use crate::settings::{FitSettings, Method, SceneBox};
 use crate::shading::{Shading, VIEW_INDEPENDENT_CHANNELS};
+use crate::space::FieldSpace;
 
 /// Channels of a view-independent grid's raw value: density, then red, green, blue.
 pub const CHANNELS: usize = VIEW_INDEPENDENT_CHANNELS;

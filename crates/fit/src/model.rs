@@ -13,8 +13,8 @@ use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2, ArrayView2};
 
 use crate::error::FitError;
-use crate::space::FieldSpace;
 use crate::settings::{FitSettings, Method};
+use crate::space::FieldSpace;
 
 /// What a training step records: the photometric loss alone (for the log) and the objective
 /// the backward starts from (the loss plus the model's own priors).

@@ -191,7 +191,10 @@ fn run_typed<F: Float, M: RadianceField<F>>(
         None => None,
     };
     let first_step = start.as_ref().map_or(0, |s| s.training.step);
-    let save_path = plan.save_model.clone().unwrap_or_else(|| plan.save_on_interrupt.clone());
+    let save_path = plan
+        .save_model
+        .clone()
+        .unwrap_or_else(|| plan.save_on_interrupt.clone());
     let bar = progress_bar(plan.progress_bar);
     let mut first_step_seconds = f64::NAN;
     let mut progress = |p: Progress| {

@@ -142,7 +142,6 @@ impl FieldSpace {
             FieldSpace::Contracted(contraction) => march_contracted(contraction, occupancy, rays, step),
         }
     }
-
 }
 
 /// The most pieces a ray is cut into in the contracted space: a ray's contracted path is at
@@ -200,7 +199,9 @@ fn march_contracted<F: Float>(
     step: f64,
 ) -> Result<PackedSamples<F>, FitError> {
     if !(step.is_finite() && step > 0.0) {
-        return Err(FitError::Config(format!("contracted sample step {step}: must be finite and positive")));
+        return Err(FitError::Config(format!(
+            "contracted sample step {step}: must be finite and positive"
+        )));
     }
     let (origins, directions) = (rays.origins(), rays.directions());
     let per_ray: Vec<Vec<ContractedPiece>> = (0..rays.len())
@@ -361,7 +362,13 @@ mod tests {
         // Occupied only where contracted x > 1 (the +x half of the shell).
         grid.update(
             |p: ndarray::ArrayView2<'_, f64>| {
-                Ok::<_, FitError>(Array1::from_iter(p.rows().into_iter().map(|q| if q[0] > 1.0 { 100.0 } else { 0.0 })))
+                Ok::<_, FitError>(Array1::from_iter(p.rows().into_iter().map(|q| {
+                    if q[0] > 1.0 {
+                        100.0
+                    } else {
+                        0.0
+                    }
+                })))
             },
             fogray_ops::sample::CellPoints::Centre,
         )

@@ -21,11 +21,11 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-use fogray_ops::space::Contraction;
 use fogray_ops::grid::{NodeIndex, SparseGridField};
 use fogray_ops::prior::{SparseTotalVariation, TotalVariation};
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{KnownCells, OccupancyGrid, PackedSamples};
+use fogray_ops::space::Contraction;
 use fogray_ops::{CompositeVars, GridBox};
 use fogray_tape::params::{ParamId, Params};
 use fogray_tape::{Float, Tape, TapeError, Var};
@@ -35,9 +35,9 @@ use crate::environment::{add_environment, copy_environment};
 use crate::error::FitError;
 use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
-use crate::space::FieldSpace;
 use crate::settings::{FitSettings, Method, SceneBox};
 use crate::shading::Shading;
+use crate::space::FieldSpace;
 
 /// The name of the packed raw values `[kept, C]` in the parameter store and a checkpoint.
 pub const DATA: &str = "sparse_grid";

@@ -238,7 +238,11 @@ fn export_refuses_bad_arguments_with_one_line() {
     assert_refused(&run, "no-such-dir", "an unwritable output");
     // A directory as the output: refused, and nothing left beside it.
     let run = fogray(&["export", "--model", arg(&model), "--mesh", arg(dir.path())]);
-    assert_refused(&run, "it is a folder, where a file is expected", "a directory as the output");
+    assert_refused(
+        &run,
+        "it is a folder, where a file is expected",
+        "a directory as the output",
+    );
     let left: Vec<_> = std::fs::read_dir(dir.path())
         .unwrap()
         .map(|e| e.unwrap().file_name())

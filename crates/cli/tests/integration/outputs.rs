@@ -204,7 +204,6 @@ fn an_export_onto_its_model_and_a_gif_onto_a_folder_are_refused_before_any_work(
 }
 
 #[test]
-#[ignore = "needs the fit session's output check (fogray_data::plan_fit_outputs) wired into fogray fit"]
 fn a_fit_saving_onto_its_transforms_or_reporting_into_its_dataset_is_refused_before_training() {
     let dir = tempfile::tempdir().unwrap();
     let (data, _) = scene(dir.path());

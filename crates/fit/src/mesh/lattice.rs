@@ -5,9 +5,9 @@ use fogray_tape::Float;
 use ndarray::Array2;
 
 use super::MeshError;
-use crate::space::FieldSpace;
 use crate::error::FitError;
 use crate::model::RadianceField;
+use crate::space::FieldSpace;
 
 /// Lattice nodes looked up at once: bounds the raw values a lookup holds (every channel of
 /// every node) while leaving the lookup enough work to spread over the threads.

@@ -42,9 +42,9 @@ use fogray_tape::Float;
 use ndarray::Array2;
 use thiserror::Error;
 
-use fogray_ops::space::InnerRegion;
 use crate::error::FitError;
 use crate::model::RadianceField;
+use fogray_ops::space::InnerRegion;
 pub use lattice::Lattice;
 pub use marching::{march, Surface};
 pub use ply::write_ply;

@@ -131,7 +131,10 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
         }
         let (model, resumed) = match start {
             Some(s) => (s.model, s.training),
-            None => (M::fresh(settings, Growth::first_nodes(settings))?, TrainingState::fresh()),
+            None => (
+                M::fresh(settings, Growth::first_nodes(settings))?,
+                TrainingState::fresh(),
+            ),
         };
         let mut occupancy = match settings.sampling {
             Sampling::Uniform => None,
@@ -258,7 +261,9 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
             clock = now;
         };
         let pixels = self.table.pixels();
-        let rows: Vec<usize> = (0..self.settings.batch).map(|_| self.rng.gen_range(0..pixels)).collect();
+        let rows: Vec<usize> = (0..self.settings.batch)
+            .map(|_| self.rng.gen_range(0..pixels))
+            .collect();
         let batch = self.table.gather::<F>(&rows)?;
         // A random colour per ray, from the same stream after the rows (none without alpha,
         // so that a fit of opaque pictures draws the stream it always drew).
@@ -396,7 +401,14 @@ pub(crate) fn render_views<F: Float, M: RadianceField<F>>(
         .iter()
         .map(|v| {
             let (origins, directions) = v.rays();
-            Ok(render_picture(model, occupancy, &origins, &directions, v.size(), &options)?)
+            Ok(render_picture(
+                model,
+                occupancy,
+                &origins,
+                &directions,
+                v.size(),
+                &options,
+            )?)
         })
         .collect()
 }

@@ -93,7 +93,10 @@ fn context<'a, M>(
 
 #[test]
 fn the_growth_policy_doubles_the_lattice_at_its_fractions_and_resets_adam() {
-    let s = FitSettings { grid: 16, ..settings(100) };
+    let s = FitSettings {
+        grid: 16,
+        ..settings(100)
+    };
     let mut model = DenseGrid::<f64>::fresh(&s, 4).unwrap();
     let mut growth = Growth::new(&s, 0, 4, None).unwrap();
     let mut adam = Adam::new(AdamConfig::default()).unwrap();
@@ -105,16 +108,26 @@ fn the_growth_policy_doubles_the_lattice_at_its_fractions_and_resets_adam() {
     grads.insert(model.params(), id, ones).unwrap();
     adam.step(model.params_mut(), &grads).unwrap();
     assert_eq!(adam.updates(id), 1);
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 9, 0.099)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 9, 0.099))
+        .unwrap();
     assert_eq!((model.nodes(), growth.stage(), adam.updates(id)), (4, 0, 1));
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 10, 0.1)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 10, 0.1))
+        .unwrap();
     assert_eq!((model.nodes(), growth.stage(), adam.updates(id)), (8, 1, 0));
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 29, 0.29)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 29, 0.29))
+        .unwrap();
     assert_eq!(model.nodes(), 8);
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 30, 0.3)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 30, 0.3))
+        .unwrap();
     assert_eq!((model.nodes(), growth.stage()), (16, 2));
     // The last stage stays.
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 99, 0.99)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 99, 0.99))
+        .unwrap();
     assert_eq!(model.nodes(), 16);
     // A model that is not at the stage it claims is refused.
     assert!(Growth::new(&s, 1, 4, None).is_err());
@@ -122,17 +135,26 @@ fn the_growth_policy_doubles_the_lattice_at_its_fractions_and_resets_adam() {
 
 #[test]
 fn a_model_pruned_by_occupancy_grows_no_sooner_than_its_refreshes() {
-    let s = FitSettings { grid: 16, ..settings(20) };
+    let s = FitSettings {
+        grid: 16,
+        ..settings(20)
+    };
     let mut model = DenseGrid::<f64>::fresh(&s, 4).unwrap();
     // First refresh at step 16: stage 1 waits until step 16, stage 2 until step 32.
     let mut growth = Growth::new(&s, 0, 4, Some(16)).unwrap();
     let mut adam = Adam::new(AdamConfig::default()).unwrap();
     let mut none = None;
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 15, 0.75)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 15, 0.75))
+        .unwrap();
     assert_eq!(growth.stage(), 0);
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 16, 0.8)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 16, 0.8))
+        .unwrap();
     assert_eq!(growth.stage(), 1);
-    growth.before_step(&mut context(&mut model, &mut adam, &mut none, 31, 0.95)).unwrap();
+    growth
+        .before_step(&mut context(&mut model, &mut adam, &mut none, 31, 0.95))
+        .unwrap();
     assert_eq!(growth.stage(), 1);
 }
 
@@ -148,7 +170,8 @@ fn the_rate_policy_sets_the_schedules_rate() {
     let mut none = None;
     let mut rate = LearningRate::new(&s);
     for fraction in [0.0, 0.5, 0.6, 0.8, 1.0] {
-        rate.before_step(&mut context(&mut model, &mut adam, &mut none, 0, fraction)).unwrap();
+        rate.before_step(&mut context(&mut model, &mut adam, &mut none, 0, fraction))
+            .unwrap();
         // Constant to 60 %, then geometric: 0.3 * 0.01^((f - 0.6) / 0.4).
         let expected = if fraction <= 0.6 {
             0.3
@@ -174,14 +197,20 @@ fn the_refresh_policy_keeps_every_cell_while_no_density_reaches_the_threshold() 
     let mut refresh = OccupancyRefresh;
     let due = grid.as_ref().unwrap().config().refresh().first_due();
     // Not due: nothing happens (a fresh grid is all occupied).
-    refresh.after_step(&mut context(&mut model, &mut adam, &mut grid, due - 1, 0.1)).unwrap();
+    refresh
+        .after_step(&mut context(&mut model, &mut adam, &mut grid, due - 1, 0.1))
+        .unwrap();
     assert_eq!(grid.as_ref().unwrap().occupied_fraction(), 1.0);
-    refresh.after_step(&mut context(&mut model, &mut adam, &mut grid, due, 0.1)).unwrap();
+    refresh
+        .after_step(&mut context(&mut model, &mut adam, &mut grid, due, 0.1))
+        .unwrap();
     assert_eq!(grid.as_ref().unwrap().occupied_fraction(), 1.0);
     // A dense fog everywhere marks every cell at its refresh too; an empty one would have
     // emptied the grid, which the policy refills.
     let thick = FitSettings { shift: 10.0, ..s };
     let mut model = DenseGrid::<f64>::fresh(&thick, 12).unwrap();
-    refresh.after_step(&mut context(&mut model, &mut adam, &mut grid, 2 * due, 0.2)).unwrap();
+    refresh
+        .after_step(&mut context(&mut model, &mut adam, &mut grid, 2 * due, 0.2))
+        .unwrap();
     assert_eq!(grid.as_ref().unwrap().occupied_fraction(), 1.0);
 }
