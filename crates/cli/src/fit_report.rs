@@ -4,7 +4,6 @@
 //! (`fit.json`).
 
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::Path;
 
 use fogray::stamp::Stamp;

@@ -378,7 +378,7 @@ mod tests {
             .filter(|&k| grid.is_occupied_at([0, 1, 2].map(|a| all.positions[[k, a]])))
             .count();
         assert_eq!(kept.len(), expected);
-        assert!(kept.len() > 0 && kept.len() < all.len());
+        assert!(!kept.is_empty() && kept.len() < all.len());
         assert!(kept.positions.column(0).iter().all(|&x| x > 1.0 - 1e-12));
     }
 }

@@ -401,14 +401,7 @@ pub(crate) fn render_views<F: Float, M: RadianceField<F>>(
         .iter()
         .map(|v| {
             let (origins, directions) = v.rays();
-            Ok(render_picture(
-                model,
-                occupancy,
-                &origins,
-                &directions,
-                v.size(),
-                &options,
-            )?)
+            render_picture(model, occupancy, &origins, &directions, v.size(), &options)
         })
         .collect()
 }
