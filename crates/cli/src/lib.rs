@@ -20,6 +20,7 @@ pub mod heap;
 pub mod input;
 pub mod markdown;
 pub mod memory;
+pub mod prepare;
 pub mod reference;
 pub mod render;
 pub mod render_memory;

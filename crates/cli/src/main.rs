@@ -80,6 +80,10 @@ enum Command {
     /// surface where its density crosses a level (marching cubes), binary PLY with vertex
     /// colours, which MeshLab, Blender and trimesh open.
     Export(export::ExportArgs),
+    /// Pose a folder of photographs (or a video's frames) with COLMAP, run as a child process,
+    /// into the folder `fogray fit --data DIR` reads: DIR/images (the photographs, linked or
+    /// copied) and DIR/sparse/0, beside DIR/colmap.log. Needs `colmap` on PATH.
+    Prepare(fogray_cli::prepare::PrepareArgs),
     /// Composite packed rays given as JSON; print colour, opacity, depth, weights, transmittance
     /// and, with grad_color, the gradients, as JSON.
     #[command(long_about = COMPOSITE_HELP)]
@@ -428,6 +432,8 @@ fn main() -> ExitCode {
                 .map_err(CliError::from)
                 .and_then(|()| render::run(args)),
         ),
+        // Prints its own outcome: Ctrl-C stops COLMAP and exits 130, leaving no model half-written.
+        Command::Prepare(args) => return fogray_cli::prepare::main(args),
         Command::Export(args) => (
             "export",
             exit_on_ctrl_c()

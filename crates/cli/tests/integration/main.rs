@@ -12,4 +12,5 @@ mod limits;
 mod one_line;
 mod orbit;
 mod outputs;
+mod prepare;
 mod resume;
