@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fogray_data::{check_outputs, load_cameras, shown, Inputs, Output as Destination};
+use fogray_data::{check_outputs, load_split_cameras, shown, Inputs, Output as Destination, Split};
 use fogray_fit::checkpoint::{self, ModelInfo};
 use fogray_fit::dataset::camera_rays;
 use fogray_fit::depth::write_depth_png;
@@ -25,14 +25,36 @@ use crate::framing::{self, ImageSize};
 use crate::render_memory;
 use crate::saved::{SavedModel, WithModel};
 
+/// `--split`: which frames of a dataset to render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum SplitArg {
+    /// Every frame.
+    All,
+    /// The frames a fit trains on.
+    Train,
+    /// The frames a fit holds out.
+    Test,
+}
+
+impl From<SplitArg> for Split {
+    fn from(split: SplitArg) -> Split {
+        match split {
+            SplitArg::All => Split::All,
+            SplitArg::Train => Split::Train,
+            SplitArg::Test => Split::Test,
+        }
+    }
+}
+
 /// The flags of `fogray render`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RenderArgs {
     /// A model written by `fogray fit --save-model`.
     #[arg(long, value_name = "FILE")]
     pub model: PathBuf,
-    /// A transforms file or dataset folder (Blender or instant-ngp/nerfstudio) whose every
-    /// frame is rendered (a Blender folder: train, val and test frames).
+    /// A dataset `fogray fit --data` reads (a folder of any of its formats, or a transforms
+    /// file) whose frames are rendered (by default every one; a Blender folder: train, val and
+    /// test frames).
     #[arg(
         long,
         value_name = "TRANSFORMS",
@@ -40,6 +62,12 @@ pub struct RenderArgs {
         conflicts_with = "orbit"
     )]
     pub cameras: Option<PathBuf>,
+    /// Which frames of --cameras: every one, the ones `fogray fit --data` trains on, or the
+    /// ones it holds out (a Blender folder's test split, else its val split, else every 8th
+    /// frame; every 8th frame, `i % 8 == 0`, of any other format). Each PNG is named after its
+    /// frame's image file without the extension.
+    #[arg(long, value_enum, default_value_t = SplitArg::All, requires = "cameras")]
+    pub split: SplitArg,
     /// Divide the cameras' image size, focal lengths and principal point by K.
     #[arg(long, default_value_t = 1, value_name = "K", conflicts_with = "orbit")]
     pub downscale: usize,
@@ -195,7 +223,7 @@ fn frame_file(args: &RenderArgs, name: &str, suffix: &str) -> PathBuf {
 /// The views the flags ask for: every frame of `--cameras`, or the orbit's.
 fn views(args: &RenderArgs, info: &ModelInfo) -> Result<Vec<View>, CliError> {
     if let Some(cameras) = &args.cameras {
-        return Ok(load_cameras(cameras, args.downscale)?
+        return Ok(load_split_cameras(cameras, args.downscale, args.split.into())?
             .into_iter()
             .map(|c| View {
                 name: c.name,

@@ -111,7 +111,10 @@ pub use downscale::{downscale_intrinsics, downscale_picture};
 pub use error::{DataError, MatrixProblem};
 pub use escape::{escape_controls, shown, Shown};
 pub use files::{dataset_files, DatasetFiles};
-pub use load::{load, load_cameras, load_with_progress, Format, Frame, LoadOptions, NamedCamera, SceneData};
+pub use load::{
+    load, load_cameras, load_split_cameras, load_with_progress, Format, Frame, LoadOptions, NamedCamera, SceneData,
+    Split,
+};
 pub use ngp::{ngp_scene_box, NGP_DEFAULT_OFFSET, NGP_DEFAULT_SCALE};
 pub use output::{
     check_outputs, live_temporaries, plan_fit_outputs, remove_temporaries_and_exit, resolved, write_atomic, AtomicFile,

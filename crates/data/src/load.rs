@@ -352,6 +352,52 @@ pub fn load_cameras(path: &Path, downscale: usize) -> Result<Vec<NamedCamera>, D
     }
 }
 
+/// Which of a dataset's frames to take: all of them, the ones a fit trains on, or the ones it
+/// holds out (`fogray render --split`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Split {
+    /// Every frame, as [`load_cameras`] lists them.
+    #[default]
+    All,
+    /// The frames [`load`] trains on.
+    Train,
+    /// The frames [`load`] holds out: a Blender folder's test split (else its val split, else
+    /// every eighth train frame), every eighth frame of any other format (`i % 8 == 0`).
+    Test,
+}
+
+/// The cameras of the frames of `split` at `path`, downscaled by `downscale`, in the order of
+/// [`load_cameras`]; the train and test frames are those [`load`] trains on and holds out (a
+/// Blender split file stands for its folder, as in [`load`]).
+///
+/// Errors: as [`load_cameras`].
+pub fn load_split_cameras(path: &Path, downscale: usize, split: Split) -> Result<Vec<NamedCamera>, DataError> {
+    if split == Split::All {
+        return load_cameras(path, downscale);
+    }
+    check_downscale(path, downscale)?;
+    let folder = match resolve(path)? {
+        Source::BlenderFolder(folder) => Some(folder),
+        Source::BlenderFile(file) => Some(file.parent().unwrap_or(Path::new(".")).to_path_buf()),
+        _ => None,
+    };
+    let (train, test) = match folder {
+        Some(folder) => {
+            let train = blender_cameras(&split_file(&folder, "train"), downscale)?;
+            match ["test", "val"]
+                .map(|s| split_file(&folder, s))
+                .into_iter()
+                .find(|f| f.is_file())
+            {
+                Some(file) => (train, blender_cameras(&file, downscale)?),
+                None => holdout(train),
+            }
+        }
+        None => holdout(load_cameras(path, downscale)?),
+    };
+    Ok(if split == Split::Train { train } else { test })
+}
+
 fn blender_cameras(file: &Path, downscale: usize) -> Result<Vec<NamedCamera>, DataError> {
     let parsed = blender::read(file)?;
     let (w, h) = match parsed.frames.iter().find(|s| s.file.is_file()) {

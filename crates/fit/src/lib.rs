@@ -68,6 +68,7 @@
 
 #![warn(missing_docs)]
 
+pub mod backdrop;
 pub mod batch;
 pub mod checkpoint;
 pub mod curves;

@@ -5,8 +5,9 @@
 //! grid judges a cell (in the contracted shell one step stands for a long stretch of world).
 //!
 //! The choice is made from the data unless a flag makes it ([`resolve`]): pictures with alpha
-//! (an object over nothing) keep the box; pictures without alpha (a capture, whose background
-//! is real) are contracted.
+//! (an object over nothing) keep the box, and so do pictures without alpha whose borders are
+//! all one colour (an object over a plain backdrop, [`plain_backdrop`]); other pictures
+//! without alpha (a capture, whose background is real) are contracted.
 
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples, DEFAULT_FAR_GAP, MAX_CONTRACTED_PATH};
@@ -17,6 +18,7 @@ use ndarray::{Array1, Array2};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
+use crate::backdrop::plain_backdrop;
 use crate::dataset::Dataset;
 use crate::error::FitError;
 use crate::sampling::sample_rays;
@@ -154,44 +156,96 @@ fn max_pieces(step: f64) -> usize {
 /// contracted path to the midpoint, and its contracted length.
 type ContractedPiece = ([f64; 3], f64, f64);
 
-/// The pieces of one ray from its origin to the far gap: each about `step` long in contracted
-/// space, found by a secant march (the next world step is `step` over the contracted speed of
-/// the last piece, which starts at `r` inside the inner region), each piece's length the exact
-/// chord between the contracted images of its ends. The chord, not `step`, is the piece's
-/// length, so the optical depth of a piece is right however far its length strays from `step`
-/// where the speed changes fast (across the inner faces, far out); the secant keeps the march
-/// to about one piece per `step`, and out in the shell, where the speed falls like `1 / t^2`,
-/// each step halves what is left to the faces, so the far gap is reached in a few pieces.
-fn march_ray(contraction: &Contraction, origin: [f64; 3], direction: [f64; 3], step: f64) -> Vec<ContractedPiece> {
-    let at = |t: f64| contraction.contract([0, 1, 2].map(|a| origin[a] + t * direction[a]));
+/// The pieces of one ray from its origin to the far gap, handed to `emit` in order: each about
+/// `step` long in contracted space, found by a secant march (the next world step is `step`
+/// over the contracted speed of the last piece, which starts at `r` inside the inner region),
+/// each piece's length the exact chord between the contracted images of its ends. The chord,
+/// not `step`, is the piece's length, so the optical depth of a piece is right however far its
+/// length strays from `step` where the speed changes fast (across the inner faces, far out);
+/// the secant keeps the march to about one piece per `step`, and out in the shell, where the
+/// speed falls like `1 / t^2`, each step halves what is left to the faces, so the far gap is
+/// reached in a few pieces.
+fn march_ray(
+    contraction: &Contraction,
+    origin: [f64; 3],
+    direction: [f64; 3],
+    step: f64,
+    mut emit: impl FnMut(ContractedPiece),
+) {
+    let region = contraction.region();
+    let Some(ray) = ScaledRay::new(region.centre, region.radius, origin, direction) else {
+        return;
+    };
     let limit = CONTRACTED_HALF_WIDTH - DEFAULT_FAR_GAP;
-    let mut pieces = Vec::new();
-    let (mut t, mut y) = (0.0, at(0.0));
-    let mut world_step = step * contraction.region().radius;
+    let (mut s, mut y) = (0.0, ray.contracted_at(0.0));
+    // In radii: a step of `step` is `step` radii of world inside the inner region.
+    let mut scaled_step = step;
     let mut walked = 0.0;
     for _ in 0..max_pieces(step) {
         if y.iter().any(|v| v.abs() >= limit) {
             break;
         }
-        let t_next = t + world_step;
-        let next = at(t_next);
+        let s_next = s + scaled_step;
+        let next = ray.contracted_at(s_next);
         let chord = (0..3).map(|a| (next[a] - y[a]).powi(2)).sum::<f64>().sqrt();
-        if !(chord.is_finite() && chord > 0.0 && t_next.is_finite()) {
+        if !(chord.is_finite() && chord > 0.0 && s_next.is_finite()) {
             break;
         }
-        pieces.push((at(t + world_step / 2.0), walked + chord / 2.0, chord));
+        emit((ray.contracted_at(s + scaled_step / 2.0), walked + chord / 2.0, chord));
         walked += chord;
-        (t, y) = (t_next, next);
+        (s, y) = (s_next, next);
         // A speed that falls along the ray makes the chord short of `step`: the next world
         // step is scaled by what this one gave, at most doubling or halving at once.
-        world_step *= (step / chord).clamp(0.5, 2.0);
+        scaled_step *= (step / chord).clamp(0.5, 2.0);
     }
-    pieces
 }
 
-/// [`FieldSpace::sample`] in the contracted space: each ray marched by [`march_ray`] (in
-/// parallel over rays), the pieces whose contracted midpoint lies in an unoccupied cell of
-/// `occupancy` dropped.
+/// A ray in units of the inner region's radius, measured from its centre: the point at `s`
+/// radii along the ray is `start + s u`, and its contraction is that point inside the unit
+/// cube and `(2 - 1/m) p / m` (`m = ||p||_inf`) outside, the map [`Contraction::contract`]
+/// computes for any world point, here without its guards for points beyond the float range:
+/// a marched ray stops at the far gap, `1 / gap` radii out, long before.
+struct ScaledRay {
+    start: [f64; 3],
+    u: [f64; 3],
+}
+
+impl ScaledRay {
+    /// `None` where the origin, in radii from the centre, is not finite.
+    fn new(centre: [f64; 3], radius: f64, origin: [f64; 3], direction: [f64; 3]) -> Option<ScaledRay> {
+        let start = [0, 1, 2].map(|a| (origin[a] - centre[a]) / radius);
+        (start.iter().chain(&direction).all(|v| v.is_finite())).then_some(ScaledRay { start, u: direction })
+    }
+
+    /// The contracted point `s` radii along the ray.
+    #[inline]
+    fn contracted_at(&self, s: f64) -> [f64; 3] {
+        let p = [0, 1, 2].map(|a| self.start[a] + s * self.u[a]);
+        let m = p[0].abs().max(p[1].abs()).max(p[2].abs());
+        if m <= 1.0 {
+            return p;
+        }
+        let scale = (2.0 - 1.0 / m) / m;
+        p.map(|v| v * scale)
+    }
+}
+
+/// Rays a worker marches into one buffer: enough that the buffers' bookkeeping is small
+/// beside the march, few enough that both cores share a batch evenly.
+const RAYS_PER_CHUNK: usize = 128;
+
+/// The kept pieces of a run of rays, packed as [`PackedSamples`] packs them.
+struct MarchedChunk<F> {
+    positions: Vec<F>,
+    t: Vec<F>,
+    delta: Vec<F>,
+    lengths: Vec<usize>,
+}
+
+/// [`FieldSpace::sample`] in the contracted space: each ray marched by [`march_ray`], the
+/// pieces whose contracted midpoint lies in an unoccupied cell of `occupancy` dropped as they
+/// are made. Runs of rays are marched in parallel into packed buffers of their own, joined in
+/// ray order, so the samples are the same at any thread count.
 fn march_contracted<F: Float>(
     contraction: &Contraction,
     occupancy: Option<&OccupancyGrid>,
@@ -204,37 +258,52 @@ fn march_contracted<F: Float>(
         )));
     }
     let (origins, directions) = (rays.origins(), rays.directions());
-    let per_ray: Vec<Vec<ContractedPiece>> = (0..rays.len())
+    let chunks: Vec<MarchedChunk<F>> = (0..rays.len().div_ceil(RAYS_PER_CHUNK))
         .into_par_iter()
-        .map(|r| {
-            let (o, d) = (origins.row(r), directions.row(r));
-            let origin = [o[0].as_f64(), o[1].as_f64(), o[2].as_f64()];
-            let direction = [d[0].as_f64(), d[1].as_f64(), d[2].as_f64()];
-            let mut pieces = march_ray(contraction, origin, direction, step);
-            if let Some(grid) = occupancy {
-                pieces.retain(|(y, _, _)| grid.is_occupied_at(*y));
+        .map(|c| {
+            let rays_here = c * RAYS_PER_CHUNK..((c + 1) * RAYS_PER_CHUNK).min(rays.len());
+            let mut chunk = MarchedChunk {
+                positions: Vec::new(),
+                t: Vec::new(),
+                delta: Vec::new(),
+                lengths: Vec::with_capacity(rays_here.len()),
+            };
+            for r in rays_here {
+                let (o, d) = (origins.row(r), directions.row(r));
+                let origin = [o[0].as_f64(), o[1].as_f64(), o[2].as_f64()];
+                let direction = [d[0].as_f64(), d[1].as_f64(), d[2].as_f64()];
+                let before = chunk.t.len();
+                march_ray(contraction, origin, direction, step, |(y, depth, length)| {
+                    if occupancy.is_none_or(|grid| grid.is_occupied_at(y)) {
+                        chunk.positions.extend(y.map(F::lit));
+                        chunk.t.push(F::lit(depth));
+                        chunk.delta.push(F::lit(length));
+                    }
+                });
+                chunk.lengths.push(chunk.t.len() - before);
             }
-            pieces
+            chunk
         })
         .collect();
-    let n: usize = per_ray.iter().map(Vec::len).sum();
-    let mut positions = Array2::zeros((n, 3));
-    let (mut t, mut delta, mut ray) = (Vec::with_capacity(n), Vec::with_capacity(n), Vec::with_capacity(n));
-    for (r, pieces) in per_ray.iter().enumerate() {
-        for (y, depth, length) in pieces {
-            for a in 0..3 {
-                positions[[ray.len(), a]] = F::lit(y[a]);
-            }
-            t.push(F::lit(*depth));
-            delta.push(F::lit(*length));
-            ray.push(r);
+    let n: usize = chunks.iter().map(|c| c.t.len()).sum();
+    let (mut positions, mut t, mut delta) = (Vec::with_capacity(3 * n), Vec::with_capacity(n), Vec::with_capacity(n));
+    let mut ray = Vec::with_capacity(n);
+    let mut lengths = Vec::with_capacity(rays.len());
+    for chunk in chunks {
+        positions.extend(chunk.positions);
+        t.extend(chunk.t);
+        delta.extend(chunk.delta);
+        for length in chunk.lengths {
+            ray.extend(std::iter::repeat_n(lengths.len(), length));
+            lengths.push(length);
         }
     }
     Ok(PackedSamples {
-        positions,
+        positions: Array2::from_shape_vec((n, 3), positions)
+            .map_err(|e| FitError::Config(format!("packing contracted samples: {e}")))?,
         t: Array1::from(t),
         delta: Array1::from(delta),
-        offsets: Offsets::from_lengths(per_ray.iter().map(Vec::len)),
+        offsets: Offsets::from_lengths(lengths),
         ray,
     })
 }
@@ -251,9 +320,9 @@ pub struct SpaceDecision {
 }
 
 /// `settings` with their space decided for `data`: `--space auto` becomes the box when the
-/// training pictures have alpha (an object over nothing: the box is its world) and the
-/// contracted space when they have none (a capture: what lies beyond any box is real and must
-/// be modelled); a contracted space without a framing is framed from the training cameras.
+/// training pictures have alpha (an object over nothing: the box is its world) or borders of
+/// one colour (an object over a plain backdrop), and the contracted space otherwise (a
+/// capture: what lies beyond any box is real and must be modelled); a contracted space without a framing is framed from the training cameras.
 ///
 /// Errors: cameras that frame nothing.
 pub fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, SpaceDecision), FitError> {
@@ -263,10 +332,19 @@ pub fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, S
             SpaceChoice::Box,
             "the training pictures have alpha: an object over nothing, fitted in its box".to_string(),
         ),
-        SpaceChoice::Auto => (
+        SpaceChoice::Auto => match plain_backdrop(&data.train) {
+            Some(c) => (
+                SpaceChoice::Box,
+                format!(
+                    "the training pictures have no alpha, but every border is one colour ({:.2}, {:.2}, {:.2}): an object over a plain backdrop, fitted in its box",
+                    c[0], c[1], c[2]
+                ),
+            ),
+            None => (
             SpaceChoice::Contracted,
             "the training pictures have no alpha: their background is real, so all of space is modelled, contracted around the region the cameras look at".to_string(),
         ),
+        },
         given => (given, format!("--space {}", given.name())),
     };
     let framing = match (space, settings.framing) {
@@ -304,7 +382,8 @@ mod tests {
     fn a_ray_from_the_centre_walks_the_contracted_path_to_the_far_gap() {
         let c = contraction();
         let step = 0.01;
-        let pieces = march_ray(&c, [0.0; 3], [1.0, 0.0, 0.0], step);
+        let mut pieces = Vec::new();
+        march_ray(&c, [0.0; 3], [1.0, 0.0, 0.0], step, |p| pieces.push(p));
         // Along +x from the centre the contracted path is the segment from 0 to 2: the
         // lengths add up to where the march stopped, within a piece of the far gap.
         let walked: f64 = pieces.iter().map(|p| p.2).sum();
@@ -338,7 +417,8 @@ mod tests {
         // centre to the far gap, sigma times the path length 2 - gap (in L-inf terms the path
         // along an axis), whatever the world spacing of the pieces.
         let c = contraction();
-        let pieces = march_ray(&c, [0.0; 3], [0.0, 0.0, -1.0], 0.02);
+        let mut pieces = Vec::new();
+        march_ray(&c, [0.0; 3], [0.0, 0.0, -1.0], 0.02, |p| pieces.push(p));
         let sigma = 0.7;
         let tau: f64 = pieces.iter().map(|p| sigma * p.2).sum();
         let last = pieces.last().unwrap();
@@ -380,5 +460,59 @@ mod tests {
         assert_eq!(kept.len(), expected);
         assert!(!kept.is_empty() && kept.len() < all.len());
         assert!(kept.positions.column(0).iter().all(|&x| x > 1.0 - 1e-12));
+    }
+
+    #[test]
+    fn auto_contracts_a_capture_and_keeps_the_box_for_an_object_over_a_plain_backdrop() {
+        let capture = crate::testing::small_dataset();
+        let auto = FitSettings {
+            space: SpaceChoice::Auto,
+            ..FitSettings::DEFAULT
+        };
+        let (settings, decision) = resolve(&auto, &capture).unwrap();
+        assert_eq!(
+            (settings.space, decision.space),
+            (SpaceChoice::Contracted, "contracted")
+        );
+        assert!(decision.framing.is_some());
+        // The same cameras, each picture a dark object over white: the box, framed by nothing.
+        let mut studio = capture.clone();
+        for v in studio.train.iter_mut() {
+            v.image.indexed_iter_mut().for_each(|((y, x, _), p)| {
+                *p = if (2..6).contains(&y) && (2..6).contains(&x) {
+                    0.1
+                } else {
+                    1.0
+                };
+            });
+        }
+        let (settings, decision) = resolve(&auto, &studio).unwrap();
+        assert_eq!((settings.space, decision.space), (SpaceChoice::Box, "box"));
+        assert!(decision.why.contains("plain backdrop") && decision.framing.is_none());
+        // A flag overrides the data.
+        let asked = FitSettings {
+            space: SpaceChoice::Contracted,
+            ..FitSettings::DEFAULT
+        };
+        assert_eq!(resolve(&asked, &studio).unwrap().0.space, SpaceChoice::Contracted);
+    }
+
+    #[test]
+    fn the_scaled_ray_contracts_as_the_contraction_does() {
+        let c = Framing {
+            centre: [0.3, -1.0, 2.0],
+            radius: 1.7,
+        }
+        .contraction()
+        .unwrap();
+        let (origin, direction) = ([2.0, 0.5, -3.0], [0.48, -0.6, 0.64]);
+        let ray = ScaledRay::new([0.3, -1.0, 2.0], 1.7, origin, direction).unwrap();
+        for s in [0.0, 0.1, 0.5, 1.0, 3.0, 10.0, 1e3, 1e6] {
+            let exact = c.contract([0, 1, 2].map(|a| origin[a] + s * 1.7 * direction[a]));
+            let fast = ray.contracted_at(s);
+            for a in 0..3 {
+                assert!((exact[a] - fast[a]).abs() < 1e-12, "{s}: {exact:?} {fast:?}");
+            }
+        }
     }
 }

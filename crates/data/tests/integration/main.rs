@@ -14,3 +14,4 @@ mod outputs;
 mod projection;
 mod roundtrip;
 mod scene_box;
+mod split;

@@ -276,13 +276,13 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
             _ => (TrainingBackground::Shared(self.data.background), batch.colors),
         };
         lap(&mut self.phases.batch);
-        let space = self.model.space();
-        let samples = space.sample(self.occupancy.as_ref(), &batch.rays, self.model.sample_step())?;
+        let space = at.model.space();
+        let samples = space.sample(at.occupancy.as_ref(), &batch.rays, at.model.sample_step())?;
         let taken = samples.len();
         self.samples += taken;
         lap(&mut self.phases.sample);
         let target = self.tape.constant(colors);
-        let objective = self.model.training_loss(
+        let objective = at.model.training_loss(
             &mut self.tape,
             &batch.rays,
             samples,
@@ -300,17 +300,12 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
         let grads = self.tape.backward(objective.objective)?;
         lap(&mut self.phases.backward);
         self.tape.clear();
-        self.optimiser.step(self.model.params_mut(), &grads)?;
+        at.optimiser.step(at.model.params_mut(), &grads)?;
         self.tape.recycle(grads);
         lap(&mut self.phases.optimiser);
-        self.step += 1;
-        let mut at = StepContext {
-            step: self.step,
-            fraction,
-            model: &mut self.model,
-            optimiser: &mut self.optimiser,
-            occupancy: &mut self.occupancy,
-        };
+        // The policies after the step see it counted.
+        at.step += 1;
+        self.step = at.step;
         self.refresh.after_step(&mut at)?;
         lap(&mut self.phases.occupancy);
         self.seconds += start.elapsed().as_secs_f64();
