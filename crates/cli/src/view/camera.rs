@@ -287,10 +287,13 @@ mod tests {
                     got: 2,
                 },
             ),
-            (format!("eye=1,x,3&{base}"), RequestError::NotNumber {
-                key: "eye",
-                value: "x".into(),
-            }),
+            (
+                format!("eye=1,x,3&{base}"),
+                RequestError::NotNumber {
+                    key: "eye",
+                    value: "x".into(),
+                },
+            ),
             (
                 "eye=0,-4,0&target=0,0,0&up=0,0,1&fov=40&w=3000&h=20".into(),
                 RequestError::Size {
@@ -298,11 +301,20 @@ mod tests {
                     value: "3000".into(),
                 },
             ),
-            ("eye=0,-4,0&target=0,0,0&up=0,0,1&fov=180&w=3&h=2".into(), RequestError::Fov(180.0)),
-            (format!("eye=1,1,1&eye=1,1,1&{base}"), RequestError::Duplicate("eye".into())),
+            (
+                "eye=0,-4,0&target=0,0,0&up=0,0,1&fov=180&w=3&h=2".into(),
+                RequestError::Fov(180.0),
+            ),
+            (
+                format!("eye=1,1,1&eye=1,1,1&{base}"),
+                RequestError::Duplicate("eye".into()),
+            ),
             (format!("what=1&{base}"), RequestError::Unknown("what".into())),
             (base.into(), RequestError::Missing("eye")),
-            ("c2w=2,0,0,0,0,1,0,0,0,0,1,0&fov=40&w=3&h=2".into(), RequestError::NotOrthonormal(3.0)),
+            (
+                "c2w=2,0,0,0,0,1,0,0,0,0,1,0&fov=40&w=3&h=2".into(),
+                RequestError::NotOrthonormal(3.0),
+            ),
         ];
         for (query, want) in cases {
             assert_eq!(request(&query), Err(want), "{query}");

@@ -114,7 +114,11 @@ pub fn serve(listener: &TcpListener, handler: &dyn Handler, stop: &StopFlag) -> 
             };
             if active.load(Ordering::Acquire) >= MAX_CONNECTIONS {
                 let _ = prepare(&stream).and_then(|()| {
-                    send(&stream, false, &Response::refuse(503, "busy: too many connections at once"))
+                    send(
+                        &stream,
+                        false,
+                        &Response::refuse(503, "busy: too many connections at once"),
+                    )
                 });
                 continue;
             }
@@ -182,7 +186,10 @@ fn answer(request: &httparse::Request, handler: &dyn Handler, port: u16) -> (Res
         .map(|h| h.value);
     let allowed = [format!("127.0.0.1:{port}"), format!("localhost:{port}")];
     if !host.is_some_and(|h| allowed.iter().any(|a| a.as_bytes() == h)) {
-        return (Response::refuse(421, "the Host must be 127.0.0.1 or localhost with the port"), is_head);
+        return (
+            Response::refuse(421, "the Host must be 127.0.0.1 or localhost with the port"),
+            is_head,
+        );
     }
     let (path, query) = target.split_once('?').unwrap_or((target, ""));
     let request = Request {

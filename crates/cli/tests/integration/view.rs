@@ -33,7 +33,9 @@ impl Server {
             .spawn()
             .unwrap();
         let mut line = String::new();
-        BufReader::new(child.stdout.take().unwrap()).read_line(&mut line).unwrap();
+        BufReader::new(child.stdout.take().unwrap())
+            .read_line(&mut line)
+            .unwrap();
         let port = line
             .trim()
             .strip_prefix("fogray view: http://127.0.0.1:")
@@ -182,9 +184,27 @@ fn check_model(dir: &Path, model: &Path, space: &str) {
     // The first camera's frame is served.
     let first = format!(
         "/frame?eye={}&target={}&up={}&fov={}&w=8&h=6",
-        c["eye"].as_array().unwrap().iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","),
-        c["target"].as_array().unwrap().iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","),
-        c["up"].as_array().unwrap().iter().map(|v| v.to_string()).collect::<Vec<_>>().join(","),
+        c["eye"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
+        c["target"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
+        c["up"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.to_string())
+            .collect::<Vec<_>>()
+            .join(","),
         c["fov"]
     );
     let (status, png) = server.get(&first);
@@ -217,7 +237,11 @@ fn check_model(dir: &Path, model: &Path, space: &str) {
 #[test]
 fn frames_are_fogray_renders_for_each_kind_of_model() {
     let dir = tempfile::tempdir().unwrap();
-    let sparse = fit_model(dir.path(), "sparse", &[&TINY_FIT[..], &["--model", "sparse", "--space", "box"]].concat());
+    let sparse = fit_model(
+        dir.path(),
+        "sparse",
+        &[&TINY_FIT[..], &["--model", "sparse", "--space", "box"]].concat(),
+    );
     check_model(dir.path(), &sparse, "box");
     let flags = ["--model", "dense", "--precision", "f64", "--space", "contracted"];
     let dense = fit_model(dir.path(), "dense", &[&TINY_FIT[..], &flags].concat());
@@ -236,13 +260,41 @@ fn bad_requests_are_refused_in_one_line() {
         (format!("/frame?eye=1,1,1,1&{good}"), 400, "expected 3"),
         (format!("/frame?eye=inf,1,1&{good}"), 400, "not finite"),
         (format!("/frame?{good}"), 400, "eye is missing"),
-        ("/frame?eye=0,0,3&target=0,0,0&up=0,0,1&fov=40&w=8&h=8".into(), 400, "camera:"),
-        ("/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=40&w=4096&h=4096".into(), 400, "w 4096"),
-        ("/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=40&w=8&h=99999999999999999999".into(), 400, "h 9999"),
-        ("/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=40&w=0&h=8".into(), 400, "w 0"),
-        ("/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=0&w=8&h=8".into(), 400, "fov 0"),
-        ("/frame?c2w=1,0,0,3,0,1,0,0,0,0.5,1,0&fov=40&w=8&h=8".into(), 400, "not orthonormal"),
-        ("/frame?c2w=1,0,0,3&fov=40&w=8&h=8".into(), 400, "c2w: 4 numbers, expected 12"),
+        (
+            "/frame?eye=0,0,3&target=0,0,0&up=0,0,1&fov=40&w=8&h=8".into(),
+            400,
+            "camera:",
+        ),
+        (
+            "/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=40&w=4096&h=4096".into(),
+            400,
+            "w 4096",
+        ),
+        (
+            "/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=40&w=8&h=99999999999999999999".into(),
+            400,
+            "h 9999",
+        ),
+        (
+            "/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=40&w=0&h=8".into(),
+            400,
+            "w 0",
+        ),
+        (
+            "/frame?eye=3,0,0&target=0,0,0&up=0,0,1&fov=0&w=8&h=8".into(),
+            400,
+            "fov 0",
+        ),
+        (
+            "/frame?c2w=1,0,0,3,0,1,0,0,0,0.5,1,0&fov=40&w=8&h=8".into(),
+            400,
+            "not orthonormal",
+        ),
+        (
+            "/frame?c2w=1,0,0,3&fov=40&w=8&h=8".into(),
+            400,
+            "c2w: 4 numbers, expected 12",
+        ),
         ("/frame?view=8".into(), 400, "the model's dataset has 8 cameras"),
         ("/frame?view=-1".into(), 400, "view -1"),
         ("/../../etc/passwd".into(), 404, "no such page"),
@@ -259,7 +311,11 @@ fn bad_requests_are_refused_in_one_line() {
         assert_eq!(body.lines().count(), 1, "{target}: {body:?}");
     }
     // A head larger than the server reads, another method, a foreign Host.
-    let long = format!("GET /info?{} HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n\r\n", "a".repeat(20_000), server.port);
+    let long = format!(
+        "GET /info?{} HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n\r\n",
+        "a".repeat(20_000),
+        server.port
+    );
     assert_eq!(server.raw(long.as_bytes()).0, 431);
     let post = format!("POST /info HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n\r\n", server.port);
     assert_eq!(server.raw(post.as_bytes()).0, 405);
@@ -273,14 +329,16 @@ fn bad_requests_are_refused_in_one_line() {
 
 /// Chromium's command, where it is installed.
 fn chromium() -> Option<&'static str> {
-    ["chromium", "chromium-browser", "google-chrome"].into_iter().find(|name| {
-        Command::new(name)
-            .arg("--version")
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .status()
-            .is_ok_and(|s| s.success())
-    })
+    ["chromium", "chromium-browser", "google-chrome"]
+        .into_iter()
+        .find(|name| {
+            Command::new(name)
+                .arg("--version")
+                .stdout(Stdio::null())
+                .stderr(Stdio::null())
+                .status()
+                .is_ok_and(|s| s.success())
+        })
 }
 
 /// Runs headless Chromium on `url` with `output` (`--dump-dom` or `--screenshot=FILE`), giving
@@ -339,11 +397,16 @@ fn a_drag_in_the_browser_moves_the_camera_and_shows_the_served_frame() {
     let dir = tempfile::tempdir().unwrap();
     // Enough steps for the ball to show; orbited about a point beside its centre, so that a
     // drag moves it across the frame.
-    let flags = ["--steps", "60", "--grid", "12", "--batch", "512", "--space", "box", "--json"];
+    let flags = [
+        "--steps", "60", "--grid", "12", "--batch", "512", "--space", "box", "--json",
+    ];
     let model = fit_model(dir.path(), "sparse", &flags);
     let server = Server::start(&model);
     let size = [48, 40];
-    let camera = format!("eye=3,-1,1.5&target=0.4,0.3,0&up=0,0,1&fov=40&w={}&h={}", size[0], size[1]);
+    let camera = format!(
+        "eye=3,-1,1.5&target=0.4,0.3,0&up=0,0,1&fov=40&w={}&h={}",
+        size[0], size[1]
+    );
     let (before, first) = screenshot(browser, dir.path(), &server, &camera, "before");
     let (after, last) = screenshot(browser, dir.path(), &server, &format!("{camera}&drag=40,-15"), "after");
     assert_eq!(first, camera, "the page's first frame is the camera of its address");
@@ -353,7 +416,11 @@ fn a_drag_in_the_browser_moves_the_camera_and_shows_the_served_frame() {
         assert_eq!(status, 200);
         let served = decode(&png);
         let shown = corner(shot, size);
-        assert_eq!(worst(&shown, &served), 0, "the screenshot's frame is not the served one");
+        assert_eq!(
+            worst(&shown, &served),
+            0,
+            "the screenshot's frame is not the served one"
+        );
     }
     assert!(
         worst(&corner(&before, size), &corner(&after, size)) > 10,
