@@ -266,8 +266,29 @@ fn describe(
     })
 }
 
+/// `up`, or the world axis it is within [`SNAP_DEGREES`] of: cameras that stand around an
+/// object tilt their up towards it, and their mean is then a little off the axis the scene
+/// was built along, which orbiting about would show as a wobble.
+fn snapped(up: [f64; 3]) -> [f64; 3] {
+    let cos = SNAP_DEGREES.to_radians().cos();
+    for axis in 0..3 {
+        for sign in [1.0, -1.0] {
+            if sign * up[axis] >= cos {
+                let mut e = [0.0; 3];
+                e[axis] = sign;
+                return e;
+            }
+        }
+    }
+    up
+}
+
+/// How near a world axis the dataset cameras' mean up must be to be taken as that axis.
+const SNAP_DEGREES: f64 = 10.0;
+
 /// The first camera: from the direction of the dataset's first camera at the cameras' mean
-/// distance, with their mean up and the first one's field of view; without a dataset, 30
+/// distance, with their mean up (snapped to a world axis within 10 degrees) and the first
+/// one's field of view; without a dataset, 30
 /// degrees above the +x axis (+z up, as Blender scenes are), at the distance where a box's
 /// bounding sphere fits the view, or on the framing's sphere (where a capture's cameras stand).
 fn first_camera(
@@ -287,7 +308,7 @@ fn first_camera(
         let (d, u) = (norm(direction), norm(up));
         if d > 1e-9 && u > 1e-9 && mean_distance.is_finite() {
             let eye = std::array::from_fn(|i| centre[i] + direction[i] / d * mean_distance);
-            let up = up.map(|v| v / u);
+            let up = snapped(up.map(|v| v / u));
             let k = first.intrinsics();
             let scale = (FIRST_FRAME_SIDE as f64 / k.width.max(k.height) as f64).min(1.0);
             let size = [k.width, k.height].map(|s| ((s as f64 * scale).round() as usize).max(1));

@@ -371,15 +371,20 @@ fn ready_frame(dom: &str) -> Option<String> {
     Some(dom[start..end].replace("&amp;", "&"))
 }
 
+/// Chromium's virtual time for the page: it runs far ahead of the clock while a frame is
+/// awaited (a slow frame can take tens of virtual seconds), and once the page is still (no
+/// timer, no fetch) the rest passes at once, so a generous budget costs nothing.
+const BUDGET_MS: u32 = 3_600_000;
+
 /// Takes a screenshot of the page at `query` (after its drag, if any) and returns it with the
 /// frame query the page showed last.
 fn screenshot(browser: &str, dir: &Path, server: &Server, query: &str, name: &str) -> (Array3<u8>, String) {
     let url = server.url(&format!("/?{query}"));
-    let dom = headless(browser, &dir.join(format!("{name}-dom")), &url, "--dump-dom", 20_000);
+    let dom = headless(browser, &dir.join(format!("{name}-dom")), &url, "--dump-dom", BUDGET_MS);
     let frame = ready_frame(&dom).unwrap_or_else(|| panic!("the page never got ready: {dom}"));
     let file = dir.join(format!("{name}.png"));
     let shot = format!("--screenshot={}", file.display());
-    headless(browser, &dir.join(format!("{name}-shot")), &url, &shot, 20_000);
+    headless(browser, &dir.join(format!("{name}-shot")), &url, &shot, BUDGET_MS);
     (decode(&std::fs::read(&file).unwrap()), frame)
 }
 
