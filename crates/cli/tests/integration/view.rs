@@ -15,7 +15,7 @@ use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 use serde_json::Value;
 
-use crate::common::{arg, cameras, fogray, intrinsics, write_ball, LENS, TINY_FIT};
+use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, write_ball, LENS, TINY_FIT};
 
 /// A running `fogray view`, stopped (SIGINT) when dropped.
 struct Server {
@@ -431,4 +431,27 @@ fn a_drag_in_the_browser_moves_the_camera_and_shows_the_served_frame() {
         worst(&corner(&before, size), &corner(&after, size)) > 10,
         "the picture did not change"
     );
+}
+
+#[test]
+fn refusals_before_serving_are_one_line() {
+    for (args, says) in [
+        (&["view", "--port", "70000"][..], "70000"),
+        (&["view"][..], "--model"),
+        (
+            &["view", "--model", "no-such-model.safetensors"][..],
+            "no-such-model.safetensors",
+        ),
+    ] {
+        let run = fogray(args);
+        assert_refused(&run, says, &format!("{args:?}"));
+        assert!(run.stderr.starts_with("fogray view: error: "), "{}", run.stderr);
+    }
+    // A port another program holds.
+    let dir = tempfile::tempdir().unwrap();
+    let model = fit_model(dir.path(), "sparse", &[&TINY_FIT[..], &["--space", "box"]].concat());
+    let taken = std::net::TcpListener::bind(("127.0.0.1", 0)).unwrap();
+    let port = taken.local_addr().unwrap().port().to_string();
+    let run = fogray(&["view", "--model", arg(&model), "--port", &port]);
+    assert_refused(&run, &format!("--port {port}"), "a taken port");
 }
