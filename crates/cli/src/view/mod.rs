@@ -101,7 +101,8 @@ impl WithModel for Serve<'_> {
             float: PhantomData,
         };
         let views = dataset_cameras(path, self.info);
-        let info = describe(path, self.info, background, &views);
+        let photos = dataset_photos(self.info, &views);
+        let info = describe(path, self.info, background, &views, !photos.is_empty());
         let listener = http::bind(self.args.port)
             .map_err(|e| CliError::Option(format!("--port {}: cannot listen on 127.0.0.1: {e}", self.args.port)))?;
         let address = listener
@@ -111,6 +112,7 @@ impl WithModel for Serve<'_> {
             scene: &scene,
             info: info.to_string(),
             views: views.into_iter().map(|(_, c)| c).collect(),
+            photos,
             rendering: Mutex::new(()),
         };
         // Printed and flushed once the server is ready, so that a script may wait for it.
@@ -178,6 +180,29 @@ fn dataset_cameras(model: &Path, info: &ModelInfo) -> Vec<(String, PinholeCamera
     }
 }
 
+/// The photograph of each of `views`, in their order, as the dataset the checkpoint names lists
+/// them; none unless every one is found there under its view's name (a dataset whose files
+/// are listed in another order than its cameras offers no photographs rather than wrong ones).
+fn dataset_photos(info: &ModelInfo, views: &[(String, PinholeCamera)]) -> Vec<PathBuf> {
+    let Some(data) = info.extra.get("data") else {
+        return Vec::new();
+    };
+    let Ok(files) = fogray_data::dataset_files(Path::new(data)) else {
+        return Vec::new();
+    };
+    let named = files.pictures.len() == views.len()
+        && files
+            .pictures
+            .iter()
+            .zip(views)
+            .all(|(file, (name, _))| file.file_stem().is_some_and(|s| s == name.as_str()));
+    if named {
+        files.pictures
+    } else {
+        Vec::new()
+    }
+}
+
 /// A camera as the page and `/frame` take it: eye, target, up, vertical field of view in
 /// degrees, size.
 fn camera_json(eye: [f64; 3], target: [f64; 3], up: [f64; 3], fov: f64, [w, h]: [usize; 2]) -> serde_json::Value {
@@ -212,6 +237,7 @@ fn describe(
     info: &ModelInfo,
     background: [f64; 3],
     views: &[(String, PinholeCamera)],
+    photos: bool,
 ) -> serde_json::Value {
     let settings = &info.settings;
     let contracted = settings.space == SpaceChoice::Contracted;
@@ -248,6 +274,7 @@ fn describe(
             let mut v = camera_json(eye, target, up_of(c), fov_degrees(c), [k.width, k.height]);
             v["index"] = json!(index);
             v["name"] = json!(name);
+            v["photo"] = json!(photos);
             v
         })
         .collect();

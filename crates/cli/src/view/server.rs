@@ -3,10 +3,13 @@
 //! - `GET /`: the page (`page.html`, compiled in).
 //! - `GET /info`: JSON: the model, its bounds or framing, a first camera, the dataset's views.
 //! - `GET /frame?...`: a frame from the camera the query names ([`super::camera`]), as PNG.
+//! - `GET /photo?view=N`: the dataset's photograph of view N.
 //!
-//! Nothing else is served: no route reads a file, so no path (`/../x`, `/%2e%2e/x`) can reach
-//! one; every other path is 404.
+//! Nothing else is served. The only files read are the photographs of the dataset the
+//! checkpoint names, by index into its list: no path (`/../x`, `/%2e%2e/x`) reaches a file;
+//! every other path is 404.
 
+use std::path::PathBuf;
 use std::sync::Mutex;
 
 use fogray_ops::PinholeCamera;
@@ -49,6 +52,9 @@ pub struct Site<'a> {
     pub info: String,
     /// The dataset's cameras, by index (`/frame?view=N`).
     pub views: Vec<PinholeCamera>,
+    /// Their photographs, by index (`/photo?view=N`), or none: the only files a request can
+    /// make the server read.
+    pub photos: Vec<PathBuf>,
     /// Held while a frame renders: one at a time, so that the memory the frames take is that of
     /// one, and each gets every core (the renderer is parallel inside).
     pub rendering: Mutex<()>,
@@ -60,6 +66,7 @@ impl Handler for Site<'_> {
             "/" | "/index.html" => Response::ok("text/html; charset=utf-8", PAGE.as_bytes().to_vec()),
             "/info" => Response::ok("application/json", self.info.as_bytes().to_vec()),
             "/frame" => self.frame(&request.query),
+            "/photo" => self.photo(&request.query),
             other => {
                 let shown: String = other.chars().take(80).collect();
                 Response::refuse(404, &format!("no such page: {}", fogray_data::escape_controls(&shown)))
@@ -94,6 +101,38 @@ impl Site<'_> {
         }
     }
 
+    /// `/photo?view=N`: the dataset's photograph of view N, its file's bytes as they are.
+    fn photo(&self, query: &str) -> Response {
+        let pairs = match parse_query(query) {
+            Ok(p) => p,
+            Err(e) => return Response::refuse(400, &e.to_string()),
+        };
+        let index = match (pairs.get("view"), pairs.len()) {
+            (Some(index), 1) => index,
+            _ => return Response::refuse(400, "/photo takes view=N alone"),
+        };
+        let file = index.parse::<usize>().ok().and_then(|i| self.photos.get(i));
+        let Some(file) = file else {
+            let shown: String = index.chars().take(32).collect();
+            let count = self.photos.len();
+            return Response::refuse(404, &format!("view {shown}: {count} photographs are offered"));
+        };
+        let extension = file.extension().map(|e| e.to_string_lossy().to_ascii_lowercase());
+        let content_type = match extension.as_deref() {
+            Some("png") => "image/png",
+            Some("jpg" | "jpeg") => "image/jpeg",
+            _ => return Response::refuse(404, "the photograph is neither PNG nor JPEG"),
+        };
+        let size = std::fs::metadata(file).map(|m| m.len()).unwrap_or(u64::MAX);
+        if size > MAX_PHOTO_BYTES {
+            return Response::refuse(413, "the photograph is missing or larger than 64 MiB");
+        }
+        match std::fs::read(file) {
+            Ok(bytes) => Response::ok(content_type, bytes),
+            Err(e) => Response::refuse(404, &format!("the photograph cannot be read: {e}")),
+        }
+    }
+
     /// The dataset's camera `index` (decimal), no larger than a frame may be.
     fn view(&self, index: &str) -> Result<PinholeCamera, RequestError> {
         let no_view = || RequestError::NoView {
@@ -113,6 +152,9 @@ impl Site<'_> {
         Ok(camera.clone())
     }
 }
+
+/// The largest photograph file served: a dataset's full-size pictures are a few MiB.
+const MAX_PHOTO_BYTES: u64 = 64 << 20;
 
 /// The frame as PNG: lossless, so that the page shows exactly the bytes `fogray render` would
 /// write, at a cost beside the render's that fast compression keeps small.

@@ -228,6 +228,11 @@ fn check_model(dir: &Path, model: &Path, space: &str) {
     let (status, png) = server.get("/frame?view=3");
     assert_eq!(status, 200, "{}", String::from_utf8_lossy(&png));
     assert_eq!(decode(&png).dim(), (16, 16, 3));
+    // Its photograph, the dataset's file as it is.
+    assert_eq!(info["views"][3]["photo"], true, "{info}");
+    let (status, photo) = server.get("/photo?view=3");
+    assert_eq!(status, 200);
+    assert_eq!(photo, std::fs::read(dir.join("ball/images/view_03.png")).unwrap());
 
     let (code, stderr) = server.interrupt();
     assert_eq!(code, 130, "{stderr}");
@@ -302,6 +307,10 @@ fn bad_requests_are_refused_in_one_line() {
         ("/..%2f..%2fetc%2fpasswd".into(), 404, "no such page"),
         ("/frame/../info".into(), 404, "no such page"),
         ("/nothing".into(), 404, "no such page"),
+        ("/photo?view=../../etc/passwd".into(), 404, "8 photographs are offered"),
+        ("/photo?view=8".into(), 404, "8 photographs are offered"),
+        ("/photo?file=/etc/passwd".into(), 400, "view=N alone"),
+        ("/photo?view=1&file=/etc/passwd".into(), 400, "view=N alone"),
     ];
     for (target, want, says) in cases {
         let (status, body) = server.get(&target);
