@@ -26,3 +26,4 @@ pub mod render;
 pub mod render_memory;
 pub mod saved;
 pub mod tape_cost;
+pub mod view;

@@ -84,6 +84,11 @@ enum Command {
     /// into the folder `fogray fit --data DIR` reads: DIR/images (the photographs, linked or
     /// copied) and DIR/sparse/0, beside DIR/colmap.log. Needs `colmap` on PATH.
     Prepare(fogray_cli::prepare::PrepareArgs),
+    /// Look at a model saved by `fogray fit --save-model` in the browser: a page served on
+    /// 127.0.0.1 (the address is printed) where dragging orbits the camera, shift- or
+    /// right-dragging pans and the wheel zooms; frames rendered as `fogray render` renders
+    /// them. Ctrl-C stops it (exit status 130).
+    View(fogray_cli::view::ViewArgs),
     /// Composite packed rays given as JSON; print colour, opacity, depth, weights, transmittance
     /// and, with grad_color, the gradients, as JSON.
     #[command(long_about = COMPOSITE_HELP)]
@@ -434,6 +439,14 @@ fn main() -> ExitCode {
         ),
         // Prints its own outcome: Ctrl-C stops COLMAP and exits 130, leaving no model half-written.
         Command::Prepare(args) => return fogray_cli::prepare::main(args),
+        Command::View(args) => match fogray_cli::view::run(args) {
+            Ok(()) => {
+                eprintln!("fogray view: stopped");
+                // 128 + SIGINT: the server only stops on Ctrl-C.
+                return ExitCode::from(130);
+            }
+            Err(e) => ("view", Err(e)),
+        },
         Command::Export(args) => (
             "export",
             exit_on_ctrl_c()

@@ -14,3 +14,4 @@ mod orbit;
 mod outputs;
 mod prepare;
 mod resume;
+mod view;
