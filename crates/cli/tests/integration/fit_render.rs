@@ -127,8 +127,8 @@ fn a_fitted_ball_renders_in_register_with_its_photographs() {
     let model = dir.path().join("ball.safetensors");
     let report = dir.path().join("report");
 
-    // The ball is an object over white written without alpha, which `--space auto` would take
-    // for a capture and contract: this test is of the box's render registration.
+    // The ball is an object over white written without alpha: `--space auto` must see the
+    // plain backdrop and keep the box (whose render registration this test is of).
     let run = fogray(&[
         "fit",
         "--data",
@@ -139,8 +139,6 @@ fn a_fitted_ball_renders_in_register_with_its_photographs() {
         "24",
         "--batch",
         "1024",
-        "--space",
-        "box",
         "--json",
         "--save-model",
         arg(&model),
@@ -151,6 +149,8 @@ fn a_fitted_ball_renders_in_register_with_its_photographs() {
     assert!(run.stderr.is_empty(), "{}", run.stderr);
     let json: Value = serde_json::from_str(&run.stdout).unwrap();
     assert_eq!(json["steps"], STEPS);
+    assert_eq!(json["space"]["space"], "box", "{}", json["space"]);
+    assert!(json["space"]["why"].as_str().unwrap().contains("plain backdrop"));
     check_report(&report, &json);
     // instant-ngp holds out every eighth frame: 0, 8 and 16.
     assert_eq!(json["views"], serde_json::json!([21, 3]));
