@@ -52,19 +52,59 @@ pub(crate) struct Hit {
     pub(crate) free: bool,
 }
 
-/// Splat `i` at the pixel centre `px`, or `None` where it is skipped.
+/// What a pixel reads of a splat, packed together (one or two cache lines rather than four
+/// arrays), and gathered per tile in list order so that a tile's pixels stream through it.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct Packed {
+    pub(crate) mean: [f64; 2],
+    pub(crate) conic: [f64; 3],
+    pub(crate) opacity: f64,
+    /// A power below this gives an alpha below [`ALPHA_MIN`] for certain: the exponential
+    /// is then not computed. It sits a margin below `ln(ALPHA_MIN / opacity)`, far wider
+    /// than the rounding of either side, and powers between it and the exact bound take the
+    /// exact test, so the skip decides nothing the exact test would decide otherwise.
+    pub(crate) cutoff: f64,
+    /// The splat's index.
+    pub(crate) index: usize,
+}
+
+/// How far below the exact bound [`Packed::cutoff`] sits.
+const CUTOFF_MARGIN: f64 = 1e-6;
+
+/// Every splat of `proj` packed with its opacity (in parallel, each on its own).
+pub(crate) fn pack(proj: &Projection, opacity: &[f64]) -> Vec<Packed> {
+    (0..proj.len())
+        .into_par_iter()
+        .with_min_len(1024)
+        .map(|i| Packed {
+            mean: proj.mean2d[i],
+            conic: proj.conic[i],
+            opacity: opacity[i],
+            // ln of +inf (opacity 0) skips every pixel; NaN (never from a checked opacity)
+            // compares false and leaves the exact test to decide.
+            cutoff: (ALPHA_MIN / opacity[i]).ln() - CUTOFF_MARGIN,
+            index: i,
+        })
+        .collect()
+}
+
+/// The packed splats of a tile's list, in order.
+pub(crate) fn gather(packed: &[Packed], list: &[u32]) -> Vec<Packed> {
+    list.iter().map(|&i| packed[i as usize]).collect()
+}
+
+/// Splat `p` at the pixel centre `px`, or `None` where it is skipped.
 #[inline(always)]
-pub(crate) fn hit(proj: &Projection, opacity: &[f64], i: usize, px: [f64; 2]) -> Option<Hit> {
-    let m = proj.mean2d[i];
-    let [a, b, c] = proj.conic[i];
-    let d = [m[0] - px[0], m[1] - px[1]];
+pub(crate) fn hit(p: &Packed, px: [f64; 2]) -> Option<Hit> {
+    let [a, b, c] = p.conic;
+    let d = [p.mean[0] - px[0], p.mean[1] - px[1]];
     let power = -0.5 * (a * d[0] * d[0] + c * d[1] * d[1]) - b * d[0] * d[1];
     // A positive power only comes from rounding at a conic's edge of definiteness.
-    if power > 0.0 {
+    if power > 0.0 || power < p.cutoff {
         return None;
     }
     let gauss = power.exp();
-    let raw = opacity[i] * gauss;
+    let raw = p.opacity * gauss;
     let alpha = raw.min(ALPHA_MAX);
     (alpha >= ALPHA_MIN).then_some(Hit {
         alpha,
@@ -112,24 +152,16 @@ pub(crate) fn check_inputs(
 
 /// One pixel: its colour, transmittance and count.
 #[inline]
-fn pixel(
-    proj: &Projection,
-    opacity: &[f64],
-    colors: &[[f64; 3]],
-    background: [f64; 3],
-    list: &[u32],
-    px: [f64; 2],
-) -> ([f64; 3], f64, u32) {
+fn pixel(colors: &[[f64; 3]], background: [f64; 3], local: &[Packed], px: [f64; 2]) -> ([f64; 3], f64, u32) {
     let (mut t, mut color, mut count) = (1.0, [0.0; 3], 0);
-    for (k, &i) in list.iter().enumerate() {
-        let i = i as usize;
-        let Some(h) = hit(proj, opacity, i, px) else { continue };
+    for (k, p) in local.iter().enumerate() {
+        let Some(h) = hit(p, px) else { continue };
         let next = t * (1.0 - h.alpha);
         if next < T_MIN {
             break;
         }
         let w = t * h.alpha;
-        for (o, c) in color.iter_mut().zip(colors[i]) {
+        for (o, c) in color.iter_mut().zip(colors[p.index]) {
             *o += w * c;
         }
         t = next;
@@ -153,15 +185,16 @@ pub fn rasterize(
     background: [f64; 3],
 ) -> Result<Raster, OpsError> {
     check_inputs(proj, tiles, opacity, colors)?;
+    let packed = pack(proj, opacity);
     let per_tile: Vec<Vec<([f64; 3], f64, u32)>> = (0..tiles.tiles())
         .into_par_iter()
         .map(|t| {
-            let list = tiles.tile(t);
+            let local = gather(&packed, tiles.tile(t));
             let (rows, cols) = tile_pixels(tiles, t);
             let mut out = Vec::with_capacity(TILE * TILE);
             for row in rows {
                 for col in cols.clone() {
-                    out.push(pixel(proj, opacity, colors, background, list, centre(row, col)));
+                    out.push(pixel(colors, background, &local, centre(row, col)));
                 }
             }
             out

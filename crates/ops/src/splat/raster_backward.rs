@@ -23,7 +23,7 @@
 use rayon::prelude::*;
 
 use super::project::Projection;
-use super::raster::{centre, check_inputs, hit, tile_pixels, Raster};
+use super::raster::{centre, check_inputs, gather, hit, pack, tile_pixels, Packed, Raster};
 use super::tiles::TileLists;
 use crate::error::{Op, OpsError};
 
@@ -50,7 +50,6 @@ type Entry = [f64; 9];
 #[derive(Debug, Clone, Copy)]
 struct Step {
     k: usize,
-    i: usize,
     t: f64,
     hit: super::raster::Hit,
 }
@@ -59,11 +58,9 @@ struct Step {
 /// background gradient.
 #[allow(clippy::too_many_arguments)]
 fn pixel(
-    proj: &Projection,
-    opacity: &[f64],
     colors: &[[f64; 3]],
     background: [f64; 3],
-    list: &[u32],
+    local: &[Packed],
     count: usize,
     px: [f64; 2],
     g: [f64; 3],
@@ -72,16 +69,16 @@ fn pixel(
 ) -> f64 {
     steps.clear();
     let mut t = 1.0;
-    for (k, &i) in list[..count].iter().enumerate() {
-        let i = i as usize;
-        if let Some(h) = hit(proj, opacity, i, px) {
-            steps.push(Step { k, i, t, hit: h });
+    for (k, p) in local[..count].iter().enumerate() {
+        if let Some(h) = hit(p, px) {
+            steps.push(Step { k, t, hit: h });
             t *= 1.0 - h.alpha;
         }
     }
     let mut behind = background;
     for s in steps.iter().rev() {
-        let (alpha, c) = (s.hit.alpha, colors[s.i]);
+        let p = &local[s.k];
+        let (alpha, c) = (s.hit.alpha, colors[p.index]);
         let e = &mut grads[s.k];
         let mut g_alpha = 0.0;
         for ch in 0..3 {
@@ -91,7 +88,7 @@ fn pixel(
         }
         if s.hit.free {
             let g_power = g_alpha * alpha;
-            let [a, b, cc] = proj.conic[s.i];
+            let [a, b, cc] = p.conic;
             let [dx, dy] = s.hit.d;
             e[0] -= g_power * (a * dx + b * dy);
             e[1] -= g_power * (b * dx + cc * dy);
@@ -130,6 +127,7 @@ pub fn rasterize_vjp(
             return Err(OpsError::shape(Op::Splat, what, pixels.to_string(), len.to_string()));
         }
     }
+    let packed = pack(proj, opacity);
     // Each tile's slice of the entry buffer.
     let mut entries: Vec<Entry> = vec![[0.0; 9]; tiles.splats.len()];
     let mut slices: Vec<&mut [Entry]> = Vec::with_capacity(tiles.tiles());
@@ -143,7 +141,7 @@ pub fn rasterize_vjp(
         .into_par_iter()
         .enumerate()
         .map(|(t, grads)| {
-            let list = tiles.tile(t);
+            let local = gather(&packed, tiles.tile(t));
             let (rows, cols) = tile_pixels(tiles, t);
             let mut steps = Vec::new();
             let mut g_bg = [0.0; 3];
@@ -151,16 +149,14 @@ pub fn rasterize_vjp(
                 for col in cols.clone() {
                     let p = row * tiles.width + col;
                     let count = raster.count[p] as usize;
-                    if count > list.len() {
+                    if count > local.len() {
                         return Err(p);
                     }
                     let g = g_color[p];
                     let left = pixel(
-                        proj,
-                        opacity,
                         colors,
                         background,
-                        list,
+                        &local,
                         count,
                         centre(row, col),
                         g,
