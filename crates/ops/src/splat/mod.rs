@@ -59,6 +59,7 @@ mod quat;
 mod raster;
 mod raster_backward;
 mod tiles;
+pub mod twin;
 
 pub use config::{SplatArrays, SplatRender, SplatVars};
 pub use op::SplatGradients;

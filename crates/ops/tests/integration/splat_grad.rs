@@ -170,3 +170,77 @@ fn the_fused_op_passes_gradcheck() {
         }
     }
 }
+
+#[test]
+fn the_projection_backward_is_the_taped_twins_to_rounding() {
+    use fogray_ops::splat::twin;
+    let cam = camera(24, 20);
+    for (seed, n) in [(51, 10), (52, 30)] {
+        let mut s = scene(seed, n);
+        // One splat behind the camera and one beyond the frustum's clamp (far to the side).
+        s.means.row_mut(0).assign(&ndarray::arr1(&[0.1, 0.2, -6.0]));
+        s.means.row_mut(1).assign(&ndarray::arr1(&[9.0, -7.0, 1.0]));
+        let p = project(&cam, s.means.view(), s.log_scales.view(), s.quats.view()).unwrap();
+        assert_eq!(p.radius[0], 0);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let gm = Array2::from_shape_fn((n, 2), |_| rng.gen_range(-1.0..1.0));
+        let gk = Array2::from_shape_fn((n, 3), |_| rng.gen_range(-30.0..30.0));
+        // Culled splats get no depth gradient from the fused backward.
+        let gd = ndarray::Array1::from_shape_fn(n, |i| if p.radius[i] > 0 { rng.gen_range(-1.0..1.0) } else { 0.0 });
+
+        let mut tape = Tape::<f64>::new();
+        let (m, l, q) = (
+            tape.param(s.means.clone()),
+            tape.param(s.log_scales.clone()),
+            tape.param(s.quats.clone()),
+        );
+        let out = twin::projection(&mut tape, &cam, m, l, q).unwrap();
+        let (wm, wk, wd) = (
+            tape.constant(gm.clone()),
+            tape.constant(gk.clone()),
+            tape.constant(gd.clone()),
+        );
+        let terms = [
+            tape.mul(out.mean2d, wm).unwrap(),
+            tape.mul(out.conic, wk).unwrap(),
+            tape.mul(out.depth, wd).unwrap(),
+        ];
+        let sums: Vec<_> = terms.iter().map(|&t| tape.sum(t).unwrap()).collect();
+        let a = tape.add(sums[0], sums[1]).unwrap();
+        let loss = tape.add(a, sums[2]).unwrap();
+        let grads = tape.backward(loss).unwrap();
+
+        let mean2d = tape.value(out.mean2d).unwrap().to_owned();
+        let conic = tape.value(out.conic).unwrap().to_owned();
+        for i in 0..n {
+            for k in 0..2 {
+                assert!((mean2d[[i, k]] - p.mean2d[i][k]).abs() < 1e-12, "mean2d {i} {k}");
+            }
+            for k in 0..3 {
+                let (a, b) = (conic[[i, k]], p.conic[i][k]);
+                assert!((a - b).abs() < 1e-12 * (1.0 + b.abs()), "conic {i} {k}: {a} vs {b}");
+            }
+        }
+        let gm_rows: Vec<[f64; 2]> = gm.rows().into_iter().map(|r| [r[0], r[1]]).collect();
+        let gk_rows: Vec<[f64; 3]> = gk.rows().into_iter().map(|r| [r[0], r[1], r[2]]).collect();
+        let fused = project_vjp(
+            &cam,
+            s.means.view(),
+            s.log_scales.view(),
+            s.quats.view(),
+            &gm_rows,
+            &gk_rows,
+            gd.as_slice().unwrap(),
+        )
+        .unwrap();
+        let check = |what: &str, taped: ndarray::ArrayViewD<f64>, fused: Vec<f64>| {
+            let scale = fused.iter().fold(1.0f64, |m, v| m.max(v.abs()));
+            for (j, (a, b)) in taped.iter().zip(&fused).enumerate() {
+                assert!((a - b).abs() <= 1e-11 * scale, "{what}[{j}]: taped {a}, fused {b}");
+            }
+        };
+        check("means", grads.get(m).unwrap().view(), fused.means.concat());
+        check("log_scales", grads.get(l).unwrap().view(), fused.log_scales.concat());
+        check("quats", grads.get(q).unwrap().view(), fused.quats.concat());
+    }
+}
