@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 use super::project::{Projection, CHUNK};
 use crate::error::{Op, OpsError};
+use crate::limits::{available, Bytes, SPLAT_INTERSECTION_BYTES, SPLAT_PIXEL_BYTES};
 
 /// Tile side, in pixels.
 pub const TILE: usize = 16;
@@ -96,8 +97,10 @@ fn area(r: &[usize; 4]) -> u64 {
 /// [module docs](self)).
 ///
 /// Errors: a projection whose arrays differ in length, more splats than a `u32` indexes
-/// ([`OpsError::Shape`]); an empty image ([`OpsError::EmptyImage`]); more than
-/// `max_intersections` (splat, tile) pairs ([`OpsError::TooManyIntersections`]).
+/// ([`OpsError::Shape`]); an empty image ([`OpsError::EmptyImage`]), or one whose per-pixel
+/// buffers would not fit in the available memory ([`OpsError::Config`]); more (splat, tile)
+/// pairs than `max_intersections`, or than the available memory holds at
+/// [`SPLAT_INTERSECTION_BYTES`] each ([`OpsError::TooManyIntersections`]).
 pub fn bin(proj: &Projection, width: usize, height: usize, max_intersections: u64) -> Result<TileLists, OpsError> {
     let n = proj.check_lengths()?;
     if width == 0 || height == 0 {
@@ -110,6 +113,17 @@ pub fn bin(proj: &Projection, width: usize, height: usize, max_intersections: u6
     if u32::try_from(n).is_err() {
         return Err(OpsError::shape(Op::Splat, "splats", "at most 2^32 - 1", n.to_string()));
     }
+    // The raster and its backward allocate per pixel: an image the machine cannot hold is
+    // refused here, before any of it is allocated.
+    let image = Bytes::product(&[width as u64, height as u64, SPLAT_PIXEL_BYTES]);
+    if image > available() {
+        return Err(OpsError::config(
+            Op::Splat,
+            "image size (pixels)",
+            width as f64 * height as f64,
+            "needs more memory than is available",
+        ));
+    }
     let (tiles_x, tiles_y) = (width.div_ceil(TILE), height.div_ceil(TILE));
     let mut rects = vec![[0usize; 4]; n];
     rects.par_chunks_mut(CHUNK).enumerate().for_each(|(chunk, rects)| {
@@ -119,11 +133,13 @@ pub fn bin(proj: &Projection, width: usize, height: usize, max_intersections: u6
         }
     });
     let count = rects.par_iter().map(area).reduce(|| 0, u64::saturating_add);
-    if count > max_intersections {
+    // The caller's bound, and the machine's memory at what each pair costs.
+    let limit = max_intersections.min(available().0 / SPLAT_INTERSECTION_BYTES);
+    if count > limit {
         return Err(OpsError::TooManyIntersections {
             op: Op::Splat,
             count,
-            limit: max_intersections,
+            limit,
         });
     }
     // Front to back: depth (positive, so its bits order as the values do), then index. The

@@ -225,3 +225,21 @@ fn opacity_one_is_clamped_at_alpha_0_99_with_a_finite_gradient() {
     }
     assert!(fds[0] != 0.0);
 }
+
+#[test]
+fn an_image_too_large_for_memory_is_refused_before_allocation() {
+    let (cam, s) = string_of_splats(3);
+    let proj = project(&cam, s.means.view(), s.log_scales.view(), s.quats.view()).unwrap();
+    let e = bin(&proj, 1 << 30, 1 << 30, 1 << 20).unwrap_err();
+    assert!(
+        matches!(
+            e,
+            fogray_ops::OpsError::Config {
+                what: "image size (pixels)",
+                ..
+            }
+        ),
+        "{e}"
+    );
+    assert!(bin(&proj, 0, 16, 1 << 20).is_err());
+}
