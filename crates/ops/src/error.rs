@@ -41,6 +41,9 @@ pub enum Op {
     /// The scene contraction and the framing of its inner region from cameras
     /// ([`space`](crate::space)).
     Contraction,
+    /// 3D Gaussian splatting: projection, binning, rasterisation and the fused
+    /// [`SplatRender`](crate::splat::SplatRender).
+    Splat,
 }
 
 impl Op {
@@ -61,6 +64,7 @@ impl Op {
             Op::Sample => "sample",
             Op::Occupancy => "occupancy",
             Op::Contraction => "contraction",
+            Op::Splat => "splat",
         }
     }
 }
@@ -236,6 +240,17 @@ pub enum OpsError {
         /// Its Euclidean length.
         norm: f64,
     },
+    /// More (splat, tile) pairs than the bound the op was given: the tiles' lists, and the
+    /// backward's buffers that grow with them, would be allocated past it.
+    #[error("{op}: {count} splat-tile intersections exceed the limit of {limit}")]
+    TooManyIntersections {
+        /// The op.
+        op: Op,
+        /// The number of pairs the splats make.
+        count: u64,
+        /// The bound.
+        limit: u64,
+    },
     /// The caller's density function failed or returned something unusable.
     #[error("{op}: density function: {problem}")]
     Density {
@@ -261,7 +276,8 @@ macro_rules! with_op {
             | OpsError::OutOfRange { $op, .. }
             | OpsError::Frame { $op, .. }
             | OpsError::NotUnit { $op, .. }
-            | OpsError::Density { $op, .. } => $body,
+            | OpsError::Density { $op, .. }
+            | OpsError::TooManyIntersections { $op, .. } => $body,
         }
     };
 }

@@ -30,6 +30,9 @@
 //! - [`distortion`]: the mip-NeRF 360 distortion loss of packed rays' weights, as a fused op
 //!   ([`DistortionLoss`]) with a hand-written O(n) backward into the densities, and its
 //!   taped (pairwise) twin;
+//! - [`splat`]: 3D Gaussian splatting: projection of 3-D Gaussians into a camera, binning
+//!   into tiles and front-to-back rasterisation, each with a hand-written backward, and the
+//!   fused op ([`splat::SplatRender`]) that records them as one node of the tape;
 //! - [`prior`]: priors on a grid's values for a fit's loss ([`prior::TotalVariation`]);
 //! - [`limits`]: what a grid, a training batch, a render and a loaded frame will allocate,
 //!   checked against the machine's memory before anything is allocated.
@@ -70,6 +73,7 @@ pub mod rays;
 pub mod sample;
 pub mod sh;
 pub mod space;
+pub mod splat;
 pub mod twins;
 
 pub use activation::{Activated, ActivatedGrads, ActivatedMut, ActivatedVars, DensityColor};

@@ -163,6 +163,16 @@ pub const RENDER_PIXEL_BYTES: u64 = 48 + 40 + 7;
 /// while the list is built, and the frame's name.
 pub const RENDER_FRAME_BYTES: u64 = 2 * std::mem::size_of::<PinholeCamera>() as u64 + 64;
 
+/// Bytes a splat render holds per (splat, tile) pair of its tiles' lists: the list entry
+/// (`u32`, 4) and, in the backward, the pair's gradient row (9 `f64`: 2-D mean, conic,
+/// opacity and colour).
+pub const SPLAT_INTERSECTION_BYTES: u64 = 4 + 9 * 8;
+
+/// Bytes a splat render holds per pixel: the colour, transmittance and count of the raster
+/// (36), its per-tile copy before it is placed (36), and the tile offsets (8 per 256 pixels,
+/// rounded up to 1).
+pub const SPLAT_PIXEL_BYTES: u64 = 36 + 36 + 1;
+
 /// Bytes a loaded frame keeps per pixel: colour (3) and alpha (1) in `f32`.
 pub const FRAME_PIXEL_BYTES: u64 = 4 * 4;
 

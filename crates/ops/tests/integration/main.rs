@@ -21,3 +21,7 @@ mod prior;
 mod sh;
 mod sparse_grid;
 mod sparse_prior;
+mod splat;
+mod splat_common;
+mod splat_grad;
+mod splat_hard;
