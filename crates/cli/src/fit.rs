@@ -5,7 +5,7 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use fogray_data::{load, LoadOptions, SceneData};
+use fogray_data::{LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
 use fogray_fit::metrics::{haze_fraction, ViewScore};
@@ -208,11 +208,12 @@ pub fn views(frames: Vec<fogray_data::Frame>) -> Result<Vec<View>, CliError> {
 }
 
 /// A dataset on disk as a fit's data (its training and held-out views over the background
-/// `data_args` names) and the box the dataset gives its scene.
+/// `data_args` names) and the box the dataset gives its scene; with `progress`, the pictures
+/// decoded are counted on a bar on stderr ([`crate::load_bar`]).
 ///
 /// Errors: a bad dataset, naming the file.
-pub fn load_fit_data(path: &Path, data_args: &DataArgs) -> Result<(Dataset, SceneBox), CliError> {
-    let scene: SceneData = load(path, &data_args.options())?;
+pub fn load_fit_data(path: &Path, data_args: &DataArgs, progress: bool) -> Result<(Dataset, SceneBox), CliError> {
+    let scene: SceneData = crate::load_bar::load_showing_progress(path, &data_args.options(), progress)?;
     if scene.skipped > 0 {
         eprintln!(
             "fogray fit: --skip-missing dropped {} frames whose image is missing",
@@ -326,7 +327,8 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         }
     }
     fogray_data::plan_fit_outputs(&inputs, args.save_model.as_deref(), args.out.as_deref())?;
-    let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args)?;
+    // The same rule as the training bar's: --json asks for a quiet run.
+    let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args, !args.json)?;
     let settings = FitSettings {
         scene_box: Some(plan.settings.scene_box.unwrap_or(scene_box)),
         ..plan.settings

@@ -18,6 +18,7 @@ pub mod gradcheck;
 pub mod grid_bench;
 pub mod heap;
 pub mod input;
+pub mod load_bar;
 pub mod markdown;
 pub mod memory;
 pub mod prepare;

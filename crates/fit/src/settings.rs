@@ -214,6 +214,12 @@ pub const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
 /// steps; a larger count is a typo or a budget meant never to end).
 pub const MAX_STEPS: usize = 100_000_000;
 
+/// The most held-out evaluations accepted. Each renders every held-out view, off the training
+/// clock, so a budget of seconds with more evaluations than it has time for
+/// evaluates after every step and never ends in the time asked; the curves of a report need
+/// far fewer points.
+pub const MAX_EVALUATIONS: usize = 10_000;
+
 /// Everything a fit is configured by (see the [module docs](self)).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(default)]
@@ -262,7 +268,8 @@ pub struct FitSettings {
     /// The density's shift: raw 0 is density softplus(shift), the fresh grid's thin fog.
     #[cfg_attr(feature = "cli", arg(long, allow_negative_numbers = true, default_value_t = FitSettings::DEFAULT.shift))]
     pub shift: f64,
-    /// Test evaluations, evenly spaced over the budget (plus one at the start and the end).
+    /// Test evaluations, evenly spaced over the budget (plus one at the start and the end);
+    /// at most one a step, and a count beyond what a report can use is refused.
     #[cfg_attr(feature = "cli", arg(long, default_value_t = FitSettings::DEFAULT.evaluations))]
     pub evaluations: usize,
     /// Degree of the spherical harmonics of the colour, 0 to 3 (0: the same colour from every
@@ -442,8 +449,9 @@ impl FitSettings {
         self
     }
 
-    /// Checks every setting's range, the budget against [`MAX_SECONDS`] and [`MAX_STEPS`], and
-    /// the grid and batch against the machine's memory ([`FitSettings::check_memory`]).
+    /// Checks every setting's range, the budget against [`MAX_SECONDS`] and [`MAX_STEPS`], the
+    /// evaluations against [`MAX_EVALUATIONS`], and the grid and batch against the machine's
+    /// memory ([`FitSettings::check_memory`]).
     ///
     /// Errors: [`FitError::Config`] naming the flag, [`FitError::TooLarge`] naming the flag and
     /// the bytes it would need.
@@ -478,6 +486,12 @@ impl FitSettings {
         }
         if let Some(b) = self.scene_box {
             b.check()?;
+        }
+        if self.evaluations > MAX_EVALUATIONS {
+            return Err(FitError::Config(format!(
+                "--evaluations {}: at most {MAX_EVALUATIONS} (each renders every held-out view)",
+                self.evaluations
+            )));
         }
         match self.budget() {
             Budget::Steps(0) => return bad("--steps must be at least 1"),
@@ -677,6 +691,13 @@ mod tests {
                 "--shift",
             ),
             (FitSettings { steps: Some(0), ..ok }, "--steps"),
+            (
+                FitSettings {
+                    evaluations: MAX_EVALUATIONS + 1,
+                    ..ok
+                },
+                "--evaluations",
+            ),
             (
                 FitSettings {
                     seconds: Some(-1.0),

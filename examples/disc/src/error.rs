@@ -66,6 +66,10 @@ pub enum DiscError {
     /// JSON could not be written.
     #[error("{0}")]
     Json(#[from] serde_json::Error),
+    /// An output file could not be written (nothing is left under its name but the file it
+    /// replaces, if any).
+    #[error("{0}")]
+    Output(#[from] fogray_data::DataError),
     /// A file or directory could not be written or created.
     #[error("cannot {action} {path}: {source}")]
     File {

@@ -300,10 +300,11 @@ fn run(cli: Cli) -> Result<(), DiscError> {
             let stamp = fogray::stamp::Stamp::now("cargo run --release -p fogray-disc -- report");
             let md = fogray_disc::report::markdown(&rows, common.scene.tau, timing, &stamp);
             let md_path = dir.join("speed_vs_error.md");
-            std::fs::write(&md_path, &md).map_err(DiscError::file("write", &md_path))?;
+            // Whole or not at all, as every fogray writer: never a truncated report.
+            fogray_data::write_atomic(&md_path, |out| out.write_all(md.as_bytes()))?;
             let js = serde_json::to_string_pretty(&json!({ "stamp": stamp, "results": rows }))?;
             let js_path = dir.join("speed_vs_error.json");
-            std::fs::write(&js_path, &js).map_err(DiscError::file("write", &js_path))?;
+            fogray_data::write_atomic(&js_path, |out| out.write_all(js.as_bytes()))?;
             fogray_disc::report::plot(&dir, &rows, common.scene.tau)?;
             if common.json {
                 println!("{js}");

@@ -3,6 +3,7 @@
 
 use std::path::Path;
 
+use fogray_data::PngChannels;
 use plotters::coord::Shift;
 use plotters::prelude::*;
 
@@ -20,23 +21,42 @@ fn err<E: std::fmt::Display>(e: E) -> DiscError {
     DiscError::plot(e)
 }
 
-/// Draws with `$draw` into `$stem.svg` and `$stem.png`.
+/// Writes a drawing to `svg` (its SVG text) and `png` (its RGB pixels, `size` as plotters'
+/// bitmap backend lays them out), each whole or not at all: a full disk or Ctrl-C leaves the
+/// previous file or none under either name, never a truncated picture.
+///
+/// Errors: [`DiscError::Output`] naming the file that could not be written.
+pub(crate) fn save(svg: &Path, text: &str, png: &Path, pixels: &[u8], size: (u32, u32)) -> Res {
+    fogray_data::write_atomic(svg, |out| out.write_all(text.as_bytes()))?;
+    fogray_data::write_png8(png, pixels, size.0, size.1, PngChannels::Rgb)?;
+    Ok(())
+}
+
+/// A black canvas of `size` RGB pixels, as plotters' bitmap backend starts one.
+pub(crate) fn canvas(size: (u32, u32)) -> Vec<u8> {
+    vec![0; size.0 as usize * size.1 as usize * 3]
+}
+
+/// Draws with `$draw` into `$stem.svg` and `$stem.png` (drawn in memory, then [`save`]d).
 macro_rules! both {
     ($stem:expr, $size:expr, $draw:ident, $($arg:expr),*) => {{
         // Not with_extension: a name like "landscape-tau0.45" already has a dot.
         let svg = std::path::PathBuf::from(format!("{}.svg", $stem.display()));
         let png = std::path::PathBuf::from(format!("{}.png", $stem.display()));
+        let size: (u32, u32) = $size;
+        let mut text = String::new();
         {
-            let root = SVGBackend::new(&svg, $size).into_drawing_area();
+            let root = SVGBackend::with_string(&mut text, size).into_drawing_area();
             $draw(&root, $($arg),*)?;
             root.present().map_err(err)?;
         }
+        let mut pixels = canvas(size);
         {
-            let root = BitMapBackend::new(&png, $size).into_drawing_area();
+            let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
             $draw(&root, $($arg),*)?;
             root.present().map_err(err)?;
         }
-        Ok::<(), DiscError>(())
+        save(&svg, &text, &png, &pixels, size)
     }};
 }
 

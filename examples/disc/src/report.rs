@@ -342,8 +342,16 @@ pub fn markdown(rows: &[Row], tau: f64, timing: Timing, stamp: &Stamp) -> String
 /// band sampling, the Pareto front as a line; the legend beside the chart, off the data.
 pub fn plot(dir: &Path, rows: &[Row], tau: f64) -> Result<(), DiscError> {
     let (svg, png) = (dir.join("speed_vs_error.svg"), dir.join("speed_vs_error.png"));
-    draw_plot(SVGBackend::new(&svg, (1200, 700)).into_drawing_area(), rows, tau)?;
-    draw_plot(BitMapBackend::new(&png, (1200, 700)).into_drawing_area(), rows, tau)
+    let size = (1200, 700);
+    let mut text = String::new();
+    draw_plot(SVGBackend::with_string(&mut text, size).into_drawing_area(), rows, tau)?;
+    let mut pixels = crate::plots::canvas(size);
+    draw_plot(
+        BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area(),
+        rows,
+        tau,
+    )?;
+    crate::plots::save(&svg, &text, &png, &pixels, size)
 }
 
 const SERIES: [(&str, &str, RGBColor); 6] = [

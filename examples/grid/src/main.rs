@@ -511,7 +511,9 @@ fn report_fit(args: &FitArgs, settings: &FitSettings, data: &Dataset, report: &F
             images: report.held_out.iter().map(|v| nested(v.color.view())).collect(),
         };
         let text = serde_json::to_string(&images)?;
-        std::fs::write(file, text).with_context(|| format!("cannot write {}", file.display()))?;
+        // Whole or not at all, as every fogray writer.
+        fogray_data::write_atomic(file, |w| w.write_all(text.as_bytes()))
+            .with_context(|| format!("cannot write {}", file.display()))?;
     }
     if let Some(dir) = &args.out {
         for (t, render) in data.test.iter().zip(&report.held_out) {
@@ -660,9 +662,8 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
         Command::Scene { out } => {
             let text = Scene::default().to_json_pretty() + "\n";
             match out {
-                Some(path) => {
-                    std::fs::write(&path, text).with_context(|| format!("cannot write {}", path.display()))?
-                }
+                Some(path) => fogray_data::write_atomic(&path, |w| w.write_all(text.as_bytes()))
+                    .with_context(|| format!("cannot write {}", path.display()))?,
                 None => write_stdout(|w| Ok(w.write_all(text.as_bytes())?))?,
             }
         }

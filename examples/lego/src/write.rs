@@ -182,11 +182,11 @@ pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>, stamp: &Stamp
             )?;
         }
     }
-    std::fs::write(out.join("report.md"), md)?;
-    std::fs::write(
-        out.join("report.json"),
-        serde_json::to_string_pretty(&serde_json::json!({ "stamp": stamp, "runs": runs, "anchor": outside }))?,
-    )?;
+    // Whole or not at all, as every fogray writer: a full disk or Ctrl-C never leaves a
+    // truncated report in place of the last one.
+    fogray_data::write_atomic(&out.join("report.md"), |w| w.write_all(md.as_bytes()))?;
+    let json = serde_json::to_string_pretty(&serde_json::json!({ "stamp": stamp, "runs": runs, "anchor": outside }))?;
+    fogray_data::write_atomic(&out.join("report.json"), |w| w.write_all(json.as_bytes()))?;
     Ok(())
 }
 

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use serde_json::Value;
 
-use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, write_ball, LENS, TINY_FIT};
+use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, render_cameras, write_ball, LENS, TINY_FIT};
 
 /// A good dataset of 8 views of 8x8 pixels in a fresh folder `dir/name`.
 fn dataset(dir: &Path, name: &str) -> PathBuf {
@@ -131,15 +131,7 @@ fn render_refuses_a_file_that_is_not_a_model_and_missing_cameras() {
 
     let not_a_model = dir.path().join("not-a-model.safetensors");
     std::fs::write(&not_a_model, "{\"frames\": []}").unwrap();
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&not_a_model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&not_a_model, &transforms, &out, &[]);
     assert_refused(&run, "not-a-model.safetensors", "not a model");
 
     // A real model (one step of a tiny fit), and cameras that are not there.
@@ -147,27 +139,11 @@ fn render_refuses_a_file_that_is_not_a_model_and_missing_cameras() {
     let run = fit(&data, &["--save-model", arg(&model)]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     let missing = dir.path().join("missing-transforms.json");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&missing),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&model, &missing, &out, &[]);
     assert_refused(&run, "missing-transforms.json", "missing cameras");
     assert!(!out.exists(), "a refused render made {}", out.display());
     // The dataset's own cameras render: the refusal above was the missing file's.
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&data),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&model, &data, &out, &[]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     assert_eq!(run.stdout.lines().count(), 8, "{}", run.stdout);
 }

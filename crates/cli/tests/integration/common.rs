@@ -1,7 +1,7 @@
 //! Helpers of the dataset tests: running `fogray` on paths, and a scene photographed exactly
 //! (an opaque ball in front of a white background), written as an instant-ngp dataset.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use fogray_data::write_instant_ngp;
@@ -31,7 +31,24 @@ pub fn fogray_in(cwd: &Path, args: &[&str]) -> Run {
     )
 }
 
-fn run_output(out: std::process::Output) -> Run {
+/// `fogray render` of the model file `model` from the cameras of the dataset or transforms
+/// file `cameras` into the folder `out`, with the flags `extra` after.
+pub fn render_cameras(model: &Path, cameras: &Path, out: &Path, extra: &[&str]) -> Run {
+    let mut args = vec![
+        "render",
+        "--model",
+        arg(model),
+        "--cameras",
+        arg(cameras),
+        "--out",
+        arg(out),
+    ];
+    args.extend(extra);
+    fogray(&args)
+}
+
+/// What a finished child process left, as a [`Run`].
+pub fn run_output(out: std::process::Output) -> Run {
     Run {
         code: out.status.code().unwrap_or(-1),
         stdout: String::from_utf8(out.stdout).unwrap(),
@@ -42,6 +59,26 @@ fn run_output(out: std::process::Output) -> Run {
 /// The flags of the smallest fit the tests save a model from: one step of 64 rays on an 8^3
 /// grid, JSON on stdout.
 pub const TINY_FIT: [&str; 7] = ["--steps", "1", "--grid", "8", "--batch", "64", "--json"];
+
+/// A [`TINY_FIT`] of the ball's dataset (8 views of 8x8 pixels), written in `dir/data`, with
+/// the flags `extra`: the dataset and the run, which succeeded.
+pub fn tiny_fit(dir: &Path, extra: &[&str]) -> (PathBuf, Run) {
+    let data = dir.join("data");
+    write_ball(&data, &cameras(8, intrinsics(8), LENS));
+    let mut args = vec!["fit", "--data", arg(&data)];
+    args.extend(TINY_FIT);
+    args.extend(extra);
+    let run = fogray(&args);
+    assert_eq!(run.code, 0, "{}", run.stderr);
+    (data, run)
+}
+
+/// A [`tiny_fit`] in `dir` saved to `dir/tiny.safetensors`: the dataset and the model file.
+pub fn tiny_model(dir: &Path) -> (PathBuf, PathBuf) {
+    let model = dir.join("tiny.safetensors");
+    let (data, _) = tiny_fit(dir, &["--save-model", arg(&model)]);
+    (data, model)
+}
 
 /// A path as a command-line argument (temporary paths are UTF-8 here).
 pub fn arg(path: &Path) -> &str {

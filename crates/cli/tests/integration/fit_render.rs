@@ -10,7 +10,7 @@ use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 use serde_json::Value;
 
-use crate::common::{arg, cameras, fogray, frame_name, intrinsics, photograph, psnr, write_ball, LENS};
+use crate::common::{arg, cameras, fogray, frame_name, intrinsics, photograph, psnr, render_cameras, write_ball, LENS};
 
 const VIEWS: usize = 24;
 const SIZE: usize = 24;
@@ -41,15 +41,7 @@ fn render_held_out(dir: &Path, model: &Path, cameras: &[PinholeCamera], photos: 
         .collect();
     let transforms = fogray_data::write_instant_ngp(&dir.join("cameras"), &frames).unwrap();
     let out = dir.join("renders");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(model, &transforms, &out, &[]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     (0..cameras.len())
         .step_by(8)
@@ -180,15 +172,7 @@ fn a_fitted_ball_renders_in_register_with_its_photographs() {
 
     let out = dir.path().join("renders");
     let transforms = data.join("transforms.json");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&model, &transforms, &out, &[]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     assert_eq!(run.stdout.lines().count(), VIEWS, "{}", run.stdout);
     let mut pngs: Vec<String> = std::fs::read_dir(&out)

@@ -2,26 +2,12 @@
 //! status 2, one line naming the flag or the file and the bytes, nothing on stdout (the refused
 //! size is never allocated, so each refusal returns at once).
 
-use std::path::Path;
-
-use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, write_ball, LENS, TINY_FIT};
-
-/// A one-step fit of the ball's dataset in `dir`: the model file.
-fn tiny_model(dir: &Path) -> std::path::PathBuf {
-    let data = dir.join("data");
-    write_ball(&data, &cameras(8, intrinsics(8), LENS));
-    let model = dir.join("tiny.safetensors");
-    let mut args = vec!["fit", "--data", arg(&data), "--save-model", arg(&model)];
-    args.extend(TINY_FIT);
-    let run = fogray(&args);
-    assert_eq!(run.code, 0, "{}", run.stderr);
-    model
-}
+use crate::common::{arg, assert_refused, fogray, tiny_model};
 
 #[test]
 fn renders_and_fits_the_machine_cannot_hold_are_refused_in_one_line() {
     let dir = tempfile::tempdir().unwrap();
-    let model = tiny_model(dir.path());
+    let (_, model) = tiny_model(dir.path());
     let out = dir.path().join("out");
     let render = |extra: &[&str]| {
         let mut args = vec!["render", "--model", arg(&model), "--out", arg(&out)];
@@ -78,5 +64,14 @@ fn renders_and_fits_the_machine_cannot_hold_are_refused_in_one_line() {
         &fit(&["--steps", "18446744073709551615"]),
         "--steps 18446744073709551615: at most",
         "endless steps",
+    );
+    // Each evaluation renders every held-out view off the clock: refused before the dataset
+    // is read, so a missing one is not what is reported.
+    let missing = dir.path().join("no-such-data");
+    let run = fogray(&["fit", "--data", arg(&missing), "--evaluations", "18446744073709551615"]);
+    assert_refused(
+        &run,
+        "--evaluations 18446744073709551615: at most",
+        "endless evaluations",
     );
 }

@@ -1,8 +1,9 @@
 //! What reaches the terminal: a flag error is one line on stderr (exit status 2, nothing on
 //! stdout) for every subcommand, and a name read from a transforms file is printed with its
-//! control characters escaped, in the paths a command prints and in its errors.
+//! control characters escaped, in the paths a command prints and in its errors; `--json`
+//! keeps stdout to its JSON, the load's and the fit's bars off.
 
-use crate::common::{arg, fogray};
+use crate::common::{arg, fogray, render_cameras, tiny_fit};
 use crate::outputs::write_model;
 
 #[test]
@@ -68,15 +69,7 @@ fn a_frame_name_with_control_characters_is_printed_escaped() {
     // ESC [ 2 J clears the screen of whoever reads it raw.
     let transforms = transforms_naming(dir.path(), "\u{1b}[2Jred");
     let out = dir.path().join("out");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&model, &transforms, &out, &[]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     assert!(run.stdout.ends_with("\\u{1b}[2Jred.png\n"), "{:?}", run.stdout);
     assert!(!run.stdout.contains('\u{1b}'), "{:?}", run.stdout);
@@ -90,16 +83,21 @@ fn a_frame_name_with_control_characters_is_printed_escaped() {
     assert!(!run.stderr.contains('\u{1b}'), "{:?}", run.stderr);
     // A carriage return and a NUL (which no file name can hold: the write fails, named).
     let transforms = transforms_naming(dir.path(), "a\rb\0c");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&model, &transforms, &out, &[]);
     assert_eq!(run.code, 2, "{}", run.stderr);
     assert!(run.stderr.contains("a\\rb\\0c.png"), "{:?}", run.stderr);
     assert!(!run.stderr.contains(['\r', '\0']), "{:?}", run.stderr);
+}
+
+#[test]
+fn a_fit_with_json_prints_only_its_json_on_stdout_while_the_pictures_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let (_, run) = tiny_fit(dir.path(), &[]);
+    let summary: serde_json::Value = serde_json::from_str(&run.stdout).expect("stdout is one JSON value");
+    assert_eq!(summary["steps"], 1, "{}", run.stdout);
+    assert!(
+        !run.stderr.contains("pictures"),
+        "a load bar with --json: {:?}",
+        run.stderr
+    );
 }

@@ -1,24 +1,12 @@
 //! `fogray render --orbit`: the frames, the GIF and the depth maps a tiny fitted model gives,
 //! the defaults taken from its dataset, and the flags refused (exit status 2, one line).
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use crate::common::{
-    arg, assert_refused, cameras, fogray, fogray_in, frame_name, intrinsics, write_ball, LENS, TINY_FIT,
+    arg, assert_refused, cameras, fogray, fogray_in, frame_name, intrinsics, render_cameras, tiny_model, write_ball,
+    LENS, TINY_FIT,
 };
-
-/// A one-step fit of the ball's dataset (8 views of 8x8 pixels) in `dir`: the dataset and the
-/// model file.
-fn tiny_model(dir: &Path) -> (PathBuf, PathBuf) {
-    let data = dir.join("data");
-    write_ball(&data, &cameras(8, intrinsics(8), LENS));
-    let model = dir.join("tiny.safetensors");
-    let mut args = vec!["fit", "--data", arg(&data), "--save-model", arg(&model)];
-    args.extend(TINY_FIT);
-    let run = fogray(&args);
-    assert_eq!(run.code, 0, "{}", run.stderr);
-    (data, model)
-}
 
 /// The size and colour type of the PNG `path`.
 fn png_info(path: &Path) -> (u32, u32, image::ColorType) {
@@ -149,16 +137,7 @@ fn depth_maps_are_written_beside_a_transforms_files_frames() {
     let dir = tempfile::tempdir().unwrap();
     let (data, model) = tiny_model(dir.path());
     let out = dir.path().join("views");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&data),
-        "--out",
-        arg(&out),
-        "--depth",
-    ]);
+    let run = render_cameras(&model, &data, &out, &["--depth"]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     let mut want: Vec<String> = (0..8)
         .flat_map(|i| [format!("{}.png", frame_name(i)), format!("{}-depth.png", frame_name(i))])

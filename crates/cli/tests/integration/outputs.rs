@@ -15,7 +15,7 @@ use fogray_fit::state::TrainingState;
 use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 
-use crate::common::{arg, assert_refused, fogray, TINY_FIT};
+use crate::common::{arg, assert_refused, fogray, render_cameras, run_output, TINY_FIT};
 
 /// A Blender dataset `dir/data` of four 8x8 views (`transforms_train.json`, `train/v0.png`
 /// ...) and a fresh 8^3 dense model `dir/model.safetensors` (a render of it is grey haze,
@@ -128,43 +128,19 @@ fn a_render_into_its_own_dataset_is_refused_and_the_dataset_is_untouched() {
         (&train, "its pictures' folder"),
         (&roundabout, "the same through .."),
     ] {
-        let run = fogray(&[
-            "render",
-            "--model",
-            arg(&model),
-            "--cameras",
-            arg(&data),
-            "--out",
-            arg(out),
-        ]);
+        let run = render_cameras(&model, &data, out, &[]);
         assert_refused(&run, "refused as an output", why);
         assert!(run.stderr.contains(arg(out)), "{why}: {}", run.stderr);
         assert_eq!(snapshot(dir.path()), before, "{why}: a file changed");
     }
     // A transforms file given alone protects its pictures: a frame's PNG may not land on one.
     let transforms = data.join("transforms_train.json");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&train),
-    ]);
+    let run = render_cameras(&model, &transforms, &train, &[]);
     assert_refused(&run, "it is the input", "a picture of the transforms file");
     assert_eq!(snapshot(dir.path()), before);
     // Beside the dataset, the render runs.
     let out = dir.path().join("renders");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(&model),
-        "--cameras",
-        arg(&data),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(&model, &data, &out, &[]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     assert_eq!(run.stdout.lines().count(), 4);
 }
@@ -277,19 +253,20 @@ fn links_planted_in_the_output_folder_are_never_written_through() {
 }
 
 /// Runs `fogray` with `args` under a file size limit of 512 bytes (`ulimit -f 1` in POSIX
-/// blocks), SIGXFSZ ignored, so that a write past the limit fails as on a full disk.
-fn fogray_on_a_full_disk(args: &[&str]) -> crate::common::Run {
+/// blocks), SIGXFSZ ignored, so that a write past the limit fails as on a full disk; `None`,
+/// said on stderr, where the shell cannot limit a file's size.
+fn fogray_on_a_full_disk(args: &[&str]) -> Option<crate::common::Run> {
     let script = r#"trap '' XFSZ; ulimit -f 1 || exit 99; exec "$@""#;
     let out = std::process::Command::new("sh")
         .args(["-c", script, "sh", env!("CARGO_BIN_EXE_fogray")])
         .args(args)
         .output()
         .unwrap();
-    crate::common::Run {
-        code: out.status.code().unwrap_or(-1),
-        stdout: String::from_utf8(out.stdout).unwrap(),
-        stderr: String::from_utf8(out.stderr).unwrap(),
+    if out.status.code() == Some(99) {
+        eprintln!("skipped: this shell cannot limit the size of a file (ulimit -f)");
+        return None;
     }
+    Some(run_output(out))
 }
 
 #[cfg(unix)]
@@ -299,7 +276,7 @@ fn a_write_that_fails_half_way_leaves_no_temporary_and_no_file() {
     let (_, model) = scene(dir.path());
     let out = dir.path().join("orbit");
     // A depth map is a few kilobytes (its colour bar and labels): past the limit.
-    let run = fogray_on_a_full_disk(&[
+    let Some(run) = fogray_on_a_full_disk(&[
         "render",
         "--model",
         arg(&model),
@@ -310,13 +287,41 @@ fn a_write_that_fails_half_way_leaves_no_temporary_and_no_file() {
         "--depth",
         "--out",
         arg(&out),
-    ]);
-    if run.code == 99 {
-        eprintln!("skipped: this shell cannot limit the size of a file (ulimit -f)");
+    ]) else {
         return;
-    }
+    };
     assert_refused(&run, "frame-000-depth.png", "a depth map past the size limit");
     assert!(!out.join("frame-000-depth.png").exists());
+    assert_eq!(leftovers(dir.path()), Vec::<String>::new());
+}
+
+#[cfg(unix)]
+#[test]
+fn a_fit_report_past_a_full_disk_leaves_only_whole_files_and_says_so_in_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, _) = scene(dir.path());
+    let out = dir.path().join("report");
+    let mut args = vec!["fit", "--data", arg(&data), "--out", arg(&out)];
+    args.extend(TINY_FIT);
+    let Some(run) = fogray_on_a_full_disk(&args) else {
+        return;
+    };
+    // The error names the report's file that did not fit; --json's summary is not printed.
+    assert_refused(&run, arg(&out), "a fit report past the size limit");
+    // What the report wrote before the disk filled is whole; the rest is absent.
+    for (path, bytes) in snapshot(&out) {
+        match path.extension().and_then(|e| e.to_str()) {
+            Some("png") => {
+                image::load_from_memory(&bytes).unwrap_or_else(|e| panic!("{path:?} is not whole: {e}"));
+            }
+            Some("json") => {
+                serde_json::from_slice::<serde_json::Value>(&bytes)
+                    .unwrap_or_else(|e| panic!("{path:?} is not whole: {e}"));
+            }
+            _ => {}
+        }
+    }
+    assert!(!out.join("report.md").exists(), "the report was written past the limit");
     assert_eq!(leftovers(dir.path()), Vec::<String>::new());
 }
 

@@ -15,7 +15,7 @@ use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 use serde_json::Value;
 
-use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, write_ball, LENS, TINY_FIT};
+use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, render_cameras, write_ball, LENS, TINY_FIT};
 
 /// A running `fogray view`, stopped (SIGINT) when dropped.
 struct Server {
@@ -136,15 +136,7 @@ fn rendered(dir: &Path, model: &Path, camera: &PinholeCamera) -> Array3<u8> {
     let photo = Array3::from_elem((k.height, k.width, 3), 0.5);
     let transforms = write_instant_ngp(&dir.join("cameras"), &[("probe", camera, &photo)]).unwrap();
     let out = dir.join("renders");
-    let run = fogray(&[
-        "render",
-        "--model",
-        arg(model),
-        "--cameras",
-        arg(&transforms),
-        "--out",
-        arg(&out),
-    ]);
+    let run = render_cameras(model, &transforms, &out, &[]);
     assert_eq!(run.code, 0, "{}", run.stderr);
     decode(&std::fs::read(out.join("probe.png")).unwrap())
 }

@@ -102,10 +102,16 @@ fn named<T: Copy>(rows: &[(String, T)]) -> Vec<Named<T>> {
         .collect()
 }
 
+/// Writes `text` to `path` whole or not at all (through [`fogray_data::write_atomic`]), so
+/// that a full disk or Ctrl-C never leaves a truncated report in place of the last one.
 fn write_text(path: &Path, text: &str) -> Result<(), ReportError> {
-    std::fs::write(path, text).map_err(|e| ReportError::Write {
+    fogray_data::write_atomic(path, |out| out.write_all(text.as_bytes())).map_err(|e| ReportError::Write {
         path: path.to_path_buf(),
-        message: e.to_string(),
+        // The path is said once, by this error.
+        message: match e {
+            fogray_data::DataError::Io { message, .. } => message,
+            other => other.to_string(),
+        },
     })
 }
 
