@@ -102,8 +102,8 @@ pub fn parse_colour(text: &str) -> Result<[f64; 3], String> {
 #[derive(Debug, Clone, clap::Args)]
 pub struct FitArgs {
     /// A Blender / NeRF-synthetic folder (transforms_train.json ...), an instant-ngp or
-    /// nerfstudio folder (transforms.json), or a transforms file. Resuming, the saved fit's
-    /// unless given.
+    /// nerfstudio folder (transforms.json), a COLMAP folder (sparse/0), an LLFF folder
+    /// (poses_bounds.npy), or a transforms file. Resuming, the saved fit's unless given.
     #[arg(long, value_name = "PATH", required_unless_present = "resume")]
     pub data: Option<PathBuf>,
     /// Continue the fit saved in FILE (by --save-model, or by Ctrl-C) up to its budget, or to

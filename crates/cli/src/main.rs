@@ -56,8 +56,8 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Fit a scene from a dataset on disk (Blender / NeRF-synthetic, instant-ngp or
-    /// nerfstudio): train on its training views, measure the held-out views (the test split,
-    /// else every 8th view) at intervals off the clock, and print the log.
+    /// nerfstudio, COLMAP, LLFF): train on its training views, measure the held-out views (the
+    /// test split, else every 8th view) at intervals off the clock, and print the log.
     // The defaults are the library's recommended settings (FitSettings::RECOMMENDED, which
     // says why each differs from FitSettings::DEFAULT).
     #[command(
@@ -222,10 +222,18 @@ impl Publish<'_> {
 const FIT_HELP: &str = r#"Fit a scene from a dataset on disk.
 
 --data is a Blender / NeRF-synthetic folder (transforms_train.json, and transforms_test.json or
-transforms_val.json if present), an instant-ngp or nerfstudio folder (transforms.json), or a
-transforms file. Held out: the test split, else the val split, else every 8th frame (i % 8 == 0).
-Images (PNG 8 or 16 bits, JPEG; grey, RGB or RGBA) are composited over --background; the box is
-[-1.5, 1.5]^3 for Blender and instant-ngp's aabb_scale box otherwise, unless --box.
+transforms_val.json if present), an instant-ngp or nerfstudio folder (transforms.json), a COLMAP
+folder (sparse/0, sparse or colmap/sparse/0, binary or text, beside images/), an LLFF folder
+(poses_bounds.npy beside images/), or a transforms file; the format is recognised by its files.
+Held out: the test split, else the val split, else every 8th frame (i % 8 == 0; COLMAP and LLFF
+in image-name order). Images (PNG 8 or 16 bits, JPEG; grey, RGB or RGBA) are composited over
+--background.
+
+--space auto (the default) looks at the pictures: views with alpha, or whose borders are one plain
+colour, show an object and are fitted in the scene box (--box, else the dataset's: [-1.5, 1.5]^3
+for Blender, instant-ngp's aabb_scale); other captures are fitted in a contracted space framed
+from the cameras (an inner ball where they look, everything beyond it mapped into a shell). The
+report and --json say which was chosen and why.
 
 The defaults are the recommended configuration: `fogray fit --data DIR --downscale 4` is a
 whole fit. Ctrl-C stops after the current step and saves the model (to --save-model, else
