@@ -7,7 +7,7 @@
 //! also `-packed` (rays eight at a time across the vector lanes, `Composite::pack_rays`); `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
 //! each time, its buffer pool reused). `fused-tape-mse` and `fused-tape-chain` are a training
 //! step's composite and mean squared error on a kept tape, forward and backward: one op
-//! (`Composite::apply_mse`) against `apply`, `sub`, `square` and `mean`. `cargo bench -p fogray-cli --bench composite` runs them all; `cargo bench -p fogray-cli --bench composite -- fused/f32`
+//! (`Composite::apply_mse`) against `apply`, `sub`, `square` and `mean`. `cargo bench -p fogray-benches --bench composite` runs them all; `cargo bench -p fogray-benches --bench composite -- fused/f32`
 //! selects. `ragged` runs the two fused steady states on a training batch's shape, rays of random
 //! lengths. `fogray bench` gives the same speeds beside each method's error and memory.
 

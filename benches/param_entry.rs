@@ -2,7 +2,7 @@
 //! tape with `param(grid.clone())`, or lent from a `Params` store with `param_from`; and the
 //! Adam update that is then the only per-step work on the parameter's data.
 //!
-//! `cargo bench -p fogray-tape --bench param_entry -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench -p fogray-benches --bench param_entry -- --warm-up-time 1 --measurement-time 3`
 
 use criterion::{black_box, criterion_group, criterion_main, BatchSize, Criterion};
 use fogray_tape::optim::{Adam, AdamConfig, ParamGradients};

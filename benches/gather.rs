@@ -6,7 +6,7 @@
 //! `taped` is `Tape::gather` and a backward seeded with an upstream gradient on a new tape each
 //! time; `taped-reused` keeps one tape (cleared each time, its buffer pool reused); `plain-loop`
 //! does the same work in two loops over slices with fresh output buffers, the floor a taped op
-//! is measured against. `cargo bench -p fogray-tape --bench gather` runs them.
+//! is measured against. `cargo bench -p fogray-benches --bench gather` runs them.
 
 use std::hint::black_box;
 

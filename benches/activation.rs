@@ -12,7 +12,7 @@
 //! interleaved, A B A B ..., and the ratios of their medians printed: on a machine shared with
 //! other work these ratios mean more than criterion's absolute figures.
 //!
-//! `cargo bench -p fogray-ops --bench activation` runs it all; `-- fused/f32` selects.
+//! `cargo bench -p fogray-benches --bench activation` runs it all; `-- fused/f32` selects.
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -10,7 +10,7 @@
 //! medians printed beside the largest difference between the two gradients: on a machine
 //! shared with other work the ratio means more than criterion's absolute figures.
 //!
-//! `cargo bench -p fogray-ops --bench distortion` runs it all; `-- fused-tape/f32` selects.
+//! `cargo bench -p fogray-benches --bench distortion` runs it all; `-- fused-tape/f32` selects.
 
 use std::hint::black_box;
 use std::time::{Duration, Instant};

@@ -7,7 +7,7 @@
 //! lookups fall in neighbouring cells; `fused-rays-into` runs them through `evaluate_into` and
 //! `vjp_into` into buffers kept across runs.
 //!
-//! `cargo bench -p fogray-ops --bench grid` runs them all; `cargo bench -p fogray-ops --bench grid
+//! `cargo bench -p fogray-benches --bench grid` runs them all; `cargo bench -p fogray-benches --bench grid
 //! -- fused/f32` selects.
 //! `fogray bench --op grid` gives the same speeds beside each method's error and memory.
 

@@ -8,7 +8,7 @@
 //! uniform piece tested, `midpoints`). The occupied share and samples per ray are printed
 //! first.
 //!
-//! `cargo bench -p fogray-ops --bench march -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench -p fogray-benches --bench march -- --warm-up-time 1 --measurement-time 3`
 
 mod common;
 use common::{cameras, picks, RAYS};

@@ -1,5 +1,5 @@
 //! Timing of the splatting stages on a fixed scene (a plain timing binary, not criterion):
-//! `cargo bench -p fogray-ops --bench splat [-- SPLATS SIZE]`. Prints the time of each stage
+//! `cargo bench -p fogray-benches --bench splat [-- SPLATS SIZE]`. Prints the time of each stage
 //! (best of a few runs) on the global pool and on one thread, and the depth sort on its own
 //! at 1e5 and 1e6 keys.
 

@@ -3,7 +3,7 @@
 //! random (camera, pixel) rays clipped to [-1, 1]^3; a scene that is one ball of radius 0.45
 //! (density 50), the rest empty. Samples per ray of each sampler are printed first.
 //!
-//! `cargo bench -p fogray-ops --bench samplers -- --warm-up-time 1 --measurement-time 3`
+//! `cargo bench -p fogray-benches --bench samplers -- --warm-up-time 1 --measurement-time 3`
 
 mod common;
 use common::{cameras, picks, RAYS};
