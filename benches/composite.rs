@@ -3,8 +3,7 @@
 //! timed steps (`fogray_cli::bench`: the same calls, so the two cannot drift apart).
 //!
 //! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
-//! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them, each
-//! also `-packed` (rays eight at a time across the vector lanes, `Composite::pack_rays`); `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
+//! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them; `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
 //! each time, its buffer pool reused). `fused-tape-mse` and `fused-tape-chain` are a training
 //! step's composite and mean squared error on a kept tape, forward and backward: one op
 //! (`Composite::apply_mse`) against `apply`, `sub`, `square` and `mean`. `cargo bench -p fogray-benches --bench composite` runs them all; `cargo bench -p fogray-benches --bench composite -- fused/f32`
@@ -55,16 +54,12 @@ fn bench_precision<F: Float>(c: &mut Criterion) {
             b.iter(|| bench::fused_step(&op, x, true).unwrap())
         });
         let mut buffers = Buffers::new(&x);
-        // `-packed`: rays eight at a time across the vector lanes (`Composite::pack_rays`).
-        let packed = op.clone().pack_rays(true);
-        for (suffix, op) in [("", &op), ("-packed", &packed)] {
-            group.bench_with_input(BenchmarkId::new(format!("fused-into{suffix}"), &id), &x, |b, x| {
-                b.iter(|| bench::fused_step_into(op, x, &mut buffers).unwrap())
-            });
-            group.bench_with_input(BenchmarkId::new(format!("fused-one-pass{suffix}"), &id), &x, |b, x| {
-                b.iter(|| bench::fused_step_one_pass(op, x, &mut buffers).unwrap())
-            });
-        }
+        group.bench_with_input(BenchmarkId::new("fused-into", &id), &x, |b, x| {
+            b.iter(|| bench::fused_step_into(&op, x, &mut buffers).unwrap())
+        });
+        group.bench_with_input(BenchmarkId::new("fused-one-pass", &id), &x, |b, x| {
+            b.iter(|| bench::fused_step_one_pass(&op, x, &mut buffers).unwrap())
+        });
         for (name, one_op) in [("fused-tape-mse", true), ("fused-tape-chain", false)] {
             let mut kept = Tape::new();
             group.bench_with_input(BenchmarkId::new(name, &id), &x, |b, x| {

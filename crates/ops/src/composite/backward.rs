@@ -8,10 +8,7 @@ use rayon::prelude::*;
 use super::attenuation::{grow, Attenuation};
 use super::config::Composite;
 use super::forward::Residuals;
-use super::lanes::{Unit, LANES};
 use super::layout::{blocks, take_front, Block, Flat, Ray};
-use super::pack_attenuation::PackAttenuation;
-use super::pack_backward::{backward_pack, PackScratch};
 use super::rows::{add_row_dots, outer_product};
 use super::suffix::adds_minus_hides;
 use crate::prefetch::prefetch_span;
@@ -147,35 +144,15 @@ fn backward_block<'a, F: Float>(
     let longest = block.longest_ray(&op.offsets);
     let mut scratch = Scratch::for_rays(longest);
     let mut att = Attenuation::for_rays(longest);
-    let mut pack = PackAttenuation::default();
-    let mut pack_scratch = PackScratch::default();
-    let mut units = block.units(&op.offsets, op.packs).peekable();
-    while let Some(unit) = units.next() {
-        // The next unit's lines are asked for while this one is computed.
-        if let Some((samples, local)) = units.peek().map(Unit::spans) {
-            x.request(samples);
-            o.request(local, x.ch);
+    for r in block.rays.clone() {
+        // The next ray's lines are asked for while this one is computed.
+        if r + 1 < block.rays.end {
+            let next = block.ray(&op.offsets, r + 1);
+            x.request(next.samples);
+            o.request(next.local, x.ch);
         }
-        match unit {
-            Unit::Single(ray) => one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o),
-            Unit::Pack { first, len } => {
-                let samples = Unit::pack_samples(&first, len);
-                pack.compute(&x.sigma[samples.clone()], &x.delta[samples], len, op.min_transmittance);
-                let stops = pack.stop();
-                if stops.iter().all(|&s| s == stops[0]) {
-                    let up = std::array::from_fn(|l| {
-                        let ray = block.ray(&op.offsets, first.index + l);
-                        g.of_ray(ray.index, ray.samples, x.ch)
-                    });
-                    backward_pack(x, want, &first, len, &pack, &up, &mut pack_scratch, &mut o);
-                } else {
-                    for r in first.index..first.index + LANES {
-                        let ray = block.ray(&op.offsets, r);
-                        one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o);
-                    }
-                }
-            }
-        }
+        let ray = block.ray(&op.offsets, r);
+        one_ray(op, x, saved, g, want, ray, &mut att, &mut scratch, &mut o);
     }
 }
 

@@ -29,9 +29,6 @@ pub struct Composite {
     pub(crate) depth: bool,
     pub(crate) weights: bool,
     pub(crate) transmittance: bool,
-    /// Whether equal-length neighbours are composited several at a time (see
-    /// [`Composite::pack_rays`]).
-    pub(crate) packs: bool,
 }
 
 /// The tape values a composite reads. `sigma` and `delta` are `[n]`, `color` is `[n, ch]`,
@@ -89,7 +86,6 @@ impl Composite {
             depth: false,
             weights: false,
             transmittance: false,
-            packs: false,
         }
     }
 
@@ -129,19 +125,6 @@ impl Composite {
     /// Also output the per-sample transmittance.
     pub fn with_transmittance(mut self) -> Self {
         self.transmittance = true;
-        self
-    }
-
-    /// Whether rays of equal length are composited several at a time, one per vector lane
-    /// (off by default): consecutive rays of the same non-zero length are taken eight at a
-    /// time, so that the running sums of eight rays (optical depth, the back-to-front chain)
-    /// advance together instead of one ray's at a time; other rays go one at a time. Every
-    /// value is bitwise the same either way (each lane does the one-ray code's operations in
-    /// its order). Off by default because on AVX2 it was measured slower than one ray at a
-    /// time (`docs/performance.md`): the sequential sums are a small share of the op, and the
-    /// transposes into and out of the lanes cost more than they save.
-    pub fn pack_rays(mut self, on: bool) -> Self {
-        self.packs = on;
         self
     }
 

@@ -9,10 +9,7 @@ use rayon::prelude::*;
 
 use super::attenuation::{valid_steps, Attenuation};
 use super::config::Composite;
-use super::lanes::{Unit, LANES};
 use super::layout::{blocks, take_front, Block, Flat, Ray};
-use super::pack_attenuation::PackAttenuation;
-use super::pack_forward::{forward_pack, ForwardScratch};
 use super::rows::weighted_column_sums;
 
 /// What the composite's forward keeps for its backward: the stop index of each ray (its
@@ -106,27 +103,16 @@ fn forward_block<'a, F: Float>(
 ) -> bool {
     let mut acc = vec![0.0f64; x.ch];
     let mut att = Attenuation::for_rays(block.longest_ray(&op.offsets));
-    let mut pack = PackAttenuation::default();
-    let mut pack_forward = ForwardScratch::default();
     let mut valid = true;
-    let mut units = block.units(&op.offsets, op.packs).peekable();
-    while let Some(unit) = units.next() {
-        // The next unit's inputs are asked for while this one is computed.
-        if let Some((samples, _)) = units.peek().map(Unit::spans) {
-            x.request(samples);
+    for r in block.rays.clone() {
+        // The next ray's inputs are asked for while this one is computed.
+        if r + 1 < block.rays.end {
+            x.request(block.ray(&op.offsets, r + 1).samples);
         }
-        match unit {
-            Unit::Single(ray) => {
-                let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
-                stop[ray.in_block] = result.stop;
-                valid &= result.valid;
-            }
-            Unit::Pack { first, len } => {
-                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut pack_forward, &mut o);
-                stop[first.in_block..first.in_block + LANES].copy_from_slice(&stops);
-                valid &= ok;
-            }
-        }
+        let ray = block.ray(&op.offsets, r);
+        let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
+        stop[ray.in_block] = result.stop;
+        valid &= result.valid;
     }
     valid
 }

@@ -68,9 +68,6 @@
 //!   four interleaved chains; for three channels on AVX2 with FMA they run four samples' twelve
 //!   values in three vector registers (`rows_x86`, every result bitwise the scalar loop's); the
 //!   one sequential chain of the backward carries one fused multiply-add per four samples.
-//! - With [`Composite::pack_rays`], equal-length neighbours go eight at a time across the
-//!   vector lanes (`lanes`), every value bitwise the per-ray one; off by default, as it was
-//!   slower on AVX2 (`docs/performance.md`).
 //! - [`Composite::evaluate_into`] and [`Composite::vjp_into`] write into buffers the caller
 //!   keeps: fresh output pages, which the kernel clears, are a quarter of the time of
 //!   [`Composite::evaluate`] + [`Composite::vjp`] on large batches.
@@ -89,16 +86,12 @@ mod backward;
 mod config;
 mod forward;
 mod gradients;
-mod lanes;
 mod layout;
 mod mse;
 
 pub(crate) use layout::validate;
 mod one_pass;
 mod op;
-mod pack_attenuation;
-mod pack_backward;
-mod pack_forward;
 mod rows;
 #[cfg(target_arch = "x86_64")]
 mod rows_x86;

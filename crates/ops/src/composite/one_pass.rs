@@ -11,11 +11,7 @@ use super::attenuation::Attenuation;
 use super::backward::{backward_ray, InputGrads, RayUpstream, Scratch, Wanted};
 use super::config::Composite;
 use super::forward::{composite_ray_into, Outputs};
-use super::lanes::{Unit, LANES};
 use super::layout::{blocks, Block, Flat};
-use super::pack_attenuation::PackAttenuation;
-use super::pack_backward::{backward_pack, PackScratch};
-use super::pack_forward::{forward_pack, ForwardScratch};
 
 /// `upstream(ray, colour, d_colour)` writes `dL/dC` of a ray from its colour as written to the
 /// outputs.
@@ -56,53 +52,23 @@ fn one_pass_block<'a, F: Float, U: ColorLoss<F>>(
 ) -> bool {
     let ch = x.ch;
     let mut acc = vec![0.0f64; ch];
-    let mut d_color = vec![F::zero(); ch * LANES];
+    let mut d_color = vec![F::zero(); ch];
     let longest = block.longest_ray(&op.offsets);
     let mut att = Attenuation::for_rays(longest);
     let mut scratch = Scratch::for_rays(longest);
-    let mut pack = PackAttenuation::default();
-    let mut pack_forward = ForwardScratch::default();
-    let mut pack_scratch = PackScratch::default();
     let mut valid = true;
-    let mut units = block.units(&op.offsets, op.packs).peekable();
-    while let Some(unit) = units.next() {
-        // The next unit's lines are asked for while this one is computed.
-        if let Some((samples, local)) = units.peek().map(Unit::spans) {
-            x.request(samples);
-            g.request(local, ch);
+    for r in block.rays.clone() {
+        // The next ray's lines are asked for while this one is computed.
+        if r + 1 < block.rays.end {
+            let next = block.ray(&op.offsets, r + 1);
+            x.request(next.samples);
+            g.request(next.local, ch);
         }
-        match unit {
-            Unit::Single(ray) => {
-                let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
-                valid &= result.valid;
-                let d_color = &mut d_color[..ch];
-                color_upstream(upstream, ray.index, ray.in_block, &o, d_color);
-                backward_ray(x, want, &ray, &att, only_color(d_color), &mut scratch, &mut g);
-            }
-            Unit::Pack { first, len } => {
-                let (stops, ok) = forward_pack(op, x, &first, len, &mut pack, &mut pack_forward, &mut o);
-                valid &= ok;
-                for (l, d) in d_color.chunks_exact_mut(ch).enumerate() {
-                    color_upstream(upstream, first.index + l, first.in_block + l, &o, d);
-                }
-                if stops.iter().all(|&s| s == stops[0]) {
-                    let up = std::array::from_fn(|l| only_color(&d_color[l * ch..(l + 1) * ch]));
-                    backward_pack(x, want, &first, len, &pack, &up, &mut pack_scratch, &mut g);
-                } else {
-                    // Lanes that stop apart count their groups of four from different samples:
-                    // ray by ray, the attenuation recomputed (bitwise the same).
-                    for (l, d) in d_color.chunks_exact(ch).enumerate() {
-                        let ray = block.ray(&op.offsets, first.index + l);
-                        att.compute(
-                            &x.sigma[ray.samples.clone()],
-                            &x.delta[ray.samples.clone()],
-                            op.min_transmittance,
-                        );
-                        backward_ray(x, want, &ray, &att, only_color(d), &mut scratch, &mut g);
-                    }
-                }
-            }
-        }
+        let ray = block.ray(&op.offsets, r);
+        let result = composite_ray_into(op, x, &ray, &mut att, &mut acc, &mut o);
+        valid &= result.valid;
+        color_upstream(upstream, ray.index, ray.in_block, &o, &mut d_color);
+        backward_ray(x, want, &ray, &att, only_color(&d_color), &mut scratch, &mut g);
     }
     valid
 }

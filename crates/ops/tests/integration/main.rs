@@ -5,7 +5,6 @@
 mod activation;
 mod composite_common;
 mod composite_mse;
-mod composite_packs;
 mod distortion;
 mod fused_vs_taped;
 mod grid_common;
