@@ -114,7 +114,8 @@ pub struct FitArgs {
     pub resume: Option<PathBuf>,
     #[command(flatten)]
     pub data_args: DataArgs,
-    /// Write the fitted model here (safetensors; `fogray render --model` reads it).
+    /// Write the fitted model here: safetensors for a grid (`fogray render --model` reads it),
+    /// the PLY file 3DGS viewers open for `--model splats`.
     #[arg(long, value_name = "FILE")]
     pub save_model: Option<PathBuf>,
     /// Write a report into this directory: report.md (the final figures, PSNR and SSIM

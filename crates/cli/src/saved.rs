@@ -77,4 +77,12 @@ impl<W: WithModel> ModelWork for AtPath<'_, W> {
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
         self.work.run::<F, M>(self.path)
     }
+
+    fn run_splats<F: Float>(self) -> Self::Output {
+        // A splat fit is saved as a 3DGS PLY file, which no model file's metadata names.
+        Err(CliError::Option(format!(
+            "{}: a splat model; this command reads grids (splats are saved as PLY for 3DGS viewers)",
+            self.path.display()
+        )))
+    }
 }

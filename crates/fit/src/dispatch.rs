@@ -17,6 +17,9 @@
 //!     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
 //!         (M::KIND, std::mem::size_of::<F>())
 //!     }
+//!     fn run_splats<F: Float>(self) -> Self::Output {
+//!         ("splats", std::mem::size_of::<F>())
+//!     }
 //! }
 //!
 //! assert_eq!(with_model(Precision::F64, ModelKind::Sparse, Describe), ("sparse-grid", 8));
@@ -29,13 +32,17 @@ use crate::dense::DenseGrid;
 use crate::model::RadianceField;
 use crate::settings::{ModelKind, Precision};
 use crate::sparse::SparseGrid;
+use crate::splats::SplatModel;
 
-/// Work to run with one model type `M` in one float type `F`.
+/// Work to run with one model type `M` in one float type `F`: a radiance field marched along
+/// rays, or the splats, which are drawn by projection and have a work of their own.
 pub trait ModelWork {
     /// What the work gives (a `Result` for work that can fail).
     type Output;
     /// Does the work with models of type `M` in `F`.
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output;
+    /// Does the work with [`SplatModel`]s in `F`.
+    fn run_splats<F: Float>(self) -> Self::Output;
 }
 
 /// Runs `work` with the model type of `kind` in the float type of `precision`.
@@ -45,6 +52,8 @@ pub fn with_model<W: ModelWork>(precision: Precision, kind: ModelKind, work: W) 
         (Precision::F64, ModelKind::Dense) => work.run::<f64, DenseGrid<f64>>(),
         (Precision::F32, ModelKind::Sparse) => work.run::<f32, SparseGrid<f32>>(),
         (Precision::F64, ModelKind::Sparse) => work.run::<f64, SparseGrid<f64>>(),
+        (Precision::F32, ModelKind::Splats) => work.run_splats::<f32>(),
+        (Precision::F64, ModelKind::Splats) => work.run_splats::<f64>(),
     }
 }
 
@@ -53,7 +62,7 @@ impl ModelKind {
     /// entry, [`ModelInfo::kind`](crate::checkpoint::ModelInfo::kind)); `None` for a kind the
     /// pipeline does not know.
     pub fn of_kind(kind: &str) -> Option<ModelKind> {
-        [ModelKind::Dense, ModelKind::Sparse]
+        [ModelKind::Dense, ModelKind::Sparse, ModelKind::Splats]
             .into_iter()
             .find(|k| with_model(Precision::F32, *k, KindName) == kind)
     }
@@ -66,5 +75,8 @@ impl ModelWork for KindName {
     type Output = &'static str;
     fn run<F: Float, M: RadianceField<F>>(self) -> &'static str {
         M::KIND
+    }
+    fn run_splats<F: Float>(self) -> &'static str {
+        SplatModel::<F>::KIND
     }
 }

@@ -36,4 +36,12 @@ pub enum FitError {
     /// before anything was allocated.
     #[error(transparent)]
     TooLarge(#[from] fogray_ops::limits::TooLarge),
+    /// More splats than the settings allow (`max_splats`), refused before allocation.
+    #[error("{count} splats exceed the cap of {cap}")]
+    TooManySplats {
+        /// The splats asked for.
+        count: usize,
+        /// The cap.
+        cap: usize,
+    },
 }

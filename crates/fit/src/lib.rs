@@ -96,6 +96,7 @@ pub mod slices;
 pub mod space;
 pub mod space_picture;
 pub mod sparse;
+pub mod splats;
 pub mod state;
 pub mod sweep;
 #[cfg(test)]

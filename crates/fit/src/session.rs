@@ -176,6 +176,10 @@ impl ModelWork for SessionWork<'_> {
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
         run_typed::<F, M>(self.data, self.plan, self.space, self.stop)
     }
+
+    fn run_splats<F: Float>(self) -> Self::Output {
+        crate::splats::session::run::<F>(self.data, self.plan, self.space, self.stop)
+    }
 }
 
 fn run_typed<F: Float, M: RadianceField<F>>(
@@ -260,7 +264,7 @@ fn run_typed<F: Float, M: RadianceField<F>>(
     })))
 }
 
-fn progress_bar(shown: bool) -> indicatif::ProgressBar {
+pub(crate) fn progress_bar(shown: bool) -> indicatif::ProgressBar {
     if !shown {
         return indicatif::ProgressBar::hidden();
     }

@@ -56,14 +56,18 @@ pub enum ModelKind {
     /// Only the nodes near what the occupancy grid finds, pruned at each growth
     /// ([`SparseGrid`](crate::sparse::SparseGrid)): memory follows the scene.
     Sparse,
+    /// 3-D Gaussians composited by projection onto the image, densified where the picture
+    /// needs them ([`SplatModel`](crate::splats::SplatModel)).
+    Splats,
 }
 
 impl ModelKind {
-    /// `dense` or `sparse`.
+    /// `dense`, `sparse` or `splats`.
     pub fn name(self) -> &'static str {
         match self {
             ModelKind::Dense => "dense",
             ModelKind::Sparse => "sparse",
+            ModelKind::Splats => "splats",
         }
     }
 }
@@ -300,7 +304,8 @@ pub struct FitSettings {
     /// against floaters and haze) added to the training objective; 0 for none.
     #[cfg_attr(feature = "cli", arg(long, value_name = "WEIGHT", default_value_t = FitSettings::DEFAULT.distortion))]
     pub distortion: f64,
-    /// The model: a dense grid, or a sparse one pruned to the occupied space at each growth.
+    /// The model: a dense grid, a sparse one pruned to the occupied space at each growth, or
+    /// 3-D Gaussian splats.
     #[cfg_attr(feature = "cli", arg(long, value_enum, default_value_t = FitSettings::DEFAULT.model))]
     pub model: ModelKind,
     /// For captures without alpha (photographs whose background lies beyond the box): learn
@@ -530,6 +535,8 @@ impl FitSettings {
         let model_bytes = |nodes| match self.model {
             ModelKind::Dense => shape(nodes).dense_bytes(),
             ModelKind::Sparse => shape(nodes).sparse_bytes(),
+            // No grid: splats are counted where they are made (`splats::check_count`).
+            ModelKind::Splats => Bytes(0),
         };
         let stages = crate::schedule::growth_stages(self);
         // A growth builds the finer grid while the coarser one still exists.

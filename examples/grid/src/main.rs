@@ -738,6 +738,13 @@ impl ModelWork for RenderWork<'_> {
     fn run<F: fogray::tape::Float, M: RadianceField<F>>(self) -> Result<()> {
         render_views::<F, M>(self.args, self.ring, self.scene, self.views)
     }
+
+    fn run_splats<F: fogray::tape::Float>(self) -> Result<()> {
+        anyhow::bail!(
+            "{}: a splat model; fogray-grid renders grids",
+            self.args.model.display()
+        )
+    }
 }
 
 fn render_views<F: fogray::tape::Float, M: RadianceField<F>>(

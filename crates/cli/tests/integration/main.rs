@@ -14,4 +14,5 @@ mod orbit;
 mod outputs;
 mod prepare;
 mod resume;
+mod splats;
 mod view;

@@ -162,6 +162,13 @@ impl ModelWork for FitAndKeep<'_> {
         let result = fit::<F, M>(self.data, self.fit_config, self.progress)?;
         keep(self.config, result, self.fit_config.model_box(), self.slice_pixels)
     }
+
+    fn run_splats<F: Float>(self) -> Self::Output {
+        // A sweep keeps density slices and grid statistics, which splats have not.
+        Err(SweepError::Config(
+            "a sweep fits grids; splats are fitted with `fogray fit --model splats`".into(),
+        ))
+    }
 }
 
 /// Fits every configuration of `options` to `data` in turn; `progress` hears the index of the

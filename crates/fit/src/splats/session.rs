@@ -1,0 +1,197 @@
+//! A session's fit with splats: what [`session::run`](crate::session::run) does for a grid
+//! (progress, Ctrl-C, evaluations, the final report), for a [`SplatTrainer`], whose model is
+//! drawn by projection and is saved as the PLY file 3DGS viewers open.
+
+use std::time::Instant;
+
+use fogray_tape::Float;
+
+use super::carve::visual_hull;
+use super::model::SplatModel;
+use super::ply::write_ply;
+use super::settings::SplatSettings;
+use super::trainer::{render_view, SplatTrainer};
+use crate::dataset::Dataset;
+use crate::error::FitError;
+use crate::interrupt::StopFlag;
+use crate::metrics::{mean_psnr, psnr, view_scores};
+use crate::session::{progress_bar, FitReport, SessionError, SessionOutcome, SessionPlan};
+use crate::settings::FitSettings;
+use crate::space::SpaceDecision;
+
+/// Candidates drawn for each splat a visual hull keeps: enough for an object that fills a
+/// twentieth of its box.
+const HULL_CANDIDATES: usize = 20;
+
+/// Training pixels a starting splat is given at least: more splats than the pictures can
+/// tell apart fit each training view on its own and not the scene.
+const PIXELS_PER_SPLAT: usize = 8;
+
+/// How many splats a fit of `data` starts with: `most`, or fewer where the training pictures
+/// have fewer pixels of the object (where alpha is at least one half; every pixel of a
+/// picture without alpha) than [`PIXELS_PER_SPLAT`] for each; at least 1.
+pub fn start_count(data: &Dataset, most: usize) -> usize {
+    let pixels: usize = data
+        .train
+        .iter()
+        .map(|v| match &v.alpha {
+            Some(alpha) => alpha.iter().filter(|&&a| a >= super::carve::EMPTY_ALPHA).count(),
+            None => v.size()[0] * v.size()[1],
+        })
+        .sum();
+    (pixels / PIXELS_PER_SPLAT).clamp(1, most.max(1))
+}
+
+/// Where a random start puts its splats: the fit's inner region when its space was framed
+/// from the cameras (a capture), else its box (`[min, max]` corners).
+pub fn start_region(settings: &FitSettings) -> [[f64; 3]; 2] {
+    match &settings.framing {
+        Some(f) => [f.centre.map(|c| c - f.radius), f.centre.map(|c| c + f.radius)],
+        None => {
+            let b = settings.scene_box.unwrap_or(crate::settings::SceneBox::UNIT);
+            [b.min, b.max]
+        }
+    }
+}
+
+/// Runs the splat fit `plan` describes on `data` (see the [module docs](self)).
+///
+/// Errors: a resumed splat fit (not supported yet), bad settings, the ops', a file that cannot
+/// be written.
+pub(crate) fn run<F: Float>(
+    data: &Dataset,
+    plan: &SessionPlan,
+    space: &SpaceDecision,
+    stop: &StopFlag,
+) -> Result<SessionOutcome, SessionError> {
+    if let Some(file) = &plan.resume {
+        return Err(FitError::Config(format!(
+            "{}: a splat fit cannot be resumed yet; start it afresh",
+            file.display()
+        ))
+        .into());
+    }
+    let clock = Instant::now();
+    let settings = &plan.settings;
+    let splat_settings = SplatSettings::of_fit(settings);
+    splat_settings.check()?;
+    let region = start_region(settings);
+    let n = start_count(data, splat_settings.initial_splats);
+    let model = match visual_hull(data, region, n.saturating_mul(HULL_CANDIDATES), n, settings.seed)? {
+        Some(hull) => SplatModel::<F>::from_points(
+            &hull.points,
+            &hull.colors,
+            splat_settings.degree,
+            splat_settings.max_splats,
+        )?,
+        None => SplatModel::<F>::random(
+            region,
+            n,
+            splat_settings.degree,
+            settings.seed,
+            splat_settings.max_splats,
+        )?,
+    };
+    let mut trainer = SplatTrainer::new(data, &splat_settings, model)?;
+    let save_path = plan
+        .save_model
+        .clone()
+        .unwrap_or_else(|| plan.save_on_interrupt.with_extension("ply"));
+    let bar = progress_bar(plan.progress_bar);
+    let evaluations = settings.evaluations as f64;
+    let mut log = vec![trainer.evaluate()?.entry];
+    let mut next_eval = 1usize;
+    let mut first_step_seconds = f64::NAN;
+    let mut last = None;
+    while !trainer.is_done() {
+        if stop.is_raised() {
+            bar.finish_and_clear();
+            write_ply(&save_path, trainer.model())?;
+            return Ok(SessionOutcome::Interrupted {
+                step: trainer.steps(),
+                saved: save_path,
+            });
+        }
+        let report = trainer.step()?;
+        if report.step == 1 {
+            first_step_seconds = clock.elapsed().as_secs_f64();
+            if plan.announce {
+                let [h, w] = data.train[0].size();
+                bar.suspend(|| {
+                    eprintln!(
+                        "{}: {} splats on {} training and {} held-out views of {w}x{h}; Ctrl-C stops and saves them to {}",
+                        plan.tool,
+                        trainer.model().len(),
+                        data.train.len(),
+                        data.test.len(),
+                        save_path.display()
+                    )
+                });
+            }
+        }
+        bar.set_position((report.fraction * 1000.0) as u64);
+        bar.set_message(format!("step {}, {} splats", report.step, trainer.model().len()));
+        if trainer.is_done() || trainer.fraction() * evaluations >= next_eval as f64 {
+            let evaluation = trainer.evaluate()?;
+            log.push(evaluation.entry);
+            last = Some(evaluation);
+            next_eval = (trainer.fraction() * evaluations).floor() as usize + 1;
+        }
+    }
+    bar.finish_and_clear();
+    let last = match last {
+        Some(e) => e,
+        None => trainer.evaluate()?,
+    };
+    let scores = view_scores(
+        &last.views.iter().map(|v| v.color.view()).collect::<Vec<_>>(),
+        &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
+    )?;
+    let train_views_psnr = training_views_psnr(trainer.model(), data)?;
+    let profile = trainer.profile().table();
+    let (seconds, steps) = (trainer.seconds(), trainer.steps());
+    let model = trainer.into_model();
+    let saved = match &plan.save_model {
+        Some(path) => {
+            write_ply(path, &model)?;
+            Some(path.clone())
+        }
+        None => None,
+    };
+    Ok(SessionOutcome::Finished(Box::new(FitReport {
+        final_test_psnr: last.entry.test_psnr,
+        final_test_psnr_view_mean: mean_psnr(&scores),
+        final_test_ssim: last.entry.test_ssim,
+        train_views_psnr,
+        view_scores: scores,
+        held_out: last.views,
+        seconds,
+        steps,
+        samples_per_ray_mean: f64::NAN,
+        occupied_fraction: f64::NAN,
+        profile,
+        parameters: model.parameter_count(),
+        first_step_seconds,
+        saved,
+        space: space.clone(),
+        settings: *settings,
+        log,
+    })))
+}
+
+/// The PSNR of `model` on as many training views as `data` holds out, spread through them as
+/// [`crate::train::training_views_psnr`] spreads the grid's.
+///
+/// Errors: the ops'.
+fn training_views_psnr<F: Float>(model: &SplatModel<F>, data: &Dataset) -> Result<f64, FitError> {
+    let n = data.train.len();
+    let count = data.test.len().clamp(1, n);
+    let chosen: Vec<_> = (0..count).map(|i| &data.train[i * n / count]).collect();
+    let renders = chosen
+        .iter()
+        .map(|v| render_view(model, v, data.background).map(|r| r.color))
+        .collect::<Result<Vec<_>, _>>()?;
+    let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
+    let e: Vec<_> = chosen.iter().map(|v| v.image.view()).collect();
+    Ok(psnr(&r, &e)?)
+}
