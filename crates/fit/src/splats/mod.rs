@@ -27,6 +27,7 @@ pub mod settings;
 #[cfg(test)]
 mod tests;
 pub mod trainer;
+pub mod undistort;
 
 pub use densify::Densify;
 pub use model::{SplatArraysOwned, SplatIds, SplatModel};

@@ -11,6 +11,7 @@ use super::model::SplatModel;
 use super::ply::write_ply;
 use super::settings::SplatSettings;
 use super::trainer::{render_view, SplatTrainer};
+use super::undistort::undistorted;
 use crate::dataset::Dataset;
 use crate::error::FitError;
 use crate::interrupt::StopFlag;
@@ -73,6 +74,10 @@ pub(crate) fn run<F: Float>(
     }
     let clock = Instant::now();
     let settings = &plan.settings;
+    // The op projects through a pinhole: pictures through a lens are resampled into theirs
+    // (the held-out views too, which are then scored against their resampled pictures).
+    let resampled = undistorted(data)?;
+    let data = resampled.as_ref().unwrap_or(data);
     let splat_settings = SplatSettings::of_fit(settings);
     splat_settings.check()?;
     let region = start_region(settings);
