@@ -1,12 +1,12 @@
 //! A model file that a command reads (`fogray render`, `fogray export`): its metadata, read
 //! first, and the dispatch from its kind and precision to the model type that loads it
-//! (fogray-fit's [`with_model`]), so that each command writes its work once, generic over the
+//! (fogray-fit's [`with_field`]), so that each command writes its work once, generic over the
 //! model.
 
 use std::path::{Path, PathBuf};
 
 use fogray_fit::checkpoint::{read_info, ModelInfo};
-use fogray_fit::dispatch::{with_model, ModelWork};
+use fogray_fit::dispatch::{with_field, FieldKind, FieldWork};
 use fogray_fit::model::RadianceField;
 use fogray_fit::settings::ModelKind;
 use fogray_tape::Float;
@@ -31,8 +31,8 @@ pub struct SavedModel {
     pub path: PathBuf,
     /// Its metadata (settings, nodes, the application's entries).
     pub info: ModelInfo,
-    /// Its kind.
-    pub kind: ModelKind,
+    /// Its kind (a field: a splat fit is saved as a 3DGS PLY file, not as a model file).
+    pub kind: FieldKind,
 }
 
 impl SavedModel {
@@ -42,13 +42,15 @@ impl SavedModel {
     /// command line does not know.
     pub fn open(path: &Path, command: &str) -> Result<Self, CliError> {
         let info = read_info(path)?;
-        let kind = ModelKind::of_kind(&info.kind).ok_or_else(|| {
-            CliError::Option(format!(
-                "{}: a {:?} model, which {command} does not know",
-                path.display(),
-                info.kind
-            ))
-        })?;
+        let kind = ModelKind::of_kind(&info.kind)
+            .and_then(ModelKind::field)
+            .ok_or_else(|| {
+                CliError::Option(format!(
+                    "{}: a {:?} model, which {command} does not know",
+                    path.display(),
+                    info.kind
+                ))
+            })?;
         Ok(SavedModel {
             path: path.to_path_buf(),
             info,
@@ -61,7 +63,7 @@ impl SavedModel {
     /// Errors: `work`'s.
     pub fn with<W: WithModel>(&self, work: W) -> Result<W::Output, CliError> {
         let at = AtPath { work, path: &self.path };
-        with_model(self.info.settings.precision, self.kind, at)
+        with_field(self.info.settings.precision, self.kind, at)
     }
 }
 
@@ -71,18 +73,10 @@ struct AtPath<'a, W> {
     path: &'a Path,
 }
 
-impl<W: WithModel> ModelWork for AtPath<'_, W> {
+impl<W: WithModel> FieldWork for AtPath<'_, W> {
     type Output = Result<W::Output, CliError>;
 
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
         self.work.run::<F, M>(self.path)
-    }
-
-    fn run_splats<F: Float>(self) -> Self::Output {
-        // A splat fit is saved as a 3DGS PLY file, which no model file's metadata names.
-        Err(CliError::Option(format!(
-            "{}: a splat model; this command reads grids (splats are saved as PLY for 3DGS viewers)",
-            self.path.display()
-        )))
     }
 }

@@ -228,4 +228,14 @@ impl Dataset {
     pub fn training_alpha(&self) -> bool {
         self.train.iter().any(|v| v.alpha.is_some())
     }
+
+    /// `count` of the training views (all of them if there are fewer): views `i n / count` of
+    /// the `n`, for `i` in `0..count`, spread through the training list as the held-out views
+    /// are through the file. What a fit's PSNR on its own views is measured on, whatever the
+    /// model.
+    pub fn spread_training_views(&self, count: usize) -> Vec<&View> {
+        let n = self.train.len();
+        let count = count.min(n);
+        (0..count).map(|i| &self.train[i * n / count]).collect()
+    }
 }

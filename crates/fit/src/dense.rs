@@ -293,10 +293,7 @@ impl<F: Float> GridModel<F> for DenseGrid<F> {
     }
 
     fn lookup(&self, tape: &mut Tape<F>, grid: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
-        match method {
-            Method::Fused => self.field.apply(tape, grid, positions),
-            Method::Taped => fogray_ops::grid::twin::lookup(tape, &self.field, grid, positions),
-        }
+        method.kernels().grid_lookup(tape, &self.field, grid, positions)
     }
 
     fn prior(&self, tape: &mut Tape<F>, grid: Var) -> Result<Option<Var>, TapeError> {

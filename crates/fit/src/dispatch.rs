@@ -3,8 +3,14 @@
 //! place where the pipeline's model types are listed, so that a command line, an example and
 //! a sweep dispatch the same way.
 //!
+//! A model kind is of one of two classes: a [`FieldKind`], a field of density and colour
+//! marched along rays ([`RadianceField`]: what every command that renders, meshes or resumes
+//! a model file handles), or the splats, drawn by projection, which only a fit's session
+//! runs ([`with_float`]). [`ModelKind::field`] says which, so that work on fields is never
+//! asked of splats.
+//!
 //! ```
-//! use fogray_fit::dispatch::{with_model, ModelWork};
+//! use fogray_fit::dispatch::{with_field, FieldKind, FieldWork};
 //! use fogray_fit::settings::{ModelKind, Precision};
 //! use fogray_fit::RadianceField;
 //! use fogray_tape::Float;
@@ -12,18 +18,16 @@
 //! /// The kind name of the model type, and the bytes of its float.
 //! struct Describe;
 //!
-//! impl ModelWork for Describe {
+//! impl FieldWork for Describe {
 //!     type Output = (&'static str, usize);
 //!     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
 //!         (M::KIND, std::mem::size_of::<F>())
 //!     }
-//!     fn run_splats<F: Float>(self) -> Self::Output {
-//!         ("splats", std::mem::size_of::<F>())
-//!     }
 //! }
 //!
-//! assert_eq!(with_model(Precision::F64, ModelKind::Sparse, Describe), ("sparse-grid", 8));
+//! assert_eq!(with_field(Precision::F64, FieldKind::Sparse, Describe), ("sparse-grid", 8));
 //! assert_eq!(ModelKind::of_kind("dense-grid"), Some(ModelKind::Dense));
+//! assert_eq!(ModelKind::Splats.field(), None);
 //! ```
 
 use fogray_tape::Float;
@@ -34,49 +38,80 @@ use crate::settings::{ModelKind, Precision};
 use crate::sparse::SparseGrid;
 use crate::splats::SplatModel;
 
-/// Work to run with one model type `M` in one float type `F`: a radiance field marched along
-/// rays, or the splats, which are drawn by projection and have a work of their own.
-pub trait ModelWork {
+/// The model kinds that are fields marched along rays.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FieldKind {
+    /// [`DenseGrid`].
+    Dense,
+    /// [`SparseGrid`].
+    Sparse,
+}
+
+/// Work to run with one field type `M` in one float type `F`.
+pub trait FieldWork {
     /// What the work gives (a `Result` for work that can fail).
     type Output;
     /// Does the work with models of type `M` in `F`.
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output;
-    /// Does the work with [`SplatModel`]s in `F`.
-    fn run_splats<F: Float>(self) -> Self::Output;
 }
 
-/// Runs `work` with the model type of `kind` in the float type of `precision`.
-pub fn with_model<W: ModelWork>(precision: Precision, kind: ModelKind, work: W) -> W::Output {
+/// Work to run in one float type `F` (a model class that is not a field, such as the splats).
+pub trait FloatWork {
+    /// What the work gives.
+    type Output;
+    /// Does the work in `F`.
+    fn run<F: Float>(self) -> Self::Output;
+}
+
+/// Runs `work` with the field type of `kind` in the float type of `precision`.
+pub fn with_field<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) -> W::Output {
     match (precision, kind) {
-        (Precision::F32, ModelKind::Dense) => work.run::<f32, DenseGrid<f32>>(),
-        (Precision::F64, ModelKind::Dense) => work.run::<f64, DenseGrid<f64>>(),
-        (Precision::F32, ModelKind::Sparse) => work.run::<f32, SparseGrid<f32>>(),
-        (Precision::F64, ModelKind::Sparse) => work.run::<f64, SparseGrid<f64>>(),
-        (Precision::F32, ModelKind::Splats) => work.run_splats::<f32>(),
-        (Precision::F64, ModelKind::Splats) => work.run_splats::<f64>(),
+        (Precision::F32, FieldKind::Dense) => work.run::<f32, DenseGrid<f32>>(),
+        (Precision::F64, FieldKind::Dense) => work.run::<f64, DenseGrid<f64>>(),
+        (Precision::F32, FieldKind::Sparse) => work.run::<f32, SparseGrid<f32>>(),
+        (Precision::F64, FieldKind::Sparse) => work.run::<f64, SparseGrid<f64>>(),
+    }
+}
+
+/// Runs `work` in the float type of `precision`.
+pub fn with_float<W: FloatWork>(precision: Precision, work: W) -> W::Output {
+    match precision {
+        Precision::F32 => work.run::<f32>(),
+        Precision::F64 => work.run::<f64>(),
     }
 }
 
 impl ModelKind {
-    /// The kind whose model type has [`RadianceField::KIND`] `kind` (a model file's `model`
-    /// entry, [`ModelInfo::kind`](crate::checkpoint::ModelInfo::kind)); `None` for a kind the
+    /// The field kind of a model marched along rays; `None` for the splats.
+    pub fn field(self) -> Option<FieldKind> {
+        match self {
+            ModelKind::Dense => Some(FieldKind::Dense),
+            ModelKind::Sparse => Some(FieldKind::Sparse),
+            ModelKind::Splats => None,
+        }
+    }
+
+    /// The kind whose model type has [`RadianceField::KIND`] (or the splats'
+    /// [`SplatModel::KIND`]) `kind` (a model file's `model` entry,
+    /// [`ModelInfo::kind`](crate::checkpoint::ModelInfo::kind)); `None` for a kind the
     /// pipeline does not know.
     pub fn of_kind(kind: &str) -> Option<ModelKind> {
-        [ModelKind::Dense, ModelKind::Sparse, ModelKind::Splats]
-            .into_iter()
-            .find(|k| with_model(Precision::F32, *k, KindName) == kind)
+        if kind == SplatModel::<f32>::KIND {
+            return Some(ModelKind::Splats);
+        }
+        [ModelKind::Dense, ModelKind::Sparse].into_iter().find(|k| {
+            k.field()
+                .is_some_and(|f| with_field(Precision::F32, f, KindName) == kind)
+        })
     }
 }
 
 /// [`RadianceField::KIND`] of the model type.
 struct KindName;
 
-impl ModelWork for KindName {
+impl FieldWork for KindName {
     type Output = &'static str;
     fn run<F: Float, M: RadianceField<F>>(self) -> &'static str {
         M::KIND
-    }
-    fn run_splats<F: Float>(self) -> &'static str {
-        SplatModel::<F>::KIND
     }
 }

@@ -81,6 +81,7 @@ pub mod error;
 mod grid_model;
 pub mod images;
 pub mod interrupt;
+pub mod kernels;
 pub mod mesh;
 pub mod metrics;
 pub mod model;

@@ -15,7 +15,7 @@ use fogray_tape::Float;
 
 use crate::checkpoint::{self, CheckpointError, ModelInfo};
 use crate::dataset::Dataset;
-use crate::dispatch::{with_model, ModelWork};
+use crate::dispatch::{with_field, with_float, FieldWork, FloatWork};
 use crate::error::FitError;
 use crate::interrupt::StopFlag;
 use crate::metrics::{mean_psnr, view_scores, ViewScore};
@@ -24,7 +24,8 @@ use crate::profile::ProfileTable;
 use crate::render::RenderedView;
 use crate::settings::FitSettings;
 use crate::space::{self, SpaceDecision};
-use crate::train::{fit_from, LogEntry, Progress};
+use crate::train::{training_views_psnr, LogEntry, Progress};
+use crate::trainer::{run_budget, Evaluation, Trainer};
 
 /// Why a session failed.
 #[derive(Debug, thiserror::Error)]
@@ -159,7 +160,10 @@ pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, Session
         space: &space,
         stop: &stop,
     };
-    with_model(plan.settings.precision, plan.settings.model, work)
+    match plan.settings.model.field() {
+        Some(field) => with_field(plan.settings.precision, field, work),
+        None => with_float(plan.settings.precision, work),
+    }
 }
 
 /// A session with one model type, as the dispatch runs it.
@@ -170,25 +174,30 @@ struct SessionWork<'a> {
     stop: &'a StopFlag,
 }
 
-impl ModelWork for SessionWork<'_> {
+impl FieldWork for SessionWork<'_> {
     type Output = Result<SessionOutcome, SessionError>;
 
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
-        run_typed::<F, M>(self.data, self.plan, self.space, self.stop)
+        run_field::<F, M>(self.data, self.plan, self.space, self.stop)
     }
+}
 
-    fn run_splats<F: Float>(self) -> Self::Output {
+/// The splats' session ([`crate::splats::session`]).
+impl FloatWork for SessionWork<'_> {
+    type Output = Result<SessionOutcome, SessionError>;
+
+    fn run<F: Float>(self) -> Self::Output {
         crate::splats::session::run::<F>(self.data, self.plan, self.space, self.stop)
     }
 }
 
-fn run_typed<F: Float, M: RadianceField<F>>(
+fn run_field<F: Float, M: RadianceField<F>>(
     data: &Dataset,
     plan: &SessionPlan,
     space: &SpaceDecision,
     stop: &StopFlag,
 ) -> Result<SessionOutcome, SessionError> {
-    let clock = Instant::now();
+    let mut bar = SessionBar::new(plan, data);
     let settings = &plan.settings;
     let start = match &plan.resume {
         Some(file) => Some(checkpoint::load::<F, M>(file)?.start),
@@ -199,72 +208,169 @@ fn run_typed<F: Float, M: RadianceField<F>>(
         .save_model
         .clone()
         .unwrap_or_else(|| plan.save_on_interrupt.clone());
-    let bar = progress_bar(plan.progress_bar);
-    let mut first_step_seconds = f64::NAN;
-    let mut progress = |p: Progress| {
-        if p.step == first_step + 1 {
-            first_step_seconds = clock.elapsed().as_secs_f64();
-            if plan.announce {
-                let [h, w] = data.train[0].size();
-                let from = match &plan.resume {
-                    Some(file) => format!(", from step {first_step} of {}", file.display()),
-                    None => String::new(),
-                };
-                bar.suspend(|| {
+    let from = match &plan.resume {
+        Some(file) => format!(", from step {first_step} of {}", file.display()),
+        None => String::new(),
+    };
+    let mut trainer = Trainer::<F, M>::new(data, settings, start)?;
+    let run = run_budget(&mut trainer, settings.evaluations, Some(stop.flag()), &mut |p, _| {
+        bar.on_step(
+            p,
+            first_step,
+            || (String::new(), from.clone(), save_path.clone()),
+            format!("step {}", p.step),
+        )
+    })?;
+    bar.finish();
+    let training = trainer.state()?;
+    if run.interrupted || plan.save_model.is_some() {
+        checkpoint::save(&save_path, trainer.model(), &training, settings, &plan.entries)?;
+    }
+    let Some(last) = run.last else {
+        return Ok(SessionOutcome::Interrupted {
+            step: training.step,
+            saved: save_path,
+        });
+    };
+    let steps_taken = trainer.steps_taken();
+    let samples_per_ray_mean = trainer.samples() as f64 / (steps_taken * settings.batch) as f64;
+    let train_views_psnr = training_views_psnr(trainer.model(), data, settings, trainer.occupancy(), data.test.len())?;
+    let profile = trainer.profile().table();
+    let seconds = trainer.seconds();
+    let (model, occupancy) = trainer.into_parts();
+    let params = model.params();
+    let fit = FitFigures {
+        train_views_psnr,
+        seconds,
+        steps: training.step,
+        samples_per_ray_mean,
+        occupied_fraction: occupancy.as_ref().map_or(1.0, |g| g.occupied_fraction()),
+        profile,
+        parameters: params.ids().filter_map(|id| params.get(id).ok()).map(|v| v.len()).sum(),
+        saved: plan.save_model.is_some().then_some(save_path),
+    };
+    Ok(SessionOutcome::Finished(Box::new(FitReport::of(
+        data,
+        plan,
+        space,
+        run.log,
+        last,
+        fit,
+        bar.first_step_seconds,
+    )?)))
+}
+
+/// What a model's session measured beside the budget loop's evaluations.
+pub(crate) struct FitFigures {
+    pub(crate) train_views_psnr: f64,
+    pub(crate) seconds: f64,
+    pub(crate) steps: usize,
+    pub(crate) samples_per_ray_mean: f64,
+    pub(crate) occupied_fraction: f64,
+    pub(crate) profile: ProfileTable,
+    pub(crate) parameters: usize,
+    pub(crate) saved: Option<PathBuf>,
+}
+
+impl FitReport {
+    /// The report of a finished fit of `data`: the budget loop's `log` and `last` evaluation,
+    /// scored view by view, with the model's `fit` figures.
+    ///
+    /// Errors: renders that do not match the held-out views.
+    pub(crate) fn of(
+        data: &Dataset,
+        plan: &SessionPlan,
+        space: &SpaceDecision,
+        log: Vec<LogEntry>,
+        last: Evaluation,
+        fit: FitFigures,
+        first_step_seconds: f64,
+    ) -> Result<FitReport, SessionError> {
+        let scores = view_scores(
+            &last.views.iter().map(|v| v.color.view()).collect::<Vec<_>>(),
+            &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
+        )?;
+        Ok(FitReport {
+            final_test_psnr: last.entry.test_psnr,
+            final_test_psnr_view_mean: mean_psnr(&scores),
+            final_test_ssim: last.entry.test_ssim,
+            train_views_psnr: fit.train_views_psnr,
+            view_scores: scores,
+            held_out: last.views,
+            seconds: fit.seconds,
+            steps: fit.steps,
+            samples_per_ray_mean: fit.samples_per_ray_mean,
+            occupied_fraction: fit.occupied_fraction,
+            profile: fit.profile,
+            parameters: fit.parameters,
+            first_step_seconds,
+            saved: fit.saved,
+            space: space.clone(),
+            settings: plan.settings,
+            log,
+        })
+    }
+}
+
+/// A session's progress bar, and the line it writes once the first step is done.
+pub(crate) struct SessionBar<'a> {
+    plan: &'a SessionPlan,
+    data: &'a Dataset,
+    clock: Instant,
+    bar: indicatif::ProgressBar,
+    /// Seconds from the session's start to its first step's end; NaN until then.
+    pub(crate) first_step_seconds: f64,
+}
+
+impl<'a> SessionBar<'a> {
+    /// A bar for `plan`'s fit of `data` (hidden if the plan asks for none), its clock started.
+    pub(crate) fn new(plan: &'a SessionPlan, data: &'a Dataset) -> Self {
+        SessionBar {
+            plan,
+            data,
+            clock: Instant::now(),
+            bar: progress_bar(plan.progress_bar),
+            first_step_seconds: f64::NAN,
+        }
+    }
+
+    /// Shows `progress` with `message`. After the first step of the session (step
+    /// `first_step + 1`), notes the time and, if the plan asks, says what is trained: `line`
+    /// gives what goes before the views' count, what follows their size, and where Ctrl-C saves.
+    pub(crate) fn on_step(
+        &mut self,
+        progress: Progress,
+        first_step: usize,
+        line: impl FnOnce() -> (String, String, PathBuf),
+        message: String,
+    ) {
+        if progress.step == first_step + 1 {
+            self.first_step_seconds = self.clock.elapsed().as_secs_f64();
+            if self.plan.announce {
+                let (before, after, saved) = line();
+                let [h, w] = self.data.train[0].size();
+                self.bar.suspend(|| {
                     eprintln!(
-                        "{}: {} training and {} held-out views of {w}x{h}{from}; Ctrl-C stops and saves the fit to {}",
-                        plan.tool,
-                        data.train.len(),
-                        data.test.len(),
-                        save_path.display()
+                        "{}: {before}{} training and {} held-out views of {w}x{h}{after}; Ctrl-C stops and saves the fit to {}",
+                        self.plan.tool,
+                        self.data.train.len(),
+                        self.data.test.len(),
+                        saved.display()
                     )
                 });
             }
         }
-        bar.set_position((p.fraction * 1000.0) as u64);
-        bar.set_message(format!("step {}", p.step));
-    };
-    let result = fit_from::<F, M>(data, settings, start, Some(stop.flag()), &mut progress)?;
-    bar.finish_and_clear();
-    let saved = if plan.save_model.is_some() || result.interrupted {
-        checkpoint::save(&save_path, &result.model, &result.training, settings, &plan.entries)?;
-        Some(save_path)
-    } else {
-        None
-    };
-    if let (true, Some(saved)) = (result.interrupted, &saved) {
-        return Ok(SessionOutcome::Interrupted {
-            step: result.training.step,
-            saved: saved.clone(),
-        });
+        self.bar.set_position((progress.fraction * 1000.0) as u64);
+        self.bar.set_message(message);
     }
-    let scores = view_scores(
-        &result.renders.iter().map(|r| r.view()).collect::<Vec<_>>(),
-        &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
-    )?;
-    let params = result.model.params();
-    Ok(SessionOutcome::Finished(Box::new(FitReport {
-        final_test_psnr_view_mean: mean_psnr(&scores),
-        view_scores: scores,
-        train_views_psnr: result.training_views_psnr(data, settings)?,
-        final_test_psnr: result.final_test_psnr,
-        final_test_ssim: result.final_test_ssim,
-        seconds: result.seconds,
-        steps: result.training.step,
-        samples_per_ray_mean: result.samples_per_ray_mean,
-        occupied_fraction: result.occupied_fraction,
-        profile: result.profile.table(),
-        parameters: params.ids().filter_map(|id| params.get(id).ok()).map(|v| v.len()).sum(),
-        first_step_seconds,
-        saved,
-        space: space.clone(),
-        settings: *settings,
-        held_out: result.held_out,
-        log: result.log,
-    })))
+
+    /// Clears the bar.
+    pub(crate) fn finish(&self) {
+        self.bar.finish_and_clear();
+    }
 }
 
-pub(crate) fn progress_bar(shown: bool) -> indicatif::ProgressBar {
+fn progress_bar(shown: bool) -> indicatif::ProgressBar {
     if !shown {
         return indicatif::ProgressBar::hidden();
     }

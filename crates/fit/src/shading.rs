@@ -3,11 +3,11 @@
 //! composite over the packed samples, fused or taped. The dense and the sparse grid differ
 //! only in the lookup they pass in.
 
-use fogray_ops::activation::{twin, DensityColor};
+use fogray_ops::activation::DensityColor;
 use fogray_ops::distortion::DistortionLoss;
 use fogray_ops::rays::RayBatch;
 use fogray_ops::sample::PackedSamples;
-use fogray_ops::{twins, Background, Composite, CompositeInputs, CompositeVars, ShColor};
+use fogray_ops::{Background, Composite, CompositeInputs, CompositeVars, ShColor};
 use fogray_tape::{Float, Tape, TapeError, Var};
 use ndarray::{Array1, Array2};
 
@@ -47,15 +47,12 @@ impl Shaded {
     ///
     /// Errors: from the ops.
     pub fn render<F: Float>(self, tape: &mut Tape<F>, method: Method) -> Result<CompositeVars, TapeError> {
-        match method {
-            Method::Fused => self.composite.apply(tape, &self.inputs),
-            Method::Taped => twins::stable(tape, &self.composite, &self.inputs),
-        }
+        method.kernels().composite(tape, &self.composite, &self.inputs)
     }
 
-    /// Records the training loss against `target` (`[R, 3]`): the fused method composites and
-    /// takes the mean squared error in one op ([`Composite::apply_mse`]), the taped one the
-    /// stable twin, then `sub`, `square` and `mean`; the objective adds the distortion loss and
+    /// Records the training loss against `target` (`[R, 3]`): the mean squared error of the
+    /// composite's colour ([`Kernels::composite_mse`](crate::kernels::Kernels::composite_mse));
+    /// the objective adds the distortion loss and
     /// `prior`, where there are.
     ///
     /// Errors: from the ops.
@@ -66,15 +63,9 @@ impl Shaded {
         method: Method,
         prior: Option<Var>,
     ) -> Result<TrainingLoss, TapeError> {
-        let photometric = match method {
-            Method::Fused => self.composite.apply_mse(tape, &self.inputs, target)?,
-            Method::Taped => {
-                let color = twins::stable(tape, &self.composite, &self.inputs)?.color;
-                let residual = tape.sub(color, target)?;
-                let squared = tape.square(residual)?;
-                tape.mean(squared)?
-            }
-        };
+        let photometric = method
+            .kernels()
+            .composite_mse(tape, &self.composite, &self.inputs, target)?;
         let mut objective = photometric;
         for term in [self.distortion, prior].into_iter().flatten() {
             objective = tape.add(objective, term)?;
@@ -208,18 +199,13 @@ impl Shading {
             Some(_) => tape.slice(raw, 1, 0, 2)?,
             None => raw,
         };
-        let activated = match method {
-            Method::Fused => self.activation.apply(tape, activation_input)?,
-            Method::Taped => twin::density_color(tape, &self.activation, activation_input)?,
-        };
+        let kernels = method.kernels();
+        let activated = kernels.density_color(tape, &self.activation, activation_input)?;
         let color = match (&self.sh, directions) {
             (Some(sh), Some(directions)) => {
                 let coefficients = tape.slice(raw, 1, 1, self.channels())?;
                 let directions = tape.constant(directions);
-                match method {
-                    Method::Fused => sh.apply(tape, coefficients, directions)?,
-                    Method::Taped => fogray_ops::sh::twin::sh_color(tape, sh, coefficients, directions)?,
-                }
+                kernels.sh_color(tape, sh, coefficients, directions)?
             }
             _ => activated.color,
         };
@@ -240,12 +226,7 @@ impl Shading {
         };
         let distortion = if distortion > 0.0 {
             let op = DistortionLoss::packed(offsets.clone());
-            let loss = match method {
-                Method::Fused => op.apply(tape, activated.sigma, vars.delta, vars.t)?,
-                Method::Taped => {
-                    fogray_ops::distortion::twin::distortion_loss(tape, &op, activated.sigma, vars.delta, vars.t)?
-                }
-            };
+            let loss = kernels.distortion(tape, &op, activated.sigma, vars.delta, vars.t)?;
             Some(tape.mul_scalar(loss, F::lit(distortion))?)
         } else {
             None

@@ -423,10 +423,7 @@ impl<F: Float> GridModel<F> for SparseGrid<F> {
     }
 
     fn lookup(&self, tape: &mut Tape<F>, data: Var, positions: Var, method: Method) -> Result<Var, TapeError> {
-        match method {
-            Method::Fused => self.field.apply(tape, data, positions),
-            Method::Taped => fogray_ops::grid::sparse::twin::lookup(tape, &self.field, data, positions),
-        }
+        method.kernels().sparse_lookup(tape, &self.field, data, positions)
     }
 
     fn prior(&self, tape: &mut Tape<F>, data: Var) -> Result<Option<Var>, TapeError> {

@@ -2,11 +2,11 @@
 //! flag is raised, with the test PSNR on the held-out views measured at intervals (outside the
 //! training clock), and returns the fitted model with its log ([`FitResult`]).
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 
 use fogray_ops::sample::OccupancyGrid;
 use fogray_tape::Float;
-use ndarray::Array3;
+use ndarray::{Array3, ArrayView3};
 use serde::Serialize;
 
 use crate::dataset::{Dataset, View};
@@ -17,7 +17,7 @@ use crate::profile::StepProfile;
 use crate::render::{render_picture, RenderOptions, RenderedView};
 use crate::settings::FitSettings;
 use crate::state::{Start, TrainingState};
-use crate::trainer::Trainer;
+use crate::trainer::{run_budget, Trainer};
 
 /// One line of the log.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -129,9 +129,7 @@ pub fn training_views_psnr<F: Float, M: RadianceField<F>>(
     if count == 0 {
         return Err(FitError::Config("training_views_psnr: a count of at least 1".into()));
     }
-    let n = data.train.len();
-    let count = count.min(n);
-    let chosen: Vec<&View> = (0..count).map(|i| &data.train[i * n / count]).collect();
+    let chosen = data.spread_training_views(count);
     let renders = render_views(model, &chosen, data, settings, occupancy)?;
     let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
     let e: Vec<_> = chosen.iter().map(|v| v.image.view()).collect();
@@ -153,9 +151,7 @@ impl<F: Float, M: RadianceField<F>> FitResult<F, M> {
 ///
 /// Errors: renders that do not match the views.
 pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
-    let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
-    let e: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
-    Ok(psnr(&r, &e)?)
+    held_out_psnr(&renders.iter().map(|a| a.view()).collect::<Vec<_>>(), data)
 }
 
 /// The mean SSIM of `renders` against the test views' pictures; NaN (not measured) when a
@@ -163,12 +159,22 @@ pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitErro
 ///
 /// Errors: renders that do not match the views.
 pub fn test_ssim(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
+    held_out_ssim(&renders.iter().map(|a| a.view()).collect::<Vec<_>>(), data)
+}
+
+/// [`test_psnr`] of renders held as views.
+pub(crate) fn held_out_psnr(colors: &[ArrayView3<f64>], data: &Dataset) -> Result<f64, FitError> {
+    let e: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
+    Ok(psnr(colors, &e)?)
+}
+
+/// [`test_ssim`] of renders held as views.
+pub(crate) fn held_out_ssim(colors: &[ArrayView3<f64>], data: &Dataset) -> Result<f64, FitError> {
     if data.test.iter().any(|t| t.size().iter().any(|&n| n < SSIM_WINDOW)) {
         return Ok(f64::NAN);
     }
-    let r: Vec<_> = renders.iter().map(|a| a.view()).collect();
     let e: Vec<_> = data.test.iter().map(|t| t.image.view()).collect();
-    Ok(ssim(&r, &e)?)
+    Ok(ssim(colors, &e)?)
 }
 
 /// Fits a fresh model to `data` for its budget: [`fit_from`] with no start and no stop flag.
@@ -225,33 +231,12 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
     progress: &mut dyn FnMut(Progress),
 ) -> Result<FitResult<F, M>, FitError> {
     let mut trainer = Trainer::<F, M>::new(data, settings, start)?;
-    let evaluations = settings.evaluations as f64;
-    let mut log = vec![trainer.evaluate(false)?.entry];
-    let mut next_eval = (trainer.fraction() * evaluations).floor() as usize + 1;
-    let mut interrupted = false;
-    let mut last = None;
-    while !trainer.is_done() {
-        if stop.is_some_and(|s| s.load(Ordering::Relaxed)) {
-            interrupted = true;
-            break;
-        }
-        let report = trainer.step()?;
-        progress(Progress {
-            step: report.step,
-            fraction: report.fraction,
-        });
-        if trainer.is_done() || trainer.fraction() * evaluations >= next_eval as f64 {
-            let evaluation = trainer.evaluate(trainer.is_done())?;
-            log.push(evaluation.entry);
-            last = Some(evaluation);
-            next_eval = (trainer.fraction() * evaluations).floor() as usize + 1;
-        }
-    }
-    // The last evaluation is the final one when it saw the last step.
-    let last = match last.filter(|e| e.entry.step == trainer.steps() && e.views.iter().all(|v| v.depth.is_some())) {
+    let run = run_budget(&mut trainer, settings.evaluations, stop, &mut |p, _| progress(p))?;
+    let last = match run.last {
         Some(e) => e,
         None => trainer.evaluate(true)?,
     };
+    let (log, interrupted) = (run.log, run.interrupted);
     let steps_taken = trainer.steps_taken();
     let samples_per_ray_mean = trainer.samples() as f64 / (steps_taken * settings.batch) as f64;
     let training = trainer.state()?;

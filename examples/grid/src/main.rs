@@ -17,7 +17,7 @@ use serde::Serialize;
 use fogray::fit::checkpoint::{self, ModelInfo};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::depth::write_depth_png;
-use fogray::fit::dispatch::{with_model, ModelWork};
+use fogray::fit::dispatch::{with_field, FieldWork};
 use fogray::fit::images::{nested, write_comparison_png, write_png};
 use fogray::fit::metrics::psnr;
 use fogray::fit::plots;
@@ -707,13 +707,15 @@ fn run_render(args: RenderArgs) -> Result<()> {
     if views.is_empty() {
         anyhow::bail!("no view to render: the ring has no test views; pass --view I or --all");
     }
-    let kind = ModelKind::of_kind(&info.kind).with_context(|| {
-        format!(
-            "{}: a {:?} model, which fogray-grid does not know",
-            args.model.display(),
-            info.kind
-        )
-    })?;
+    let kind = ModelKind::of_kind(&info.kind)
+        .and_then(ModelKind::field)
+        .with_context(|| {
+            format!(
+                "{}: a {:?} model, which fogray-grid does not know",
+                args.model.display(),
+                info.kind
+            )
+        })?;
     create_dir(&args.out)?;
     let work = RenderWork {
         args: &args,
@@ -721,7 +723,7 @@ fn run_render(args: RenderArgs) -> Result<()> {
         scene: &scene,
         views: &views,
     };
-    with_model(info.settings.precision, kind, work)
+    with_field(info.settings.precision, kind, work)
 }
 
 /// The views to render from the model file, as fogray-fit's dispatch runs it.
@@ -732,18 +734,11 @@ struct RenderWork<'a> {
     views: &'a [usize],
 }
 
-impl ModelWork for RenderWork<'_> {
+impl FieldWork for RenderWork<'_> {
     type Output = Result<()>;
 
     fn run<F: fogray::tape::Float, M: RadianceField<F>>(self) -> Result<()> {
         render_views::<F, M>(self.args, self.ring, self.scene, self.views)
-    }
-
-    fn run_splats<F: fogray::tape::Float>(self) -> Result<()> {
-        anyhow::bail!(
-            "{}: a splat model; fogray-grid renders grids",
-            self.args.model.display()
-        )
     }
 }
 

@@ -2,8 +2,6 @@
 //! (progress, Ctrl-C, evaluations, the final report), for a [`SplatTrainer`], whose model is
 //! drawn by projection and is saved as the PLY file 3DGS viewers open.
 
-use std::time::Instant;
-
 use fogray_tape::Float;
 
 use super::carve::visual_hull;
@@ -15,10 +13,11 @@ use super::undistort::undistorted;
 use crate::dataset::Dataset;
 use crate::error::FitError;
 use crate::interrupt::StopFlag;
-use crate::metrics::{mean_psnr, psnr, view_scores};
-use crate::session::{progress_bar, FitReport, SessionError, SessionOutcome, SessionPlan};
+use crate::metrics::psnr;
+use crate::session::{FitFigures, FitReport, SessionBar, SessionError, SessionOutcome, SessionPlan};
 use crate::settings::FitSettings;
 use crate::space::SpaceDecision;
+use crate::trainer::run_budget;
 
 /// Candidates drawn for each splat a visual hull keeps: enough for an object that fills a
 /// twentieth of its box.
@@ -72,7 +71,7 @@ pub(crate) fn run<F: Float>(
         ))
         .into());
     }
-    let clock = Instant::now();
+    let mut bar = SessionBar::new(plan, data);
     let settings = &plan.settings;
     // The op projects through a pinhole: pictures through a lens are resampled into theirs
     // (the held-out views too, which are then scored against their resampled pictures).
@@ -102,96 +101,58 @@ pub(crate) fn run<F: Float>(
         .save_model
         .clone()
         .unwrap_or_else(|| plan.save_on_interrupt.with_extension("ply"));
-    let bar = progress_bar(plan.progress_bar);
-    let evaluations = settings.evaluations as f64;
-    let mut log = vec![trainer.evaluate()?.entry];
-    let mut next_eval = 1usize;
-    let mut first_step_seconds = f64::NAN;
-    let mut last = None;
-    while !trainer.is_done() {
-        if stop.is_raised() {
-            bar.finish_and_clear();
-            write_ply(&save_path, trainer.model())?;
-            return Ok(SessionOutcome::Interrupted {
-                step: trainer.steps(),
-                saved: save_path,
-            });
-        }
-        let report = trainer.step()?;
-        if report.step == 1 {
-            first_step_seconds = clock.elapsed().as_secs_f64();
-            if plan.announce {
-                let [h, w] = data.train[0].size();
-                bar.suspend(|| {
-                    eprintln!(
-                        "{}: {} splats on {} training and {} held-out views of {w}x{h}; Ctrl-C stops and saves them to {}",
-                        plan.tool,
-                        trainer.model().len(),
-                        data.train.len(),
-                        data.test.len(),
-                        save_path.display()
-                    )
-                });
-            }
-        }
-        bar.set_position((report.fraction * 1000.0) as u64);
-        bar.set_message(format!("step {}, {} splats", report.step, trainer.model().len()));
-        if trainer.is_done() || trainer.fraction() * evaluations >= next_eval as f64 {
-            let evaluation = trainer.evaluate()?;
-            log.push(evaluation.entry);
-            last = Some(evaluation);
-            next_eval = (trainer.fraction() * evaluations).floor() as usize + 1;
-        }
-    }
-    bar.finish_and_clear();
-    let last = match last {
-        Some(e) => e,
-        None => trainer.evaluate()?,
+    let run = run_budget(&mut trainer, settings.evaluations, Some(stop.flag()), &mut |p, t| {
+        let splats = t.model().len();
+        bar.on_step(
+            p,
+            0,
+            || (format!("{splats} splats on "), String::new(), save_path.clone()),
+            format!("step {}, {splats} splats", p.step),
+        )
+    })?;
+    bar.finish();
+    let Some(last) = run.last else {
+        write_ply(&save_path, trainer.model())?;
+        return Ok(SessionOutcome::Interrupted {
+            step: trainer.steps(),
+            saved: save_path,
+        });
     };
-    let scores = view_scores(
-        &last.views.iter().map(|v| v.color.view()).collect::<Vec<_>>(),
-        &data.test.iter().map(|t| t.image.view()).collect::<Vec<_>>(),
-    )?;
     let train_views_psnr = training_views_psnr(trainer.model(), data)?;
     let profile = trainer.profile().table();
     let (seconds, steps) = (trainer.seconds(), trainer.steps());
     let model = trainer.into_model();
-    let saved = match &plan.save_model {
-        Some(path) => {
-            write_ply(path, &model)?;
-            Some(path.clone())
-        }
-        None => None,
-    };
-    Ok(SessionOutcome::Finished(Box::new(FitReport {
-        final_test_psnr: last.entry.test_psnr,
-        final_test_psnr_view_mean: mean_psnr(&scores),
-        final_test_ssim: last.entry.test_ssim,
+    if let Some(path) = &plan.save_model {
+        write_ply(path, &model)?;
+    }
+    let fit = FitFigures {
         train_views_psnr,
-        view_scores: scores,
-        held_out: last.views,
         seconds,
         steps,
+        // Splats draw no rays and keep no occupancy grid.
         samples_per_ray_mean: f64::NAN,
         occupied_fraction: f64::NAN,
         profile,
         parameters: model.parameter_count(),
-        first_step_seconds,
-        saved,
-        space: space.clone(),
-        settings: *settings,
-        log,
-    })))
+        saved: plan.save_model.clone(),
+    };
+    Ok(SessionOutcome::Finished(Box::new(FitReport::of(
+        data,
+        plan,
+        space,
+        run.log,
+        last,
+        fit,
+        bar.first_step_seconds,
+    )?)))
 }
 
-/// The PSNR of `model` on as many training views as `data` holds out, spread through them as
-/// [`crate::train::training_views_psnr`] spreads the grid's.
+/// The PSNR of `model` on as many training views as `data` holds out (at least one), chosen
+/// as the grid's are ([`Dataset::spread_training_views`]).
 ///
 /// Errors: the ops'.
 fn training_views_psnr<F: Float>(model: &SplatModel<F>, data: &Dataset) -> Result<f64, FitError> {
-    let n = data.train.len();
-    let count = data.test.len().clamp(1, n);
-    let chosen: Vec<_> = (0..count).map(|i| &data.train[i * n / count]).collect();
+    let chosen = data.spread_training_views(data.test.len().max(1));
     let renders = chosen
         .iter()
         .map(|v| render_view(model, v, data.background).map(|r| r.color))

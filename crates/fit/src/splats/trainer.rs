@@ -19,13 +19,11 @@ use super::policies::{OpacityReset, SplatRates};
 use super::settings::SplatSettings;
 use crate::dataset::{Dataset, View};
 use crate::error::FitError;
-use crate::metrics::{psnr, ssim, SSIM_WINDOW};
 use crate::profile::{Phases, StepProfile};
 use crate::render::RenderedView;
 use crate::settings::Budget;
 use crate::state::TrainingState;
-use crate::train::LogEntry;
-use crate::trainer::{Evaluation, StepContext, StepPolicy, StepReport};
+use crate::trainer::{Evaluation, StepContext, StepPolicy, StepReport, Stepper};
 
 /// A splat fit in progress (see the [module docs](self)).
 pub struct SplatTrainer<'d, F: Float> {
@@ -214,18 +212,7 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
             .iter()
             .map(|v| render_view(&self.model, v, self.data.background))
             .collect::<Result<Vec<_>, _>>()?;
-        let colors: Vec<_> = views.iter().map(|v| v.color.view()).collect();
-        let expected: Vec<_> = self.data.test.iter().map(|t| t.image.view()).collect();
-        let small = self.data.test.iter().any(|t| t.size().iter().any(|&n| n < SSIM_WINDOW));
-        let entry = LogEntry {
-            step: self.step,
-            seconds: self.seconds,
-            train_loss: self.loss,
-            test_psnr: psnr(&colors, &expected)?,
-            test_ssim: if small { f64::NAN } else { ssim(&colors, &expected)? },
-            samples: 0,
-        };
-        Ok(Evaluation { entry, views })
+        Evaluation::scored(views, self.data, self.step, self.seconds, self.loss, 0)
     }
 
     /// What resumes the fit's optimiser: steps, seconds and Adam's moments by parameter name
@@ -267,6 +254,22 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     /// The model, ending the fit.
     pub fn into_model(self) -> SplatModel<F> {
         self.model
+    }
+}
+
+impl<F: Float> Stepper for SplatTrainer<'_, F> {
+    fn step(&mut self) -> Result<StepReport, FitError> {
+        SplatTrainer::step(self)
+    }
+    /// Without depth, which splats do not render yet.
+    fn evaluate(&self, _depth: bool) -> Result<Evaluation, FitError> {
+        SplatTrainer::evaluate(self)
+    }
+    fn fraction(&self) -> f64 {
+        SplatTrainer::fraction(self)
+    }
+    fn steps(&self) -> usize {
+        SplatTrainer::steps(self)
     }
 }
 

@@ -6,7 +6,7 @@ use ndarray::Array3;
 use serde::Serialize;
 
 use crate::dataset::Dataset;
-use crate::dispatch::{with_model, ModelWork};
+use crate::dispatch::{with_field, FieldWork};
 use crate::model::RadianceField;
 use crate::settings::{FitSettings, SceneBox};
 use crate::slices::{model_density_planes, occupancy_planes, PlaneImage};
@@ -143,7 +143,11 @@ pub(crate) fn run_config(
         slice_pixels,
         progress,
     };
-    with_model(config.precision, fit_config.model, work)
+    // A sweep keeps density slices and grid statistics, which splats have not.
+    let field = fit_config.model.field().ok_or_else(|| {
+        SweepError::Config("a sweep fits grids; splats are fitted with `fogray fit --model splats`".into())
+    })?;
+    with_field(config.precision, field, work)
 }
 
 /// [`run_config`]'s work, for one model type.
@@ -155,19 +159,12 @@ struct FitAndKeep<'a> {
     progress: &'a mut dyn FnMut(Progress),
 }
 
-impl ModelWork for FitAndKeep<'_> {
+impl FieldWork for FitAndKeep<'_> {
     type Output = Result<ConfigRun, SweepError>;
 
     fn run<F: Float, M: RadianceField<F>>(self) -> Self::Output {
         let result = fit::<F, M>(self.data, self.fit_config, self.progress)?;
         keep(self.config, result, self.fit_config.model_box(), self.slice_pixels)
-    }
-
-    fn run_splats<F: Float>(self) -> Self::Output {
-        // A sweep keeps density slices and grid statistics, which splats have not.
-        Err(SweepError::Config(
-            "a sweep fits grids; splats are fitted with `fogray fit --model splats`".into(),
-        ))
     }
 }
 

@@ -33,6 +33,7 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+pub mod budget;
 pub mod growth;
 pub mod policy;
 pub mod rate;
@@ -49,6 +50,7 @@ use ndarray::Array2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha12Rng;
 
+pub use budget::{run_budget, BudgetRun, Stepper};
 pub use growth::Growth;
 pub use policy::{StepContext, StepPolicy};
 pub use rate::LearningRate;
@@ -57,14 +59,13 @@ pub use refresh::OccupancyRefresh;
 use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
 use crate::error::FitError;
-use crate::metrics::{psnr, ssim, SSIM_WINDOW};
 use crate::model::{RadianceField, TrainingBackground};
 use crate::profile::{Phases, StepProfile};
 use crate::render::{render_picture, RenderOptions, RenderedView};
 use crate::sampling::occupancy_grid;
 use crate::settings::{Budget, FitSettings, Sampling};
 use crate::state::{Start, TrainingState};
-use crate::train::LogEntry;
+use crate::train::{held_out_psnr, held_out_ssim, LogEntry};
 
 /// What one step did.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,6 +87,34 @@ pub struct Evaluation {
     pub entry: LogEntry,
     /// Each held-out view's render (colour unclamped, opacity, depth if asked), in view order.
     pub views: Vec<RenderedView>,
+}
+
+impl Evaluation {
+    /// `views` (`data`'s held-out views rendered, in order) scored against their pictures, at
+    /// the trainer's `step`, training `seconds`, last `train_loss` and `samples` so far. SSIM is
+    /// NaN (not measured) when a view is smaller than its window, so that tiny test scenes still
+    /// fit.
+    ///
+    /// Errors: renders that do not match the views.
+    pub fn scored(
+        views: Vec<RenderedView>,
+        data: &Dataset,
+        step: usize,
+        seconds: f64,
+        train_loss: f64,
+        samples: usize,
+    ) -> Result<Evaluation, FitError> {
+        let colors: Vec<_> = views.iter().map(|v| v.color.view()).collect();
+        let entry = LogEntry {
+            step,
+            seconds,
+            train_loss,
+            test_psnr: held_out_psnr(&colors, data)?,
+            test_ssim: held_out_ssim(&colors, data)?,
+            samples,
+        };
+        Ok(Evaluation { entry, views })
+    }
 }
 
 /// A fit in progress (see the [module docs](self)).
@@ -324,20 +353,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     /// Errors: the ops' errors.
     pub fn evaluate(&self, depth: bool) -> Result<Evaluation, FitError> {
         let views = render_views(&self.model, self.occupancy.as_ref(), self.data, &self.settings, depth)?;
-        let colors: Vec<_> = views.iter().map(|v| v.color.view()).collect();
-        let expected: Vec<_> = self.data.test.iter().map(|t| t.image.view()).collect();
-        let small = self.data.test.iter().any(|t| t.size().iter().any(|&n| n < SSIM_WINDOW));
-        let entry = LogEntry {
-            step: self.step,
-            seconds: self.seconds,
-            train_loss: self.loss,
-            test_psnr: psnr(&colors, &expected)?,
-            // NaN (not measured) when a view is smaller than SSIM's window, so that tiny test
-            // scenes still fit.
-            test_ssim: if small { f64::NAN } else { ssim(&colors, &expected)? },
-            samples: self.samples,
-        };
-        Ok(Evaluation { entry, views })
+        Evaluation::scored(views, self.data, self.step, self.seconds, self.loss, self.samples)
     }
 
     /// Where the fit stands beyond its model: with the model, [`Trainer::new`] continues it
@@ -374,6 +390,21 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     /// The model and the occupancy grid, ending the fit.
     pub fn into_parts(self) -> (M, Option<OccupancyGrid>) {
         (self.model, self.occupancy)
+    }
+}
+
+impl<F: Float, M: RadianceField<F>> Stepper for Trainer<'_, F, M> {
+    fn step(&mut self) -> Result<StepReport, FitError> {
+        Trainer::step(self)
+    }
+    fn evaluate(&self, depth: bool) -> Result<Evaluation, FitError> {
+        Trainer::evaluate(self, depth)
+    }
+    fn fraction(&self) -> f64 {
+        Trainer::fraction(self)
+    }
+    fn steps(&self) -> usize {
+        Trainer::steps(self)
     }
 }
 
