@@ -1,0 +1,103 @@
+//! The settings' choices of kind: the model class, the float type, fused or taped ops, and
+//! where samples go.
+
+use serde::{Deserialize, Serialize};
+
+/// Which implementation of the grid lookup, the activation and the composite a step records.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Method {
+    /// The fused ops (one record each, hand-written backwards).
+    Fused,
+    /// Their taped twins (built from tape primitives).
+    Taped,
+}
+
+/// Where samples go along each ray.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Sampling {
+    /// Every half voxel across the box.
+    Uniform,
+    /// Every half voxel, but only in the cells of an occupancy grid (one cell per voxel) that
+    /// the current density marks as occupied, refreshed every few steps.
+    Occupancy,
+}
+
+/// Which radiance field a fit trains.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum ModelKind {
+    /// Every node of the grid stored ([`DenseGrid`](crate::dense::DenseGrid)): small scenes.
+    Dense,
+    /// Only the nodes near what the occupancy grid finds, pruned at each growth
+    /// ([`SparseGrid`](crate::sparse::SparseGrid)): memory follows the scene.
+    Sparse,
+    /// 3-D Gaussians composited by projection onto the image, densified where the picture
+    /// needs them ([`SplatModel`](crate::splats::SplatModel)).
+    Splats,
+}
+
+impl ModelKind {
+    /// `dense`, `sparse` or `splats`.
+    pub fn name(self) -> &'static str {
+        match self {
+            ModelKind::Dense => "dense",
+            ModelKind::Sparse => "sparse",
+            ModelKind::Splats => "splats",
+        }
+    }
+}
+
+/// The floating-point type of a model and its render.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+#[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
+pub enum Precision {
+    /// 32-bit floats.
+    F32,
+    /// 64-bit floats.
+    F64,
+}
+
+impl Precision {
+    /// `f32` or `f64`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Precision::F32 => "f32",
+            Precision::F64 => "f64",
+        }
+    }
+
+    /// The precision of `F` (`f32` or `f64`, the two [`Float`](fogray_tape::Float) types).
+    pub fn of<F: fogray_tape::Float>() -> Precision {
+        if std::mem::size_of::<F>() == 4 {
+            Precision::F32
+        } else {
+            Precision::F64
+        }
+    }
+}
+
+impl Method {
+    /// `fused` or `taped`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Method::Fused => "fused",
+            Method::Taped => "taped",
+        }
+    }
+}
+
+impl Sampling {
+    /// `uniform` or `occupancy`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Sampling::Uniform => "uniform",
+            Sampling::Occupancy => "occupancy",
+        }
+    }
+}

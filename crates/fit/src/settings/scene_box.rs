@@ -1,0 +1,81 @@
+//! [`SceneBox`]: the box a model covers, as a flag (`--box`) and in a checkpoint.
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::FitError;
+
+/// The box a model covers: `min` to `max` on each axis (world units).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct SceneBox {
+    /// The lower corner.
+    pub min: [f64; 3],
+    /// The upper corner.
+    pub max: [f64; 3],
+}
+
+impl SceneBox {
+    /// `[-1, 1]^3`, the box of a model whose settings name none.
+    pub const UNIT: SceneBox = SceneBox {
+        min: [-1.0; 3],
+        max: [1.0; 3],
+    };
+
+    /// The cube `[-half, half]^3`.
+    pub fn cube(half: f64) -> SceneBox {
+        SceneBox {
+            min: [-half; 3],
+            max: [half; 3],
+        }
+    }
+
+    /// Half the spacing of a lattice of `nodes` per axis along the box's shortest side: the
+    /// sample step that resolves a grid over the box (`1 / (nodes - 1)` for `[-1, 1]^3`).
+    pub fn half_node_spacing(&self, nodes: usize) -> f64 {
+        let side = (0..3).map(|a| self.max[a] - self.min[a]).fold(f64::INFINITY, f64::min);
+        side / (2 * (nodes - 1)) as f64
+    }
+
+    /// Errors: [`FitError::Config`] for a bound that is not finite or an axis whose minimum is
+    /// not below its maximum.
+    pub fn check(&self) -> Result<(), FitError> {
+        for a in 0..3 {
+            let (lo, hi) = (self.min[a], self.max[a]);
+            if !(lo.is_finite() && hi.is_finite() && lo < hi) {
+                return Err(FitError::Config(format!(
+                    "--box: axis {a} runs from {lo} to {hi} (must be finite and increasing)"
+                )));
+            }
+        }
+        Ok(())
+    }
+}
+
+impl std::fmt::Display for SceneBox {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let [a, b, c] = self.min;
+        let [d, e, g] = self.max;
+        write!(f, "{a},{b},{c},{d},{e},{g}")
+    }
+}
+
+impl std::str::FromStr for SceneBox {
+    type Err = String;
+
+    /// `H` for the cube `[-H, H]^3`, or `x0,y0,z0,x1,y1,z1` for the lower and upper corners.
+    fn from_str(text: &str) -> Result<Self, Self::Err> {
+        let values = text
+            .split(',')
+            .map(|v| v.trim().parse::<f64>().map_err(|e| format!("{v:?}: {e}")))
+            .collect::<Result<Vec<_>, _>>()?;
+        let scene_box = match values[..] {
+            [h] => SceneBox::cube(h),
+            [a, b, c, d, e, g] => SceneBox {
+                min: [a, b, c],
+                max: [d, e, g],
+            },
+            _ => return Err(format!("{text:?}: give H (the cube [-H, H]^3) or x0,y0,z0,x1,y1,z1")),
+        };
+        scene_box.check().map_err(|e| e.to_string())?;
+        Ok(scene_box)
+    }
+}
