@@ -305,6 +305,11 @@ impl OpsError {
         }
     }
 
+    /// A shape error naming the shape given (`got`, printed as `[a, b]`).
+    pub(crate) fn shape_of(op: Op, what: &'static str, expected: impl Into<String>, got: &[usize]) -> Self {
+        OpsError::shape(op, what, expected, format!("{got:?}"))
+    }
+
     /// A configuration error.
     pub(crate) fn config(op: Op, what: &'static str, value: f64, rule: &'static str) -> Self {
         OpsError::Config { op, what, value, rule }

@@ -21,15 +21,6 @@ fn flat<'a, F: Float, D: ndarray::Dimension>(x: &'a ndarray::ArrayView<'_, F, D>
     }
 }
 
-fn shape_error(what: &'static str, expected: String, got: &[usize]) -> OpsError {
-    OpsError::Shape {
-        op: Op::DensityColor,
-        what,
-        expected,
-        got: format!("{got:?}"),
-    }
-}
-
 /// A NaN raw value (infinities are valid: they saturate).
 fn nan_raw(row: usize, channel: usize) -> OpsError {
     OpsError::domain(
@@ -55,7 +46,12 @@ fn matrix<F: Float>(what: &'static str, rows: usize, cols: usize, data: Vec<F>) 
 fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), OpsError> {
     let (n, k) = raw.dim();
     if k < 2 {
-        return Err(shape_error("raw values", "[n, k] with k >= 2".into(), raw.shape()));
+        return Err(OpsError::shape_of(
+            Op::DensityColor,
+            "raw values",
+            "[n, k] with k >= 2",
+            raw.shape(),
+        ));
     }
     let values = flat(raw);
     // A fold per chunk, not a search, so that valid input (the common case) is read at full
@@ -74,12 +70,22 @@ fn check_raw<F: Float>(raw: &ArrayView2<'_, F>) -> Result<(usize, usize), OpsErr
 fn check_upstream<F: Float>(upstream: &ActivatedGrads<'_, F>, n: usize, k: usize) -> Result<(), OpsError> {
     if let Some(g) = &upstream.sigma {
         if g.len() != n {
-            return Err(shape_error("sigma gradient", format!("[{n}]"), g.shape()));
+            return Err(OpsError::shape_of(
+                Op::DensityColor,
+                "sigma gradient",
+                format!("[{n}]"),
+                g.shape(),
+            ));
         }
     }
     if let Some(g) = &upstream.color {
         if g.dim() != (n, k - 1) {
-            return Err(shape_error("color gradient", format!("[{n}, {}]", k - 1), g.shape()));
+            return Err(OpsError::shape_of(
+                Op::DensityColor,
+                "color gradient",
+                format!("[{n}, {}]", k - 1),
+                g.shape(),
+            ));
         }
     }
     Ok(())
@@ -109,10 +115,20 @@ impl DensityColor {
         let (n, k) = check_raw(&raw)?;
         let ActivatedMut { mut sigma, mut color } = out;
         if sigma.len() != n {
-            return Err(shape_error("sigma", format!("[{n}]"), sigma.shape()));
+            return Err(OpsError::shape_of(
+                Op::DensityColor,
+                "sigma",
+                format!("[{n}]"),
+                sigma.shape(),
+            ));
         }
         if color.dim() != (n, k - 1) {
-            return Err(shape_error("color", format!("[{n}, {}]", k - 1), color.shape()));
+            return Err(OpsError::shape_of(
+                Op::DensityColor,
+                "color",
+                format!("[{n}, {}]", k - 1),
+                color.shape(),
+            ));
         }
         let raw = flat(&raw);
         match (sigma.as_slice_mut(), color.as_slice_mut()) {
@@ -136,7 +152,12 @@ impl DensityColor {
     pub fn density<F: Float>(&self, raw: ArrayView2<'_, F>) -> Result<Array1<F>, OpsError> {
         let (n, k) = raw.dim();
         if k == 0 {
-            return Err(shape_error("raw values", "[n, k] with k >= 1".into(), raw.shape()));
+            return Err(OpsError::shape_of(
+                Op::DensityColor,
+                "raw values",
+                "[n, k] with k >= 1",
+                raw.shape(),
+            ));
         }
         if let Some(row) = raw.column(0).iter().position(|x| x.is_nan()) {
             return Err(nan_raw(row, 0));
@@ -176,7 +197,12 @@ impl DensityColor {
         let (n, k) = check_raw(&raw)?;
         check_upstream(upstream, n, k)?;
         if g_raw.dim() != (n, k) {
-            return Err(shape_error("raw gradient", format!("[{n}, {k}]"), g_raw.shape()));
+            return Err(OpsError::shape_of(
+                Op::DensityColor,
+                "raw gradient",
+                format!("[{n}, {k}]"),
+                g_raw.shape(),
+            ));
         }
         let raw = flat(&raw);
         let g_sigma = upstream.sigma.as_ref().map(flat);
@@ -229,9 +255,14 @@ impl DensityColor {
 
 /// `x` as a 2-D view, or the shape error.
 fn two_d<'a, F: Float>(x: &ArrayViewD<'a, F>) -> Result<ArrayView2<'a, F>, OpError> {
-    x.clone()
-        .into_dimensionality::<Ix2>()
-        .map_err(|_| OpError::from(shape_error("raw values", "[n, k] with k >= 2".into(), x.shape())))
+    x.clone().into_dimensionality::<Ix2>().map_err(|_| {
+        OpError::from(OpsError::shape_of(
+            Op::DensityColor,
+            "raw values",
+            "[n, k] with k >= 2",
+            x.shape(),
+        ))
+    })
 }
 
 /// The op's one input as `[n, k]` raw values, checked, with `n` and `k`.

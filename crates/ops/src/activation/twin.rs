@@ -15,10 +15,10 @@ use crate::error::{Op, OpsError};
 pub fn density_color<F: Float>(tape: &mut Tape<F>, op: &DensityColor, raw: Var) -> Result<ActivatedVars, TapeError> {
     let shape = tape.shape(raw)?.to_vec();
     let &[n, k] = shape.as_slice() else {
-        return Err(shape_error(&shape).into());
+        return Err(OpsError::shape_of(Op::DensityColor, "raw values", "[n, k] with k >= 2", &shape).into());
     };
     if k < 2 {
-        return Err(shape_error(&shape).into());
+        return Err(OpsError::shape_of(Op::DensityColor, "raw values", "[n, k] with k >= 2", &shape).into());
     }
     let density = tape.slice(raw, 1, 0, 1)?;
     let density = tape.reshape(density, &[n])?;
@@ -27,13 +27,4 @@ pub fn density_color<F: Float>(tape: &mut Tape<F>, op: &DensityColor, raw: Var) 
     let x = tape.slice(raw, 1, 1, k)?;
     let color = tape.sigmoid(x)?;
     Ok(ActivatedVars { sigma, color })
-}
-
-fn shape_error(shape: &[usize]) -> OpsError {
-    OpsError::Shape {
-        op: Op::DensityColor,
-        what: "raw values",
-        expected: "[n, k] with k >= 2".into(),
-        got: format!("{shape:?}"),
-    }
 }

@@ -9,23 +9,18 @@ use rayon::prelude::*;
 use super::kernel::RAYS_PER_CHUNK;
 use crate::error::{At, Op, OpsError};
 
-/// The error for an array whose shape does not fit.
-pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -> OpsError {
-    OpsError::Shape {
-        op: Op::DistortionLoss,
-        what,
-        expected,
-        got: format!("shape {got:?}"),
-    }
-}
-
 /// Checks that `sigma`, `delta` and `t` (given by their shapes) are each `[n]`, `n` the
 /// packing's number of samples.
 pub(crate) fn check_shapes(offsets: &Offsets, shapes: [(&'static str, &[usize]); 3]) -> Result<(), OpsError> {
     let n = offsets.rows();
     for (what, shape) in shapes {
         if shape != [n] {
-            return Err(shape_error(what, format!("[{n}] (the offsets end at {n})"), shape));
+            return Err(OpsError::shape_of(
+                Op::DistortionLoss,
+                what,
+                format!("[{n}] (the offsets end at {n})"),
+                shape,
+            ));
         }
     }
     Ok(())

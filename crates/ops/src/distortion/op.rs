@@ -8,7 +8,7 @@ use fogray_tape::buffer::{flat, scratch};
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
 use ndarray::{Array1, ArrayD, ArrayView1, ArrayViewD, IxDyn};
 
-use super::check::{check_shapes, check_values, shape_error};
+use super::check::{check_shapes, check_values};
 use super::config::DistortionLoss;
 use super::kernel;
 use crate::error::{Op, OpsError};
@@ -151,9 +151,10 @@ impl<F: Float> CustomOp<F> for DistortionLoss {
         let upstream = match g.ndim() {
             0 => g.iter().next().map_or(0.0, |v| v.as_f64()),
             _ => {
-                return Err(OpError::from(shape_error(
+                return Err(OpError::from(OpsError::shape_of(
+                    Op::DistortionLoss,
                     "loss gradient",
-                    "[] (a 0-d value)".into(),
+                    "[] (a 0-d value)",
                     g.shape(),
                 )))
             }

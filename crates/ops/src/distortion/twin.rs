@@ -7,16 +7,19 @@
 //! fused op is checked against it.
 
 use fogray_tape::{Float, Tape, TapeError, Var};
+
+use crate::error::{Op, OpsError};
 use ndarray::Array1;
 
-use super::check::{check_shapes, check_values, shape_error};
+use super::check::{check_shapes, check_values};
 use super::config::DistortionLoss;
 
 /// `v`'s value as a flat `[n]` vector.
 fn values<F: Float>(tape: &Tape<F>, what: &'static str, v: Var, n: usize) -> Result<Vec<F>, TapeError> {
     let x = tape.value(v)?;
     if x.shape() != [n] {
-        return Err(TapeError::from(shape_error(
+        return Err(TapeError::from(OpsError::shape_of(
+            Op::DistortionLoss,
             what,
             format!("[{n}] (the offsets end at {n})"),
             x.shape(),

@@ -16,15 +16,6 @@ pub struct RayBatch<F: Float> {
     directions: Array2<F>,
 }
 
-fn shape_error(what: &'static str, got: &[usize]) -> OpsError {
-    OpsError::Shape {
-        op: Op::Rays,
-        what,
-        expected: "[R, 3]".into(),
-        got: format!("{got:?}"),
-    }
-}
-
 impl<F: Float> RayBatch<F> {
     /// Rays from `origins` `[R, 3]` and `directions` `[R, 3]` (any non-zero length; they are
     /// normalised).
@@ -34,7 +25,7 @@ impl<F: Float> RayBatch<F> {
     pub fn new(origins: Array2<F>, directions: Array2<F>) -> Result<Self, OpsError> {
         for (what, a) in [("origins", &origins), ("directions", &directions)] {
             if a.ncols() != 3 {
-                return Err(shape_error(what, a.shape()));
+                return Err(OpsError::shape_of(Op::Rays, what, "[R, 3]", a.shape()));
             }
             if let Some((k, v)) = a.iter().enumerate().find(|(_, v)| !v.is_finite()) {
                 return Err(OpsError::Domain {

@@ -12,15 +12,6 @@ use crate::error::{At, Op, OpsError};
 /// How far from 1 a direction's length may be.
 pub(crate) const UNIT_TOLERANCE: f64 = 1e-3;
 
-pub(crate) fn shape_error(what: &'static str, expected: String, got: &[usize]) -> OpsError {
-    OpsError::Shape {
-        op: Op::ShColor,
-        what,
-        expected,
-        got: format!("{got:?}"),
-    }
-}
-
 /// A coefficient or a direction component (`what`) that is NaN or infinite.
 fn non_finite(what: &'static str, row: usize, column: usize, value: f64) -> OpsError {
     OpsError::domain(Op::ShColor, At::Entry { row, column }, what, value, "must be finite")
@@ -35,14 +26,20 @@ pub(crate) fn check_shapes<F: Float>(
 ) -> Result<usize, OpsError> {
     let n = coeffs.nrows();
     if coeffs.ncols() != 3 * b {
-        return Err(shape_error(
+        return Err(OpsError::shape_of(
+            Op::ShColor,
             "coefficients",
             format!("[n, {}] (3 channels of {b} for degree {degree})", 3 * b),
             coeffs.shape(),
         ));
     }
     if directions.dim() != (n, 3) {
-        return Err(shape_error("directions", format!("[{n}, 3]"), directions.shape()));
+        return Err(OpsError::shape_of(
+            Op::ShColor,
+            "directions",
+            format!("[{n}, 3]"),
+            directions.shape(),
+        ));
     }
     Ok(n)
 }

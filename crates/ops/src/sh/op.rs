@@ -7,7 +7,7 @@ use fogray_tape::buffer::scratch;
 use fogray_tape::{BackwardCtx, CustomOp, Float, OpError};
 use ndarray::{Array2, ArrayD, ArrayView2, ArrayViewD, Ix2, IxDyn};
 
-use super::check::{check_shapes, check_values, shape_error};
+use super::check::{check_shapes, check_values};
 use super::config::ShColor;
 use super::kernel;
 use crate::error::{Op, OpsError};
@@ -68,7 +68,12 @@ impl ShColor {
     ) -> Result<Array2<F>, OpsError> {
         let n = self.check(&coeffs, &directions)?;
         if g_color.dim() != (n, 3) {
-            return Err(shape_error("color gradient", format!("[{n}, 3]"), g_color.shape()));
+            return Err(OpsError::shape_of(
+                Op::ShColor,
+                "color gradient",
+                format!("[{n}, 3]"),
+                g_color.shape(),
+            ));
         }
         let g = self.backward_flat(&flat(&coeffs), &flat(&directions), &flat(&g_color));
         matrix("coefficient gradient", n, self.coefficient_count(), g)
@@ -98,7 +103,7 @@ fn two_d<'a, F: Float>(
 ) -> Result<ArrayView2<'a, F>, OpError> {
     x.clone()
         .into_dimensionality::<Ix2>()
-        .map_err(|_| OpError::from(shape_error(what, expected.into(), x.shape())))
+        .map_err(|_| OpError::from(OpsError::shape_of(Op::ShColor, what, expected, x.shape())))
 }
 
 /// The op's two inputs as 2-D views.
@@ -151,7 +156,8 @@ impl<F: Float> CustomOp<F> for ShColor {
         // The inputs were checked by the forward; the tape gives a gradient of the output's shape.
         let g_color = two_d("color gradient", "[n, 3]", g_color)?;
         if g_color.dim() != (coeffs.nrows(), 3) {
-            return Err(OpError::from(shape_error(
+            return Err(OpError::from(OpsError::shape_of(
+                Op::ShColor,
                 "color gradient",
                 format!("[{}, 3]", coeffs.nrows()),
                 g_color.shape(),

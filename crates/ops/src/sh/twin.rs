@@ -4,10 +4,12 @@
 //! The fused op is checked against it.
 
 use fogray_tape::{Float, Tape, TapeError, Var};
+
+use crate::error::{Op, OpsError};
 use ndarray::{Array3, ArrayView2, Ix2};
 
 use super::basis::basis;
-use super::check::{check_shapes, check_values, shape_error};
+use super::check::{check_shapes, check_values};
 use super::config::ShColor;
 
 /// Records `op`'s colour of `coeffs` (`[n, 3 B]`) along `directions` (`[n, 3]`, unit
@@ -21,15 +23,21 @@ pub fn sh_color<F: Float>(tape: &mut Tape<F>, op: &ShColor, coeffs: Var, directi
         let c = tape.value(coeffs)?;
         let d = tape.value(directions)?;
         let c = c.into_dimensionality::<Ix2>().map_err(|_| {
-            shape_error(
+            OpsError::shape_of(
+                Op::ShColor,
                 "coefficients",
-                "[n, 3 (degree + 1)^2]".into(),
+                "[n, 3 (degree + 1)^2]",
                 tape.shape(coeffs).unwrap_or(&[]),
             )
         })?;
-        let d: ArrayView2<'_, F> = d
-            .into_dimensionality::<Ix2>()
-            .map_err(|_| shape_error("directions", "[n, 3]".into(), tape.shape(directions).unwrap_or(&[])))?;
+        let d: ArrayView2<'_, F> = d.into_dimensionality::<Ix2>().map_err(|_| {
+            OpsError::shape_of(
+                Op::ShColor,
+                "directions",
+                "[n, 3]",
+                tape.shape(directions).unwrap_or(&[]),
+            )
+        })?;
         let n = check_shapes(op.degree(), b, &c, &d)?;
         check_values(&c, &d)?;
         Array3::from_shape_fn((n, 1, b), |(i, _, k)| {

@@ -624,7 +624,7 @@ fn bad_input_is_a_composite_error_naming_the_ray_and_sample() {
     assert_eq!(
         op.evaluate(short.view(), d.view(), t.view()).unwrap_err().to_string(),
         format!(
-            "distortion_loss: sigma: expected [{n}] (the offsets end at {n}), got shape [{}]",
+            "distortion_loss: sigma: expected [{n}] (the offsets end at {n}), got [{}]",
             n - 1
         )
     );
