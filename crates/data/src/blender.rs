@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fogray_ops::Distortion;
+use fogray_ops::LensDistortion;
 
 use crate::error::DataError;
 use crate::json::{self, Obj};
@@ -70,7 +70,7 @@ pub(crate) fn read(path: &Path) -> Result<BlenderFile, DataError> {
                 file,
                 pose,
                 lens,
-                distortion: Distortion::NONE,
+                distortion: LensDistortion::NONE,
                 size: None,
             })
         })

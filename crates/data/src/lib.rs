@@ -12,7 +12,7 @@
 //!   every eighth train frame (`i % 8 == 0`, then held out of train).
 //! - **instant-ngp / nerfstudio** ([`Format::InstantNgp`]): one `transforms.json`, intrinsics
 //!   `fl_x fl_y cx cy w h` global or per frame, OpenCV distortion `k1 k2 k3 k4 p1 p2`
-//!   ([`Distortion`]), `camera_model` `OPENCV` or `PINHOLE` (others,
+//!   ([`LensDistortion`]), `camera_model` `OPENCV` or `PINHOLE` (others,
 //!   such as `OPENCV_FISHEYE`, are refused). Test split: every eighth frame. Scene box: the
 //!   cube instant-ngp marches for the file's `aabb_scale`, `scale` and `offset`, in the file's
 //!   own world coordinates: axis by axis, with `a = aabb_scale` (default 1), `scale` (default
@@ -128,4 +128,4 @@ pub use world::WorldTransform;
 pub use write::{write_blender, write_instant_ngp, FrameToWrite};
 
 /// Re-exported so that users name the camera types without depending on fogray-ops.
-pub use fogray_ops::{Distortion, Intrinsics, PinholeCamera};
+pub use fogray_ops::{Intrinsics, LensDistortion, PinholeCamera};

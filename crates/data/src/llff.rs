@@ -200,7 +200,7 @@ fn frame(
             fl_y: Some(row.focal * h as f64 / row.height),
             ..Lens::default()
         },
-        distortion: fogray_ops::Distortion::NONE,
+        distortion: fogray_ops::LensDistortion::NONE,
         size: Some((w, h)),
     };
     Ok(CaptureFrame {

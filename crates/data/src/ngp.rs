@@ -26,7 +26,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fogray_ops::Distortion;
+use fogray_ops::LensDistortion;
 
 use crate::error::DataError;
 use crate::json::{self, Obj};
@@ -102,9 +102,9 @@ impl Camera {
         }
     }
 
-    fn distortion(&self) -> Distortion {
+    fn distortion(&self) -> LensDistortion {
         let [k1, k2, k3, k4, p1, p2] = self.k.map(|v| v.unwrap_or(0.0));
-        Distortion { k1, k2, k3, k4, p1, p2 }
+        LensDistortion { k1, k2, k3, k4, p1, p2 }
     }
 }
 

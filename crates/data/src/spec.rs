@@ -6,7 +6,7 @@
 
 use std::path::{Path, PathBuf};
 
-use fogray_ops::{Distortion, Intrinsics, PinholeCamera};
+use fogray_ops::{Intrinsics, LensDistortion, PinholeCamera};
 
 use crate::downscale::downscale_intrinsics;
 use crate::error::DataError;
@@ -104,7 +104,7 @@ pub(crate) struct FrameSpec {
     /// The OpenGL camera-to-world matrix, checked rigid.
     pub pose: [[f64; 4]; 4],
     pub lens: Lens,
-    pub distortion: Distortion,
+    pub distortion: LensDistortion,
     /// `w` and `h` where the file gives them.
     pub size: Option<(usize, usize)>,
 }

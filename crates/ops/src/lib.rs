@@ -85,7 +85,7 @@ pub use distortion::DistortionLoss;
 pub use error::{At, Op, OpsError};
 pub use grid::{GridBox, GridField, GridGradientBuffers, GridGradients, GridWanted, NodeIndex, SparseGridField};
 pub use rays::{
-    rays_for_camera_pixels, Aabb, CameraPixel, Distortion, Intrinsics, Orbit, PinholeCamera, RayBatch, RayIntervals,
+    rays_for_camera_pixels, Aabb, CameraPixel, Intrinsics, LensDistortion, Orbit, PinholeCamera, RayBatch, RayIntervals,
 };
 pub use sh::ShColor;
 pub use space::{framing_from_cameras, Contraction, InnerRegion};

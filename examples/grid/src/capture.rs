@@ -17,7 +17,7 @@
 //! Along each ray the scene is composited exactly ([`render_ray`] over a black background)
 //! and the wall's colour where the ray meets it is added times the transmittance.
 
-use fogray::ops::{Distortion, Intrinsics, OpsError, PinholeCamera};
+use fogray::ops::{Intrinsics, LensDistortion, OpsError, PinholeCamera};
 use ndarray::Array3;
 
 use crate::exact::{render_ray, Ray};
@@ -38,7 +38,7 @@ pub struct CaptureSettings {
     pub height: usize,
     /// The lens's OpenCV distortion.
     #[arg(skip = CaptureSettings::DEFAULT.distortion)]
-    pub distortion: Distortion,
+    pub distortion: LensDistortion,
     /// The room's radius, beyond the scene's box and the cameras (more than 3.6).
     #[arg(long, default_value_t = CaptureSettings::DEFAULT.room_radius)]
     pub room_radius: f64,
@@ -51,12 +51,12 @@ impl CaptureSettings {
         views: 120,
         width: 480,
         height: 360,
-        distortion: Distortion {
+        distortion: LensDistortion {
             k1: -0.12,
             k2: 0.03,
             p1: 0.0008,
             p2: -0.0005,
-            ..Distortion::NONE
+            ..LensDistortion::NONE
         },
         room_radius: 8.0,
     };

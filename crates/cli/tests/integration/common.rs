@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use fogray_data::write_instant_ngp;
-use fogray_ops::{Distortion, Intrinsics, PinholeCamera};
+use fogray_ops::{Intrinsics, LensDistortion, PinholeCamera};
 use ndarray::Array3;
 
 /// What a run of the binary left: its exit status, stdout and stderr.
@@ -93,7 +93,7 @@ pub const BALL: [f64; 3] = [0.9, 0.35, 0.1];
 pub const EYE_DISTANCE: f64 = 3.0;
 
 /// A lens as instant-ngp / COLMAP calibrate them: barrel distortion and a little tangential.
-pub const LENS: Distortion = Distortion {
+pub const LENS: LensDistortion = LensDistortion {
     k1: -0.1,
     k2: 0.02,
     p1: 0.001,
@@ -120,7 +120,7 @@ pub fn intrinsics(size: usize) -> Intrinsics {
 
 /// `n` cameras with intrinsics `k` and lens `lens` spread evenly over the sphere of radius 3
 /// (a Fibonacci lattice), each looking at the origin, up `+z` (`+y` for a steep view).
-pub fn cameras(n: usize, k: Intrinsics, lens: Distortion) -> Vec<PinholeCamera> {
+pub fn cameras(n: usize, k: Intrinsics, lens: LensDistortion) -> Vec<PinholeCamera> {
     (0..n)
         .map(|i| {
             let z = 1.0 - 2.0 * (i as f64 + 0.5) / n as f64;

@@ -4,7 +4,7 @@
 //! file in one line.
 
 use fogray_data::write_instant_ngp;
-use fogray_ops::Distortion;
+use fogray_ops::LensDistortion;
 use ndarray::Array3;
 use serde_json::Value;
 
@@ -18,7 +18,7 @@ fn splats_fit_the_ball_and_are_saved_as_a_3dgs_ply() {
     let dir = tempfile::tempdir().unwrap();
     let data = dir.path().join("rgba");
     // The op draws through a pinhole: no lens distortion.
-    let cams = cameras(VIEWS, intrinsics(SIZE), Distortion::NONE);
+    let cams = cameras(VIEWS, intrinsics(SIZE), LensDistortion::NONE);
     let rgba: Vec<Array3<f64>> = cams
         .iter()
         .map(|c| {

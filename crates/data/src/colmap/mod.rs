@@ -4,7 +4,7 @@
 //! files) and the photographs in `DIR/images` under the names the model registers.
 //!
 //! - Cameras: SIMPLE_PINHOLE, PINHOLE, SIMPLE_RADIAL, RADIAL and OPENCV (OpenCV's
-//!   radial-tangential lens, fogray's [`Distortion`](crate::Distortion)); other models are
+//!   radial-tangential lens, fogray's [`LensDistortion`](crate::LensDistortion)); other models are
 //!   refused by name. One camera may serve every image, or each its own.
 //! - Poses: COLMAP stores world-to-camera `x_cam = R(q) x + t` in OpenCV axes (x right, y
 //!   down, z forward), so the camera centre is `-Rᵀ t`. The cameras are then moved into a

@@ -4,7 +4,7 @@
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
-use fogray_ops::Distortion;
+use fogray_ops::LensDistortion;
 
 use crate::error::DataError;
 use crate::escape::escape_controls;
@@ -78,7 +78,7 @@ pub(crate) struct Camera {
     pub fy: f64,
     pub cx: f64,
     pub cy: f64,
-    pub distortion: Distortion,
+    pub distortion: LensDistortion,
 }
 
 impl Camera {
@@ -140,12 +140,12 @@ impl Camera {
             fy,
             cx,
             cy,
-            distortion: Distortion {
+            distortion: LensDistortion {
                 k1: k[0],
                 k2: k[1],
                 p1: k[2],
                 p2: k[3],
-                ..Distortion::NONE
+                ..LensDistortion::NONE
             },
         })
     }

@@ -5,8 +5,8 @@
 use std::path::Path;
 
 use fogray_data::{
-    downscale_intrinsics, load, load_cameras, Distortion, Format, FullSizeReason, ImageSource, Intrinsics, LoadOptions,
-    PinholeCamera, SceneData, WorldTransform,
+    downscale_intrinsics, load, load_cameras, Format, FullSizeReason, ImageSource, Intrinsics, LensDistortion,
+    LoadOptions, PinholeCamera, SceneData, WorldTransform,
 };
 
 use crate::capture_files::{colmap_camera, colmap_image, write_model, ColmapCamera, ColmapImage, ColmapPoint};
@@ -68,7 +68,7 @@ fn views(per_image: bool) -> Vec<View> {
                     width: 8 + 2 * (i % 3),
                     height: 6 + 2 * (i % 2),
                 };
-                let d = Distortion {
+                let d = LensDistortion {
                     k1: if model.contains("RADIAL") || model == "OPENCV" {
                         0.05
                     } else {
@@ -81,7 +81,7 @@ fn views(per_image: bool) -> Vec<View> {
                     },
                     p1: if model == "OPENCV" { 0.002 } else { 0.0 },
                     p2: if model == "OPENCV" { -0.001 } else { 0.0 },
-                    ..Distortion::NONE
+                    ..LensDistortion::NONE
                 };
                 (model, k, d)
             } else {
@@ -93,12 +93,12 @@ fn views(per_image: bool) -> Vec<View> {
                     width: 8,
                     height: 6,
                 };
-                let d = Distortion {
+                let d = LensDistortion {
                     k1: 0.03,
                     k2: 0.01,
                     p1: -0.002,
                     p2: 0.001,
-                    ..Distortion::NONE
+                    ..LensDistortion::NONE
                 };
                 ("OPENCV", k, d)
             };

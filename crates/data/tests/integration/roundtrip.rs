@@ -2,7 +2,7 @@
 //! (to 8-bit rounding) the same images.
 
 use fogray_data::{load, load_cameras, write_blender, write_instant_ngp, Format, Frame, LoadOptions};
-use fogray_ops::{Distortion, Intrinsics, PinholeCamera};
+use fogray_ops::{Intrinsics, LensDistortion, PinholeCamera};
 use ndarray::Array3;
 
 use crate::common::tempdir;
@@ -115,12 +115,12 @@ fn ngp_round_trip(per_frame: bool) {
         width: 6,
         height: 4,
     };
-    let lens = Distortion {
+    let lens = LensDistortion {
         k1: 0.05,
         k2: -0.01,
         p1: 0.002,
         p2: -0.001,
-        ..Distortion::default()
+        ..LensDistortion::default()
     };
     let mut cams: Vec<_> = cameras(k)
         .into_iter()
@@ -130,7 +130,7 @@ fn ngp_round_trip(per_frame: bool) {
         let k2 = Intrinsics { fx: 8.1, cy: 1.7, ..k };
         cams[2] = PinholeCamera::look_at(k2, [1.0, 2.0, 3.0], [0.0; 3], [0.0, 0.0, 1.0])
             .unwrap()
-            .with_distortion(Distortion { k3: 0.001, ..lens })
+            .with_distortion(LensDistortion { k3: 0.001, ..lens })
             .unwrap();
     }
     let imgs: Vec<_> = (0..3).map(|i| image(4, 6, i + 4)).collect();

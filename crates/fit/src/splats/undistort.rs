@@ -1,12 +1,12 @@
 //! Pictures through a lens resampled into the pinhole camera of the same intrinsics and
 //! pose, for the splat op, which projects through a pinhole only: each output pixel's centre
-//! is sent through the lens ([`Distortion::distort`]) and the picture is read there,
+//! is sent through the lens ([`LensDistortion::distort`]) and the picture is read there,
 //! bilinearly (the colour and, where a picture has one, the alpha). A pixel whose lens point
 //! falls outside the picture takes the nearest edge's value.
 //!
-//! [`Distortion::distort`]: fogray_ops::Distortion::distort
+//! [`LensDistortion::distort`]: fogray_ops::LensDistortion::distort
 
-use fogray_ops::Distortion;
+use fogray_ops::LensDistortion;
 use ndarray::{Array2, Array3, ArrayView2};
 
 use crate::dataset::{Dataset, View};
@@ -32,7 +32,7 @@ pub fn undistorted(data: &Dataset) -> Result<Option<Dataset>, FitError> {
 /// Errors: a camera the pinhole cannot be made of.
 pub fn undistorted_view(view: &View) -> Result<View, FitError> {
     let lens = *view.camera.distortion();
-    let pinhole = view.camera.clone().with_distortion(Distortion::NONE)?;
+    let pinhole = view.camera.clone().with_distortion(LensDistortion::NONE)?;
     if lens.is_none() {
         return Ok(view.clone());
     }
@@ -98,12 +98,12 @@ mod tests {
             width: 80,
             height: 60,
         };
-        let lens = Distortion {
+        let lens = LensDistortion {
             k1: -0.2,
             k2: 0.05,
             p1: 0.003,
             p2: -0.002,
-            ..Distortion::NONE
+            ..LensDistortion::NONE
         };
         let camera = PinholeCamera::look_at(k, [3.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0])
             .unwrap()

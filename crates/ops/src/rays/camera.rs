@@ -4,12 +4,12 @@
 //! direction); pixel (row `a`, column `b`) has its centre at image coordinates
 //! `(b + 0.5, a + 0.5)` and its ray the camera-frame direction
 //! `((b + 0.5 - cx) / fx, (a + 0.5 - cy) / fy, 1)`, undistorted first when the camera has a
-//! lens [`Distortion`]. Pixel index `a * width + b` (row-major).
+//! lens [`LensDistortion`]. Pixel index `a * width + b` (row-major).
 
 use fogray_tape::Float;
 
 use super::batch::{normalise, RayBatch};
-use super::distortion::Distortion;
+use super::distortion::LensDistortion;
 use super::frame::{checked_transform, Frame};
 use crate::error::{At, Op, OpsError};
 
@@ -103,7 +103,7 @@ impl Intrinsics {
 pub struct PinholeCamera {
     intrinsics: Intrinsics,
     frame: Frame,
-    distortion: Distortion,
+    distortion: LensDistortion,
 }
 
 impl PinholeCamera {
@@ -119,7 +119,7 @@ impl PinholeCamera {
         Ok(PinholeCamera {
             intrinsics,
             frame: checked_transform(camera_to_world)?,
-            distortion: Distortion::NONE,
+            distortion: LensDistortion::NONE,
         })
     }
 
@@ -147,7 +147,7 @@ impl PinholeCamera {
         Ok(PinholeCamera {
             intrinsics,
             frame,
-            distortion: Distortion::NONE,
+            distortion: LensDistortion::NONE,
         })
     }
 
@@ -155,13 +155,13 @@ impl PinholeCamera {
     /// lens sent it (the pixel's normalised coordinates undistorted, then rotated).
     ///
     /// Errors: a coefficient that is not finite.
-    pub fn with_distortion(self, distortion: Distortion) -> Result<Self, OpsError> {
+    pub fn with_distortion(self, distortion: LensDistortion) -> Result<Self, OpsError> {
         distortion.check()?;
         Ok(PinholeCamera { distortion, ..self })
     }
 
-    /// The lens distortion ([`Distortion::NONE`] unless set).
-    pub fn distortion(&self) -> &Distortion {
+    /// The lens distortion ([`LensDistortion::NONE`] unless set).
+    pub fn distortion(&self) -> &LensDistortion {
         &self.distortion
     }
 

@@ -114,7 +114,7 @@ fn a_point_of_the_image_has_the_direction_through_it() {
     for (g, w) in d.iter().zip([1.375 / n, -0.0625 / n, 1.0 / n]) {
         assert!((g - w).abs() < 1e-15, "{d:?}");
     }
-    let lens = Distortion {
+    let lens = LensDistortion {
         k1: 0.1,
         k2: -0.02,
         p1: 0.001,
@@ -301,7 +301,7 @@ fn a_distorted_cameras_rays_project_back_onto_their_pixels() {
         width: 64,
         height: 48,
     };
-    let lens = Distortion {
+    let lens = LensDistortion {
         k1: -0.2,
         k2: 0.05,
         k3: 0.0,
@@ -338,9 +338,9 @@ fn a_distorted_cameras_rays_project_back_onto_their_pixels() {
 fn a_non_finite_distortion_is_refused() {
     let k = Intrinsics::from_vertical_fov(8, 8, 0.8).unwrap();
     let cam = PinholeCamera::look_at(k, [0.0, -3.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
-    let lens = Distortion {
+    let lens = LensDistortion {
         k1: f64::INFINITY,
-        ..Distortion::NONE
+        ..LensDistortion::NONE
     };
     assert!(matches!(
         cam.with_distortion(lens),

@@ -10,7 +10,7 @@
 //! ```
 //!
 //! and the pixel is `(fx x' + cx, fy y' + cy)`. A pixel's ray needs the inverse, which has no
-//! closed form: [`Distortion::undistort`] solves `distort(p) = p'` by Newton's method on the
+//! closed form: [`LensDistortion::undistort`] solves `distort(p) = p'` by Newton's method on the
 //! 2x2 system, started at `p'` (the distortion of a real lens is a small perturbation of the
 //! identity, so the start is close and the iteration converges quadratically).
 
@@ -34,7 +34,7 @@ const STEP_TOLERANCE: f64 = 1e-15;
 ///
 /// and the pixel is `(fx x' + cx, fy y' + cy)`.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Distortion {
+pub struct LensDistortion {
     /// Radial coefficient of r².
     pub k1: f64,
     /// Radial coefficient of r⁴.
@@ -49,9 +49,9 @@ pub struct Distortion {
     pub p2: f64,
 }
 
-impl Distortion {
+impl LensDistortion {
     /// No distortion.
-    pub const NONE: Distortion = Distortion {
+    pub const NONE: LensDistortion = LensDistortion {
         k1: 0.0,
         k2: 0.0,
         k3: 0.0,
@@ -63,7 +63,7 @@ impl Distortion {
     /// Whether every coefficient is zero (rays are then built without any iteration, so a
     /// pinhole camera's rays are exactly those of the formula).
     pub fn is_none(&self) -> bool {
-        *self == Distortion::NONE
+        *self == LensDistortion::NONE
     }
 
     /// Errors: a coefficient that is not finite.
@@ -95,7 +95,7 @@ impl Distortion {
 
     /// The distorted point and the Jacobian `d(x', y') / d(x, y)` (row-major).
     fn distort_with_jacobian(&self, [x, y]: [f64; 2]) -> ([f64; 2], [[f64; 2]; 2]) {
-        let Distortion { k1, k2, k3, k4, p1, p2 } = *self;
+        let LensDistortion { k1, k2, k3, k4, p1, p2 } = *self;
         let r2 = x * x + y * y;
         let s = 1.0 + r2 * (k1 + r2 * (k2 + r2 * (k3 + r2 * k4)));
         // ds/d(r²); d(r²)/dx = 2x, d(r²)/dy = 2y.
@@ -148,7 +148,7 @@ impl Distortion {
 mod tests {
     use super::*;
 
-    const LENS: Distortion = Distortion {
+    const LENS: LensDistortion = LensDistortion {
         k1: -0.12,
         k2: 0.03,
         k3: -0.004,
@@ -220,13 +220,13 @@ mod tests {
     #[test]
     fn no_distortion_is_the_identity_bit_for_bit() {
         let p = [0.123456789, -0.987654321];
-        assert_eq!(Distortion::NONE.undistort(p), Some(p));
-        assert_eq!(Distortion::NONE.distort(p), p);
+        assert_eq!(LensDistortion::NONE.undistort(p), Some(p));
+        assert_eq!(LensDistortion::NONE.distort(p), p);
     }
 
     #[test]
     fn a_non_finite_coefficient_is_refused() {
-        let bad = Distortion { p2: f64::NAN, ..LENS };
+        let bad = LensDistortion { p2: f64::NAN, ..LENS };
         let e = bad.check().unwrap_err();
         assert!(e.to_string().contains("distortion p2"), "{e}");
     }

@@ -43,5 +43,5 @@ pub mod orbit;
 pub use aabb::{Aabb, RayIntervals};
 pub use batch::RayBatch;
 pub use camera::{rays_for_camera_pixels, CameraPixel, Intrinsics, PinholeCamera};
-pub use distortion::Distortion;
+pub use distortion::LensDistortion;
 pub use orbit::Orbit;

@@ -219,9 +219,9 @@ fn bad_input_is_a_named_error() {
     assert!(SplatRender::new(&cam, [0.0, f64::NAN, 0.0]).is_err());
     let lens = cam
         .clone()
-        .with_distortion(fogray_ops::Distortion {
+        .with_distortion(fogray_ops::LensDistortion {
             k1: 0.1,
-            ..fogray_ops::Distortion::NONE
+            ..fogray_ops::LensDistortion::NONE
         })
         .unwrap();
     assert!(matches!(

@@ -5,7 +5,7 @@
 
 use std::collections::BTreeMap;
 
-use fogray::ops::{Distortion, Intrinsics, PinholeCamera};
+use fogray::ops::{Intrinsics, LensDistortion, PinholeCamera};
 use fogray_data::{load, write_blender, write_instant_ngp, Format, LoadOptions};
 use fogray_grid::photographs::photograph;
 use fogray_grid::ring::Ring;
@@ -106,12 +106,12 @@ fn the_rings_photographs_read_back_from_a_blender_dataset() {
 #[test]
 fn the_rings_photographs_through_a_distorted_lens_read_back_from_an_instant_ngp_dataset() {
     let ring = Ring::new(14, 2, 32).unwrap();
-    let lens = Distortion {
+    let lens = LensDistortion {
         k1: -0.1,
         k2: 0.02,
         p1: 0.001,
         p2: -0.001,
-        ..Distortion::NONE
+        ..LensDistortion::NONE
     };
     let cameras: Vec<PinholeCamera> = (0..ring.len())
         .map(|i| {
