@@ -47,7 +47,7 @@ mod tests {
         assert_eq!(recommended("model"), "sparse");
         assert_eq!(recommended("grid"), "128");
         assert_eq!(recommended("lr").parse::<f64>().unwrap(), FitSettings::RECOMMENDED.lr);
-        assert_eq!(recommended("smoothness").parse::<f64>().unwrap(), 0.0);
+        assert_eq!(recommended("tv").parse::<f64>().unwrap(), 0.0);
         assert_eq!(recommended("space"), "auto");
         let said = format!(
             "unless given, {}, or {} for --seconds {} and more",

@@ -65,7 +65,7 @@ enum Command {
         mut_arg("sh_degree", |a| a.default_value(fit::recommended("sh_degree"))),
         mut_arg("model", |a| a.default_value(fit::recommended("model"))),
         mut_arg("grid", |a| a.default_value(fit::recommended("grid")).help(fit::GRID_HELP)),
-        mut_arg("smoothness", |a| a.default_value(fit::recommended("smoothness"))),
+        mut_arg("tv", |a| a.default_value(fit::recommended("tv"))),
         mut_arg("lr", |a| a.default_value(fit::recommended("lr"))),
         mut_arg("lr_final", |a| a.default_value(fit::recommended("lr_final"))),
         mut_arg("distortion", |a| a.default_value(fit::recommended("distortion"))),

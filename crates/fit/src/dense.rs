@@ -178,7 +178,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
 
     fn fresh(settings: &FitSettings, nodes: usize) -> Result<Self, FitError> {
         Ok(
-            DenseGrid::with_shading(settings.model_box(), nodes, Shading::of(settings)?, settings.smoothness)?
+            DenseGrid::with_shading(settings.model_box(), nodes, Shading::of(settings)?, settings.tv)?
                 .with_distortion(settings.distortion)?
                 .with_contraction(settings.field_space()?.contraction()),
         )

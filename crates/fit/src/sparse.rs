@@ -290,7 +290,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             nodes,
             NodeIndex::full([nodes; 3])?,
             shading,
-            settings.smoothness,
+            settings.tv,
         )?
         .with_distortion(settings.distortion)
         .map(|g| g.with_contraction(contraction))
@@ -329,7 +329,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
             nodes,
             NodeIndex::from_mask([nodes; 3], &keep)?,
             shading,
-            settings.smoothness,
+            settings.tv,
         )?
         .with_distortion(settings.distortion)
         .map(|g| g.with_contraction(contraction))

@@ -28,7 +28,7 @@ impl FitSettings {
         if !(self.lr_final.is_finite() && self.lr_final > 0.0) {
             return bad("--lr-final must be finite and positive");
         }
-        if !(self.smoothness.is_finite() && self.smoothness >= 0.0) {
+        if !(self.tv.is_finite() && self.tv >= 0.0) {
             return bad("--tv must be finite and non-negative");
         }
         if !self.shift.is_finite() {

@@ -94,8 +94,10 @@ pub struct FitSettings {
     pub lr_final: f64,
     /// Weight of the total-variation prior on the raw grid (the mean squared difference of
     /// neighbouring nodes) added to the loss; 0 for none.
-    #[cfg_attr(feature = "cli", arg(long = "tv", value_name = "WEIGHT", default_value_t = FitSettings::DEFAULT.smoothness))]
-    pub smoothness: f64,
+    // Checkpoints written before the field took its flag's name call it `smoothness`.
+    #[serde(alias = "smoothness")]
+    #[cfg_attr(feature = "cli", arg(long, value_name = "WEIGHT", default_value_t = FitSettings::DEFAULT.tv))]
+    pub tv: f64,
     /// Train the full grid from the start instead of growing it coarse to fine (a quarter of
     /// --grid nodes per axis, doubled at 10 % and 30 % of the budget).
     #[cfg_attr(feature = "cli", arg(long = "no-grow", action = clap::ArgAction::SetFalse))]
@@ -178,7 +180,7 @@ impl FitSettings {
         sampling: Sampling::Occupancy,
         lr: 0.2,
         lr_final: 0.02,
-        smoothness: 1.5e-4,
+        tv: 1.5e-4,
         grow: true,
         shift: -4.0,
         evaluations: 20,
@@ -202,7 +204,7 @@ impl FitSettings {
     ///   still trains well; [`FitSettings::recommended_grid`] for long budgets;
     /// - `sh_degree`: 1: real objects shine, and degree 1 buys more on held-out views than
     ///   its cost per step takes;
-    /// - `smoothness` (`--tv`): none: tens of views constrain a scene enough, and the prior
+    /// - `tv`: none: tens of views constrain a scene enough, and the prior
     ///   costs a step as much as the lookup's backward without buying held-out PSNR;
     /// - `lr`, `lr_final`: twice the library's: tens of photographs seen through a sparse grid
     ///   with view-dependent colour gain held-out PSNR step for step at this rate, and no more
@@ -215,7 +217,7 @@ impl FitSettings {
         grid: 128,
         model: ModelKind::Sparse,
         sh_degree: 1,
-        smoothness: 0.0,
+        tv: 0.0,
         lr: 0.4,
         lr_final: 0.04,
         distortion: 0.01,

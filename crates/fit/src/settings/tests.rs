@@ -79,7 +79,7 @@ fn every_setting_is_checked() {
         (FitSettings { batch: 0, ..ok }, "--batch"),
         (FitSettings { lr: f64::NAN, ..ok }, "--lr"),
         (FitSettings { lr_final: 0.0, ..ok }, "--lr-final"),
-        (FitSettings { smoothness: -1.0, ..ok }, "--tv"),
+        (FitSettings { tv: -1.0, ..ok }, "--tv"),
         (
             FitSettings {
                 shift: f64::INFINITY,
@@ -106,4 +106,12 @@ fn every_setting_is_checked() {
         let e = bad.check().unwrap_err().to_string();
         assert!(e.starts_with(flag), "{e}");
     }
+}
+
+#[test]
+fn a_checkpoint_that_names_the_prior_smoothness_reads_as_tv() {
+    let old: FitSettings = serde_json::from_str(r#"{"smoothness": 0.25}"#).unwrap();
+    assert_eq!(old.tv, 0.25);
+    let text = serde_json::to_string(&old).unwrap();
+    assert!(text.contains(r#""tv":0.25"#) && !text.contains("smoothness"), "{text}");
 }

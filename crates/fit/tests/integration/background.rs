@@ -88,7 +88,7 @@ fn fog_settings(random_background: bool) -> FitSettings {
         grid: 8,
         batch: 256,
         grow: false,
-        smoothness: 0.0,
+        tv: 0.0,
         sampling: Sampling::Uniform,
         lr: 0.1,
         lr_final: 0.1,

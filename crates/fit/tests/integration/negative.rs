@@ -72,7 +72,7 @@ fn a_scene_and_its_colour_negative_fit_alike_with_the_recommended_model() {
         model: ModelKind::Sparse,
         sh_degree: 1,
         distortion: 0.01,
-        smoothness: 0.0,
+        tv: 0.0,
         lr: 0.4,
         lr_final: 0.04,
         ..FitSettings::DEFAULT
