@@ -5,7 +5,7 @@ use fogray_tape::Float;
 use serde::Serialize;
 
 use super::error::CliError;
-use super::evaluate::{evaluate, Method, Upstream, Wanted};
+use super::evaluate::{evaluate, CompositeMethod, Upstream, Wanted};
 use super::input::{Packed, Precision};
 
 /// A field of a ray's output, named as in the JSON.
@@ -93,7 +93,7 @@ struct Output<F> {
     rays: Vec<RayOut<F>>,
 }
 
-fn split<F: Float + Serialize>(p: &Packed, method: Method, fields: &[Field]) -> Result<String, CliError> {
+fn split<F: Float + Serialize>(p: &Packed, method: CompositeMethod, fields: &[Field]) -> Result<String, CliError> {
     let on = |f: Field| fields.contains(&f);
     let per_sample = on(Field::Weights) || on(Field::Transmittance);
     let any_grad = [
@@ -160,7 +160,7 @@ fn split<F: Float + Serialize>(p: &Packed, method: Method, fields: &[Field]) -> 
 
 /// The output JSON for the input with the fields asked for (in output order, whatever the
 /// order given), or the one-line reason it cannot be computed.
-pub fn run(p: &Packed, method: Method, fields: &[Field]) -> Result<String, CliError> {
+pub fn run(p: &Packed, method: CompositeMethod, fields: &[Field]) -> Result<String, CliError> {
     match p.precision {
         Precision::F32 => split::<f32>(p, method, fields),
         Precision::F64 => split::<f64>(p, method, fields),

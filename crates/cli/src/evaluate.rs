@@ -9,7 +9,7 @@ use super::input::Packed;
 
 /// Which implementation of the composite.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum Method {
+pub enum CompositeMethod {
     /// The fused op with its hand-written backward.
     Fused,
     /// The stable taped twin (exclusive cumsum of optical depth, exp, expm1).
@@ -70,7 +70,7 @@ fn flat<F: Float>(v: ndarray::ArrayViewD<'_, F>) -> Vec<F> {
 }
 
 /// Evaluates `p` with `method` in precision `F`, the outputs and gradients `want` asks for.
-pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Result<Evaluation<F>, CliError> {
+pub fn evaluate<F: Float>(p: &Packed, method: CompositeMethod, want: Wanted<'_>) -> Result<Evaluation<F>, CliError> {
     let (n, rays, ch) = (p.sigma.len(), p.offsets.len() - 1, p.ch);
     let mut tape = Tape::<F>::new();
     let sigma = tape.param(Array1::from(cast::<F>(&p.sigma)));
@@ -87,7 +87,7 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Resul
     if t.is_some() {
         op = op.with_depth();
     }
-    if method != Method::Fused && p.min_transmittance != 0.0 {
+    if method != CompositeMethod::Fused && p.min_transmittance != 0.0 {
         return Err(CliError::Option(
             "min_transmittance is offered by the fused method only (the taped twins are exact)".into(),
         ));
@@ -100,9 +100,9 @@ pub fn evaluate<F: Float>(p: &Packed, method: Method, want: Wanted<'_>) -> Resul
         t,
     };
     let out = match method {
-        Method::Fused => op.apply(&mut tape, &inputs),
-        Method::Taped => twins::stable(&mut tape, &op, &inputs),
-        Method::TapedNaive => twins::naive(&mut tape, &op, &inputs),
+        CompositeMethod::Fused => op.apply(&mut tape, &inputs),
+        CompositeMethod::Taped => twins::stable(&mut tape, &op, &inputs),
+        CompositeMethod::TapedNaive => twins::naive(&mut tape, &op, &inputs),
     }?;
     let grads = match want.grads {
         None => None,

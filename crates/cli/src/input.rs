@@ -26,12 +26,8 @@ struct InputJson {
     rays: Vec<RayJson>,
 }
 
-/// Which float type to compute in.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Precision {
-    F32,
-    F64,
-}
+/// Which float type to compute in: the fit's own choice of float.
+pub use fogray_fit::settings::Precision;
 
 /// The input, packed: ray `r` owns samples `offsets[r]..offsets[r+1]`.
 #[derive(Debug, Clone)]

@@ -10,7 +10,7 @@ use clap::{CommandFactory, FromArgMatches, Parser, Subcommand, ValueEnum};
 use peakmem_alloc::{PeakMemAlloc, PeakMemAllocTrait, INSTRUMENTED_SYSTEM};
 
 use fogray_cli::error::CliError;
-use fogray_cli::evaluate::Method;
+use fogray_cli::evaluate::CompositeMethod;
 use fogray_cli::{
     bench, composite, export, fit, flag_error, gradcheck, grid_bench, heap, input, markdown, render, tape_cost,
 };
@@ -95,7 +95,7 @@ enum Command {
     Composite {
         /// Which implementation computes it.
         #[arg(long, value_enum, default_value = "fused")]
-        method: Method,
+        method: CompositeMethod,
         /// JSON input file, or - for standard input.
         #[arg(long, default_value = "-")]
         input: PathBuf,

@@ -17,7 +17,7 @@ use fogray_tape::Float;
 use rayon::prelude::*;
 use serde_json::json;
 
-use super::evaluate::{evaluate, InputGrads, Method, Upstream, Wanted};
+use super::evaluate::{evaluate, CompositeMethod, InputGrads, Upstream, Wanted};
 use super::input::{Packed, Precision};
 use crate::error::CliError;
 use problem::{batch_problem, check_in, options, ray_problem};
@@ -129,7 +129,7 @@ fn widen<F: Float>(g: InputGrads<F>) -> InputGrads<f64> {
     }
 }
 
-fn gradients<F: Float>(p: &Packed, method: Method, l: &Loss) -> Result<InputGrads<f64>, CliError> {
+fn gradients<F: Float>(p: &Packed, method: CompositeMethod, l: &Loss) -> Result<InputGrads<f64>, CliError> {
     let want = Wanted {
         per_sample: false,
         grads: Some(Upstream {
@@ -289,14 +289,14 @@ fn check_with(mut p: Packed, s: &Settings, tamper: &dyn Fn(&mut InputGrads<f64>)
     round_to(&mut p);
     let l = loss(&p);
     let mut fused = match p.precision {
-        Precision::F32 => gradients::<f32>(&p, Method::Fused, &l)?,
-        Precision::F64 => gradients::<f64>(&p, Method::Fused, &l)?,
+        Precision::F32 => gradients::<f32>(&p, CompositeMethod::Fused, &l)?,
+        Precision::F64 => gradients::<f64>(&p, CompositeMethod::Fused, &l)?,
     };
     tamper(&mut fused);
     let mut tally = Tally::new(atol, rtol, s.worst);
     let mut notes = l.notes.clone();
     if p.min_transmittance == 0.0 {
-        let twin = gradients::<f64>(&p, Method::Taped, &l)?;
+        let twin = gradients::<f64>(&p, CompositeMethod::Taped, &l)?;
         elementwise(&p, &fused, &twin, &mut tally);
     } else {
         notes.push("min_transmittance > 0: no taped twin to compare with (the twins are exact)".into());
