@@ -261,9 +261,9 @@ struct ReportArgs {
 const REPORT_EVALUATIONS: usize = 60;
 
 fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
-    use fogray::fit::curves::Anchor;
-    use fogray::fit::sweep::{run_configs, same_steps, RunConfig, SweepOptions};
     use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
+    use fogray_lab::curves::Anchor;
+    use fogray_lab::sweep::{run_configs, same_steps, RunConfig, SweepOptions};
     /// Timed passes of each bandwidth measurement (the best is kept).
     const TRIAD_PASSES: usize = 5;
 

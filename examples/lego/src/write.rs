@@ -6,9 +6,9 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use fogray::stamp::Stamp;
-use fogray_fit::curves::{against_anchor, psnr_at, reach, Anchor, AnchorPoint};
 use fogray_fit::plots::{psnr_curves_against, Curve, XAxis};
 use fogray_fit::train::LogEntry;
+use fogray_lab::curves::{against_anchor, psnr_at, reach, Anchor, AnchorPoint};
 
 use crate::anchors::{NERFACTO_CPU, NERFACTO_PEAK_BYTES, NERFACTO_RENDER_SECONDS};
 use crate::{Args, Run};

@@ -2,17 +2,17 @@
 //! `fit` runs, its tables read their logs, and its files are there.
 
 use crate::common::default_scene_data;
-use fogray::fit::curves::{Anchor, AnchorPoint};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::dense::DenseGrid;
 use fogray::fit::settings::{Budget, FitSettings, Sampling};
-use fogray::fit::sweep::pairs::fused_vs_taped_rows;
-use fogray::fit::sweep::{run_configs, same_steps, SweepOptions, DEFAULT_CONFIGS};
 use fogray::fit::train::{fit, LogEntry};
 use fogray::machine::Bandwidth;
 use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
+use fogray_lab::curves::{Anchor, AnchorPoint};
+use fogray_lab::sweep::pairs::fused_vs_taped_rows;
+use fogray_lab::sweep::{run_configs, same_steps, SweepOptions, DEFAULT_CONFIGS};
 
 fn tiny() -> (Scene, Dataset, FitSettings) {
     let scene = Scene::default();

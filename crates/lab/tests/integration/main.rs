@@ -1,0 +1,5 @@
+//! fogray-lab's integration tests, one module per topic, in one binary (add a module here,
+//! not a file beside this one).
+
+mod common;
+mod sweep;
