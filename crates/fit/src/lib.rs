@@ -15,7 +15,8 @@
 //!   opacity, depth);
 //! - [`checkpoint`]: a fit to a safetensors file and back; [`metrics`]: PSNR;
 //!   [`mesh`]: a model's surface as a coloured triangle mesh (marching cubes, PLY);
-//!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves.
+//!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves; [`stamp`]: the
+//!   date, machine and command at the top of a generated report.
 //!
 //! Sweeps over configurations, curves compared and slices through a model, which measure the
 //! pipeline rather than run it, are the `fogray-lab` crate's.
@@ -94,6 +95,7 @@ pub mod space;
 pub mod space_picture;
 pub mod sparse;
 pub mod splats;
+pub mod stamp;
 pub mod state;
 #[cfg(test)]
 mod testing;

@@ -24,8 +24,8 @@ use clap::Parser;
 use serde::{Deserialize, Serialize};
 
 use configs::Config;
-use fogray::stamp::Stamp;
 use fogray_lab::curves::Anchor;
+use fogray_lab::stamp::Stamp;
 
 /// Runs the configurations and writes the report.
 #[derive(Parser)]

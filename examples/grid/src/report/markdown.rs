@@ -3,8 +3,8 @@
 //! ([`report`]).
 
 use fogray::fit::settings::Budget;
-use fogray::stamp::Stamp;
 use fogray_lab::curves::{psnr_at, AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
+use fogray_lab::stamp::Stamp;
 use fogray_lab::sweep::{ConfigRun, SameSteps};
 
 use super::write::MachineBandwidth;

@@ -3,8 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use fogray::machine::Bandwidth;
-use fogray::stamp::Stamp;
+use fogray_lab::machine::Bandwidth;
+use fogray_lab::stamp::Stamp;
 use serde::Serialize;
 
 use crate::scene::Scene;
@@ -51,7 +51,7 @@ pub struct ReportSetup<'a> {
     pub bandwidth: Option<MachineBandwidth>,
 }
 
-/// The machine's memory bandwidth ([`fogray::machine::triad`]) measured just before the first
+/// The machine's memory bandwidth ([`fogray_lab::machine::triad`]) measured just before the first
 /// run and just after the last: on a shared machine it moves from hour to hour, and the
 /// timed figures with it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
