@@ -1,6 +1,6 @@
 //! Criterion benches: the fused composite against its taped twins, forward and backward
-//! (gradients for sigma and colour), on the workloads of `fogray bench`, with its rays and its
-//! timed steps (`fogray_cli::bench`: the same calls, so the two cannot drift apart).
+//! (gradients for sigma and colour), on the workloads of `fogray-lab bench`, with its rays and its
+//! timed steps (`fogray_lab::bench`: the same calls, so the two cannot drift apart).
 //!
 //! `fused-into` is the fused op through `evaluate_into` / `vjp_into` with buffers kept across
 //! iterations, `fused-one-pass` through `evaluate_vjp_into` (one pass per ray) into them; `taped-reused` and `taped-naive-reused` keep one tape across iterations (cleared
@@ -8,12 +8,12 @@
 //! step's composite and mean squared error on a kept tape, forward and backward: one op
 //! (`Composite::apply_mse`) against `apply`, `sub`, `square` and `mean`. `cargo bench -p fogray-benches --bench composite` runs them all; `cargo bench -p fogray-benches --bench composite -- fused/f32`
 //! selects. `ragged` runs the two fused steady states on a training batch's shape, rays of random
-//! lengths. `fogray bench` gives the same speeds beside each method's error and memory.
+//! lengths. `fogray-lab bench` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
-use fogray_cli::bench::{self, Buffers, Data, Typed};
+use fogray_lab::bench::{self, Buffers, Data, Typed};
 use fogray_ops::Composite;
 use fogray_tape::{Float, Tape};
 use rand::{Rng, SeedableRng};

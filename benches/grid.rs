@@ -1,7 +1,7 @@
 //! Criterion benches: the fused grid field against its taped twin, forward + backward into
 //! the grid values (and the fused forward alone), 4,194,304 lookups (the twin: a quarter of
 //! them, its memory being about a hundred times the op's) at uniform random positions in
-//! 128^3 x 4 and 64^3 x 4 grids, as `fogray bench --op grid` measures them; and the grid
+//! 128^3 x 4 and 64^3 x 4 grids, as `fogray-lab bench --op grid` measures them; and the grid
 //! example's case (`grid/<prec>/fused-rays/64^3x4`): 8192 rays through random points of the
 //! box in random directions, a sample every half cell, in ray order, so that consecutive
 //! lookups fall in neighbouring cells; `fused-rays-into` runs them through `evaluate_into` and
@@ -9,7 +9,7 @@
 //!
 //! `cargo bench -p fogray-benches --bench grid` runs them all; `cargo bench -p fogray-benches --bench grid
 //! -- fused/f32` selects.
-//! `fogray bench --op grid` gives the same speeds beside each method's error and memory.
+//! `fogray-lab bench --op grid` gives the same speeds beside each method's error and memory.
 
 use std::hint::black_box;
 

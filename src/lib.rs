@@ -1,17 +1,12 @@
 //! # fogray
 //!
 //! Differentiable volume rendering in Rust: this facade re-exports the reverse-mode tape
-//! ([`tape`], the `fogray-tape` crate) and the volume-rendering ops ([`ops`], `fogray-ops`),
-//! and holds what the command line (the `fogray-cli` crate) and the examples share
-//! ([`machine`]: the memory bandwidth they measure; [`stamp`]: the provenance written at the
-//! top of every generated report).
+//! ([`tape`], the `fogray-tape` crate), the volume-rendering ops ([`ops`], `fogray-ops`) and
+//! the pipeline around a training step ([`fit`], `fogray-fit`), and holds nothing of its own.
 
 pub use fogray_fit as fit;
 pub use fogray_ops as ops;
 pub use fogray_tape as tape;
-
-pub mod machine;
-pub mod stamp;
 
 /// The README's examples, compiled and run as doctests so that the front page stays true.
 #[cfg(doctest)]

@@ -114,19 +114,6 @@ pub enum CliError {
         /// Why.
         source: std::io::Error,
     },
-    /// A README without the markers of the generated block to replace.
-    #[error("{path} has no {start} ... {end} block")]
-    MissingMarkers {
-        /// The README, as displayed.
-        path: String,
-        /// The start marker.
-        start: String,
-        /// The end marker.
-        end: String,
-    },
-    /// The thread pool of a one-thread run could not be built.
-    #[error("{0}")]
-    ThreadPool(#[from] rayon::ThreadPoolBuildError),
     /// A dataset or camera file that could not be read (the message names the file).
     #[error("{0}")]
     Data(#[from] fogray_data::DataError),
@@ -152,9 +139,6 @@ pub enum CliError {
     /// A computation that should have produced a value did not (a gradient missing...).
     #[error("{0}")]
     Missing(&'static str),
-    /// The platform does not offer what was asked for.
-    #[error("{0}")]
-    Unsupported(&'static str),
 }
 
 impl CliError {

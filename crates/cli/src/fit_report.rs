@@ -6,13 +6,13 @@
 use std::fmt::Write as _;
 use std::path::Path;
 
-use fogray::stamp::Stamp;
 use fogray_fit::dataset::Dataset;
 use fogray_fit::depth::write_depth_png;
 use fogray_fit::images::write_comparison_png;
 use fogray_fit::plots::{self, Curve, Metric, XAxis};
 use fogray_fit::render::RenderedView;
 use fogray_fit::settings::FitSettings;
+use fogray_fit::stamp::Stamp;
 
 use crate::error::CliError;
 use crate::fit::{FitPlan, FitSummary};

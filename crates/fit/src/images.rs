@@ -119,7 +119,7 @@ fn rgb(image: &ArrayView3<'_, f64>, row: usize, column: usize) -> RGBColor {
 
 /// An RGB canvas of `size` (width, height) for plotters' [`BitMapBackend::with_buffer`], all
 /// black; [`save_canvas`] writes it.
-pub(crate) fn canvas((w, h): (u32, u32)) -> Vec<u8> {
+pub fn canvas((w, h): (u32, u32)) -> Vec<u8> {
     vec![0; w as usize * h as usize * 3]
 }
 
@@ -127,7 +127,7 @@ pub(crate) fn canvas((w, h): (u32, u32)) -> Vec<u8> {
 /// fresh temporary renamed into place, see [`fogray_data::write_atomic`]).
 ///
 /// Errors: [`ImageError::Write`].
-pub(crate) fn save_canvas(path: &Path, pixels: &[u8], (w, h): (u32, u32)) -> Result<(), ImageError> {
+pub fn save_canvas(path: &Path, pixels: &[u8], (w, h): (u32, u32)) -> Result<(), ImageError> {
     write_png8(path, pixels, w, h, PngChannels::Rgb).map_err(|e| not_written(path, e))
 }
 

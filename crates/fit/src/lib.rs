@@ -15,11 +15,11 @@
 //!   opacity, depth);
 //! - [`checkpoint`]: a fit to a safetensors file and back; [`metrics`]: PSNR;
 //!   [`mesh`]: a model's surface as a coloured triangle mesh (marching cubes, PLY);
-//!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves; [`slices`]: a
-//!   model's density and its occupancy grid on planes through its box;
-//! - [`sweep`]: one fit per configuration (fused or taped, uniform or occupancy, f32 or f64)
-//!   for the same budget; [`curves`]: logs read as curves and compared (the PSNR at a time,
-//!   the time to a PSNR, one run against another or against an outside pipeline's log).
+//!   [`images`], [`depth`], [`plots`]: PNGs, depth maps and PSNR curves; [`stamp`]: the
+//!   date, machine and command at the top of a generated report.
+//!
+//! Sweeps over configurations, curves compared and slices through a model, which measure the
+//! pipeline rather than run it, are the `fogray-lab` crate's.
 //!
 //! A user's whole fit: cameras and pictures in, a fitted model, its test PSNR, a checkpoint
 //! and a render out.
@@ -71,7 +71,6 @@
 pub mod backdrop;
 pub mod batch;
 pub mod checkpoint;
-pub mod curves;
 pub mod dataset;
 pub mod dense;
 pub mod depth;
@@ -93,13 +92,12 @@ pub mod schedule;
 pub mod session;
 pub mod settings;
 pub mod shading;
-pub mod slices;
 pub mod space;
 pub mod space_picture;
 pub mod sparse;
 pub mod splats;
+pub mod stamp;
 pub mod state;
-pub mod sweep;
 #[cfg(test)]
 mod testing;
 pub mod train;

@@ -2,7 +2,7 @@
 //! the next, instead of going back to the system and coming back as fresh pages.
 //!
 //! A fresh page costs a fault and the kernel's clearing of it, every step, and glibc hands every
-//! buffer above 32 MiB back to the system when it is freed (`fogray bench` measures the
+//! buffer above 32 MiB back to the system when it is freed (`fogray-lab bench` measures the
 //! difference: its `reused` column runs the taped composite on one tape reused with its pool).
 //! The pool is what a caching allocator would give, held by the
 //! tape that filled it (released with it, or by [`Tape::release_buffers`](crate::Tape)), and

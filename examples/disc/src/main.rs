@@ -297,7 +297,7 @@ fn run(cli: Cli) -> Result<(), DiscError> {
             let rows = fogray_disc::report::run(&setup, common.scene.tau, timing, &|| pb.inc(1))?;
             pb.finish_and_clear();
             std::fs::create_dir_all(&dir).map_err(DiscError::file("create", &dir))?;
-            let stamp = fogray::stamp::Stamp::now("cargo run --release -p fogray-disc -- report");
+            let stamp = fogray_lab::stamp::Stamp::now("cargo run --release -p fogray-disc -- report");
             let md = fogray_disc::report::markdown(&rows, common.scene.tau, timing, &stamp);
             let md_path = dir.join("speed_vs_error.md");
             // Whole or not at all, as every fogray writer: never a truncated report.

@@ -12,8 +12,8 @@ use std::path::Path;
 use std::time::Instant;
 
 use fogray::ops::{twins, Background, Composite, CompositeArrays, CompositeInputs, CompositeUpstream, CompositeWanted};
-use fogray::stamp::Stamp;
 use fogray::tape::{Float, Tape};
+use fogray_lab::stamp::Stamp;
 use ndarray::{Array1, Array2, ArrayD};
 use plotters::prelude::*;
 use serde::Serialize;

@@ -2,9 +2,9 @@
 //!
 //! A scene with no known shape: a density and a colour at every point of space, which
 //! gradient descent on photographs must find. This crate holds the parts of that experiment
-//! that are particular to its scene; the model, the fit, the render, the checkpoints, the
-//! sweep over configurations, the curves it compares and the density slices are fogray-fit's
-//! (`fogray::fit`):
+//! that are particular to its scene; the model, the fit, the render and the checkpoints are
+//! fogray-fit's (`fogray::fit`), the sweep over configurations, the curves it compares and the
+//! density slices fogray-lab's (`fogray_lab`):
 //!
 //! - [`scene`]: constant-density spheres and boxes in front of a background, from JSON;
 //! - [`exact`]: the exact emission-absorption render of such a scene along a ray (the medium

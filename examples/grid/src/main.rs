@@ -261,9 +261,9 @@ struct ReportArgs {
 const REPORT_EVALUATIONS: usize = 60;
 
 fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
-    use fogray::fit::curves::Anchor;
-    use fogray::fit::sweep::{run_configs, same_steps, RunConfig, SweepOptions};
     use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
+    use fogray_lab::curves::Anchor;
+    use fogray_lab::sweep::{run_configs, same_steps, RunConfig, SweepOptions};
     /// Timed passes of each bandwidth measurement (the best is kept).
     const TRIAD_PASSES: usize = 5;
 
@@ -295,7 +295,7 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     // Before training, so that a bad directory costs nothing.
     create_dir(&args.out)?;
     let given: Vec<String> = std::env::args().skip(1).collect();
-    let stamp = fogray::stamp::Stamp::now(&format!("fogray-grid {}", given.join(" ")));
+    let stamp = fogray_lab::stamp::Stamp::now(&format!("fogray-grid {}", given.join(" ")));
     let reproduce = format!("cargo run --release -p fogray-grid -- {}", given.join(" "));
     let data = dataset(&scene, &ring)?;
     let bar = indicatif::ProgressBar::new(1000);
@@ -313,7 +313,7 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
         bar.set_message(format!("step {}", p.step));
     };
     // The machine's state around the timed runs (about a second each).
-    let before = fogray::machine::triad(TRIAD_PASSES);
+    let before = fogray_lab::machine::triad(TRIAD_PASSES);
     let runs = run_configs(&data, &options, &mut |i, p| {
         show(format!("{} ({}/{})", names[i], i + 1, names.len()), p)
     })?;
@@ -323,7 +323,7 @@ fn run_report(args: ReportArgs, given: &dyn Fn(&str) -> bool) -> Result<()> {
     bar.finish_and_clear();
     let bandwidth = MachineBandwidth {
         before,
-        after: fogray::machine::triad(TRIAD_PASSES),
+        after: fogray_lab::machine::triad(TRIAD_PASSES),
     };
     let problem = format!(
         "A {g}^3 grid fitted from {v} exact photographs of {s} x {s} pixels of {scene}, judged on {t} held-out views; {b} rays per step, seed {seed}.",

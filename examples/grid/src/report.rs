@@ -1,7 +1,7 @@
 //! The speed-against-error report: one fit per configuration (fused or taped ops, uniform or
 //! occupancy sampling, f32 or f64), run one after another for the same training budget
-//! (fogray-fit's [`sweep`](fogray::fit::sweep)), compared on test PSNR against training time
-//! ([`curves`](fogray::fit::curves)), with pictures of the best configuration's model beside
+//! (fogray-lab's [`sweep`](fogray_lab::sweep)), compared on test PSNR against training time
+//! ([`curves`](fogray_lab::curves)), with pictures of the best configuration's model beside
 //! the scene's exact density.
 //!
 //! - [`markdown`]: the report's tables, as numbers and as markdown;
@@ -19,10 +19,10 @@ use std::path::PathBuf;
 
 use thiserror::Error;
 
-use fogray::fit::curves::CurveError;
 use fogray::fit::images::ImageError;
-use fogray::fit::sweep::SweepError;
 use fogray::fit::FitError;
+use fogray_lab::curves::CurveError;
+use fogray_lab::sweep::SweepError;
 
 pub mod markdown;
 pub mod write;

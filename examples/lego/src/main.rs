@@ -24,8 +24,8 @@ use clap::Parser;
 use serde::{Deserialize, Serialize};
 
 use configs::Config;
-use fogray::stamp::Stamp;
-use fogray_fit::curves::Anchor;
+use fogray_lab::curves::Anchor;
+use fogray_lab::stamp::Stamp;
 
 /// Runs the configurations and writes the report.
 #[derive(Parser)]
@@ -53,7 +53,7 @@ struct Args {
     #[arg(long, default_value_t = 1.0)]
     budget_scale: f64,
     /// An outside pipeline's run on the same views and machine (a PyTorch fit, say), as
-    /// fogray_fit::curves::Anchor JSON: its curve joins the plot, and each run's time to the
+    /// fogray_lab::curves::Anchor JSON: its curve joins the plot, and each run's time to the
     /// PSNR it ends at is set against its own.
     #[arg(long, value_name = "FILE")]
     anchor: Option<PathBuf>,

@@ -5,10 +5,10 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use fogray::stamp::Stamp;
-use fogray_fit::curves::{against_anchor, psnr_at, reach, Anchor, AnchorPoint};
 use fogray_fit::plots::{psnr_curves_against, Curve, XAxis};
 use fogray_fit::train::LogEntry;
+use fogray_lab::curves::{against_anchor, psnr_at, reach, Anchor, AnchorPoint};
+use fogray_lab::stamp::Stamp;
 
 use crate::anchors::{NERFACTO_CPU, NERFACTO_PEAK_BYTES, NERFACTO_RENDER_SECONDS};
 use crate::{Args, Run};

@@ -15,5 +15,4 @@ mod metrics;
 mod negative;
 mod resume;
 mod sparse;
-mod sweep;
 mod train;

@@ -63,7 +63,7 @@
 //! - The forward keeps only each ray's stop index; the backward recomputes `T_k` and `alpha_k`
 //!   from sigma and delta with the same code (bitwise the same values), so the op's extra
 //!   memory is its outputs and gradients alone; the price is two vectorised exponentials per
-//!   sample more (`fogray bench` measures what that costs against the one-pass call).
+//!   sample more (`fogray-lab bench` measures what that costs against the one-pass call).
 //! - The colour loops are compiled for 1 to 4 channels with the count a constant and sum in
 //!   four interleaved chains; for three channels on AVX2 with FMA they run four samples' twelve
 //!   values in three vector registers (`rows_x86`, every result bitwise the scalar loop's); the

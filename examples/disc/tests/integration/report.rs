@@ -1,11 +1,11 @@
 //! The speed-against-error report: every configuration is measured, and its error column
 //! means what it says (speed is reported, never asserted).
 
-use fogray::stamp::Stamp;
 use fogray_disc::report::{self, Timing, COUNTS, THRESHOLDS};
 use fogray_disc::sampling::Sampling;
 use fogray_disc::scene::Scene;
 use fogray_disc::setup::Setup;
+use fogray_lab::stamp::Stamp;
 
 #[test]
 fn report_measures_every_configuration_with_meaningful_errors() {

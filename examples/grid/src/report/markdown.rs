@@ -1,11 +1,11 @@
 //! The report's tables, as numbers ([`checkpoints`], [`config_rows`]; the pairs of
-//! configurations are fogray-fit's [`sweep::pairs`](fogray::fit::sweep::pairs)) and as markdown
+//! configurations are fogray-lab's [`sweep::pairs`](fogray_lab::sweep::pairs)) and as markdown
 //! ([`report`]).
 
-use fogray::fit::curves::{psnr_at, AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
 use fogray::fit::settings::Budget;
-use fogray::fit::sweep::{ConfigRun, SameSteps};
-use fogray::stamp::Stamp;
+use fogray_lab::curves::{psnr_at, AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
+use fogray_lab::stamp::Stamp;
+use fogray_lab::sweep::{ConfigRun, SameSteps};
 
 use super::write::MachineBandwidth;
 use super::ReportError;
@@ -89,18 +89,18 @@ pub struct ReportContext<'a> {
     /// Test evaluations each run makes over its budget (besides the one at the start).
     pub evaluations: usize,
     /// An outside pipeline's run to compare with, if given, and every configuration against
-    /// it (as [`anchor_rows`](fogray::fit::sweep::pairs::anchor_rows) gives them).
+    /// it (as [`anchor_rows`](fogray_lab::sweep::pairs::anchor_rows) gives them).
     pub anchor: Option<(&'a Anchor, &'a [(String, AgainstAnchor)])>,
     /// Markdown for the pictures section (images and captions), or empty.
     pub pictures: &'a str,
     /// Fused against taped over the same steps, as
-    /// [`same_steps`](fn@fogray::fit::sweep::same_steps) gives them.
+    /// [`same_steps`](fn@fogray_lab::sweep::same_steps) gives them.
     pub same_steps: &'a [(String, SameSteps)],
     /// Fused against taped at the first crossing, as
-    /// [`fused_vs_taped_rows`](fogray::fit::sweep::pairs::fused_vs_taped_rows) gives them.
+    /// [`fused_vs_taped_rows`](fogray_lab::sweep::pairs::fused_vs_taped_rows) gives them.
     pub fused_vs_taped: &'a [(String, FusedVsTaped)],
     /// Occupancy against uniform, as
-    /// [`occupancy_vs_uniform_rows`](fogray::fit::sweep::pairs::occupancy_vs_uniform_rows) gives
+    /// [`occupancy_vs_uniform_rows`](fogray_lab::sweep::pairs::occupancy_vs_uniform_rows) gives
     /// them.
     pub occupancy_vs_uniform: &'a [(String, OccupancyVsUniform)],
     /// The machine's memory bandwidth before and after the runs, if measured.

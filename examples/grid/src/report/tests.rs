@@ -2,8 +2,8 @@
 
 use super::markdown::{checkpoints, config_rows};
 use fogray::fit::settings::Budget;
-use fogray::fit::sweep::{ConfigRun, FinalPictures};
 use fogray::fit::train::LogEntry;
+use fogray_lab::sweep::{ConfigRun, FinalPictures};
 
 fn entry(step: usize, seconds: f64, test_psnr: f64, samples: usize) -> LogEntry {
     LogEntry {

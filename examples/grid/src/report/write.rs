@@ -3,20 +3,20 @@
 
 use std::path::{Path, PathBuf};
 
-use fogray::machine::Bandwidth;
-use fogray::stamp::Stamp;
+use fogray_lab::machine::Bandwidth;
+use fogray_lab::stamp::Stamp;
 use serde::Serialize;
 
 use crate::scene::Scene;
-use fogray::fit::curves::{AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::images::write_comparison_png;
 use fogray::fit::plots::{psnr_curves_against, Curve, XAxis};
 use fogray::fit::settings::Budget;
-use fogray::fit::slices::{planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
-use fogray::fit::sweep::{best, ConfigRun, SameSteps};
+use fogray_lab::curves::{AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
+use fogray_lab::slices::{planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
+use fogray_lab::sweep::{best, ConfigRun, SameSteps};
 
-use fogray::fit::sweep::pairs::{anchor_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows};
+use fogray_lab::sweep::pairs::{anchor_rows, fused_vs_taped_rows, occupancy_vs_uniform_rows};
 
 use super::markdown::{report, ReportContext};
 use super::ReportError;
@@ -45,13 +45,13 @@ pub struct ReportSetup<'a> {
     /// An outside pipeline's run to set beside the configurations, if given.
     pub anchor: Option<&'a Anchor>,
     /// Fused against taped over the same steps, as
-    /// [`same_steps`](fn@fogray::fit::sweep::same_steps) gives them (empty for none).
+    /// [`same_steps`](fn@fogray_lab::sweep::same_steps) gives them (empty for none).
     pub same_steps: &'a [(String, SameSteps)],
     /// The machine's memory bandwidth before and after the runs, if measured.
     pub bandwidth: Option<MachineBandwidth>,
 }
 
-/// The machine's memory bandwidth ([`fogray::machine::triad`]) measured just before the first
+/// The machine's memory bandwidth ([`fogray_lab::machine::triad`]) measured just before the first
 /// run and just after the last: on a shared machine it moves from hour to hour, and the
 /// timed figures with it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]

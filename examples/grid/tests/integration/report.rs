@@ -2,17 +2,17 @@
 //! `fit` runs, its tables read their logs, and its files are there.
 
 use crate::common::default_scene_data;
-use fogray::fit::curves::{Anchor, AnchorPoint};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::dense::DenseGrid;
 use fogray::fit::settings::{Budget, FitSettings, Sampling};
-use fogray::fit::sweep::pairs::fused_vs_taped_rows;
-use fogray::fit::sweep::{run_configs, same_steps, SweepOptions, DEFAULT_CONFIGS};
 use fogray::fit::train::{fit, LogEntry};
-use fogray::machine::Bandwidth;
 use fogray_grid::report::write::{write_report, MachineBandwidth, ReportSetup};
 use fogray_grid::ring::Ring;
 use fogray_grid::scene::Scene;
+use fogray_lab::curves::{Anchor, AnchorPoint};
+use fogray_lab::machine::Bandwidth;
+use fogray_lab::sweep::pairs::fused_vs_taped_rows;
+use fogray_lab::sweep::{run_configs, same_steps, SweepOptions, DEFAULT_CONFIGS};
 
 fn tiny() -> (Scene, Dataset, FitSettings) {
     let scene = Scene::default();
@@ -107,7 +107,7 @@ fn the_report_runs_each_configuration_as_fit_does_and_writes_its_files() {
     }
 
     let dir = std::env::temp_dir().join(format!("fogray-grid-report-{}", std::process::id()));
-    let stamp = fogray::stamp::Stamp::now("fogray-grid report --steps 70");
+    let stamp = fogray_lab::stamp::Stamp::now("fogray-grid report --steps 70");
     // Set by hand: what is tested here is how the report writes them.
     let bandwidth = MachineBandwidth {
         before: Bandwidth {

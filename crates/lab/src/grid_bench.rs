@@ -1,4 +1,4 @@
-//! `fogray bench --op grid`: lookups per second of the fused grid field (1 thread and all)
+//! `fogray-lab bench --op grid`: lookups per second of the fused grid field (1 thread and all)
 //! and of its taped twin, forward + backward into the grid and forward alone, in f32 and
 //! f64, each beside its error against a plain f64 loop on the same lookups and its peak
 //! extra memory.
@@ -12,9 +12,9 @@ use ndarray::{Array2, ArrayD, IxDyn};
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use super::bench::{median_secs, time_runs, within, Memory, Timing};
-use super::error::CliError;
-use super::reference::errors;
+use crate::bench::{median_secs, time_runs, within, Memory, Timing};
+use crate::error::LabError;
+use crate::reference::errors;
 
 /// Nodes per axis of the workloads' cubic grids.
 pub const GRIDS: [usize; 2] = [128, 64];
@@ -33,10 +33,13 @@ pub struct GridMeasurement {
     pub op: &'static str,
     /// `"fused"` or `"taped"`.
     pub method: &'static str,
+    /// `"f32"` or `"f64"`.
     pub precision: &'static str,
+    /// Threads of the rayon pool the row ran on.
     pub threads: usize,
     /// Nodes per axis (the grid is `grid^3 x channels`).
     pub grid: usize,
+    /// Values per node.
     pub channels: usize,
     /// Lookups per run.
     pub lookups: usize,
@@ -49,6 +52,7 @@ pub struct GridMeasurement {
     /// taped on one tape cleared before each run, whose pool lends the ops the buffers of the
     /// run before.
     pub lookups_per_sec_reused: f64,
+    /// The forward alone, from the median run.
     pub lookups_per_sec_forward: f64,
     /// Worst element-wise error of the output, relative to the size of its terms.
     pub err_output: f64,
@@ -69,7 +73,7 @@ struct Data {
     upstream: Vec<f64>,
 }
 
-fn data(nodes: usize) -> Result<Data, CliError> {
+fn data(nodes: usize) -> Result<Data, LabError> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(2026);
     let mut u = |lo: f64, hi: f64| f64::from(rng.gen_range(lo..hi) as f32);
     let bbox = GridBox::new(&[0.0; 3], &[1.0; 3])?;
@@ -132,7 +136,7 @@ struct Typed<F: Float> {
     upstream: ArrayD<F>,
 }
 
-fn typed<F: Float>(d: &Data, n: usize) -> Result<Typed<F>, CliError> {
+fn typed<F: Float>(d: &Data, n: usize) -> Result<Typed<F>, LabError> {
     let cast = |v: &[f64]| v.iter().map(|&x| F::lit(x)).collect::<Vec<F>>();
     Ok(Typed {
         grid: ArrayD::from_shape_vec(IxDyn(d.field.shape()), cast(&d.grid))?,
@@ -162,7 +166,7 @@ struct Outcome {
     peak_extra: usize,
 }
 
-fn fused_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, CliError> {
+fn fused_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, LabError> {
     let p = x.positions.view().into_dyn();
     let out = field.evaluate(&x.grid.view(), &p)?;
     if !backward {
@@ -170,7 +174,7 @@ fn fused_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Resu
         return Ok(None);
     }
     let g = field.vjp(&x.grid.view(), &p, &x.upstream.view(), GRID_ONLY)?;
-    let grad = g.grid.ok_or(CliError::Missing("no grid gradient"))?;
+    let grad = g.grid.ok_or(LabError::Missing("no grid gradient"))?;
     Ok(Some(Values {
         output: to_f64(&out),
         grad: to_f64(&grad),
@@ -193,7 +197,7 @@ impl<F: Float> Buffers<F> {
 }
 
 /// [`fused_step`], forward and backward, through the `_into` calls into `b`.
-fn fused_step_into<F: Float>(field: &GridField, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
+fn fused_step_into<F: Float>(field: &GridField, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), LabError> {
     let p = x.positions.view().into_dyn();
     field.evaluate_into(&x.grid.view(), &p, &mut b.output.view_mut())?;
     let mut gradients = GridGradientBuffers {
@@ -207,7 +211,7 @@ fn fused_step_into<F: Float>(field: &GridField, x: &Typed<F>, b: &mut Buffers<F>
 
 /// [`taped_step`] on one tape kept across runs: cleared first, its gradients handed back to it
 /// after use (a training loop's steady state).
-fn taped_step_reused<F: Float>(field: &GridField, x: &Typed<F>, tape: &mut Tape<F>) -> Result<(), CliError> {
+fn taped_step_reused<F: Float>(field: &GridField, x: &Typed<F>, tape: &mut Tape<F>) -> Result<(), LabError> {
     tape.clear();
     let (grid, positions) = put_inputs(tape, x);
     let out = twin::lookup(tape, field, grid, positions)?;
@@ -230,7 +234,7 @@ fn put_inputs<F: Float>(tape: &mut Tape<F>, x: &Typed<F>) -> (fogray_tape::Var, 
     (tape.param(x.grid.clone()), tape.constant(x.positions.clone()))
 }
 
-fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, CliError> {
+fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Result<Option<Values>, LabError> {
     let (mut tape, grid, positions) = tape_with_inputs(x);
     let out = twin::lookup(&mut tape, field, grid, positions)?;
     if !backward {
@@ -238,7 +242,7 @@ fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Resu
         return Ok(None);
     }
     let g = tape.backward_with(out, x.upstream.clone())?;
-    let grad = g.get(grid).ok_or(CliError::Missing("no grid gradient"))?.to_owned();
+    let grad = g.get(grid).ok_or(LabError::Missing("no grid gradient"))?.to_owned();
     Ok(Some(Values {
         output: to_f64(&tape.value(out)?.to_owned()),
         grad: to_f64(&grad),
@@ -248,10 +252,10 @@ fn taped_step<F: Float>(field: &GridField, x: &Typed<F>, backward: bool) -> Resu
 /// One forward + backward of `step`, measured for its peak extra memory and its values.
 fn measured_run(
     mem: &dyn Memory,
-    step: impl FnOnce() -> Result<Option<Values>, CliError>,
-) -> Result<Outcome, CliError> {
+    step: impl FnOnce() -> Result<Option<Values>, LabError>,
+) -> Result<Outcome, LabError> {
     mem.reset();
-    let values = step()?.ok_or(CliError::Missing("no values"))?;
+    let values = step()?.ok_or(LabError::Missing("no values"))?;
     Ok(Outcome {
         values,
         peak_extra: mem.peak_since_reset(),
@@ -277,7 +281,7 @@ fn measure<F: Float>(
     mem: &dyn Memory,
     out: &mut Vec<GridMeasurement>,
     log: &mut dyn FnMut(&GridMeasurement),
-) -> Result<(), CliError> {
+) -> Result<(), LabError> {
     let field = &d.field;
     let mut runs = Vec::new();
     let x = typed::<F>(d, LOOKUPS)?;
@@ -369,7 +373,7 @@ pub fn run(
     quick: bool,
     mem: &dyn Memory,
     log: &mut dyn FnMut(&GridMeasurement),
-) -> Result<Vec<GridMeasurement>, CliError> {
+) -> Result<Vec<GridMeasurement>, LabError> {
     let reps = if quick { 1 } else { 5 };
     let mut out = Vec::new();
     for &nodes in grids {

@@ -4,7 +4,7 @@
 
 use serde::Serialize;
 
-use crate::train::LogEntry;
+use fogray_fit::train::LogEntry;
 
 use super::CurveError;
 

@@ -9,21 +9,21 @@
 //! the same machine; a report can only say where the numbers came from, not check them.
 //!
 //! ```
-//! use fogray_fit::curves::Anchor;
+//! use fogray_lab::curves::Anchor;
 //!
 //! let anchor = Anchor::from_json(
 //!     r#"{"name": "other", "log": [{"seconds": 0, "test_psnr": 10}, {"seconds": 300, "test_psnr": 23.9}]}"#,
 //! )?;
 //! assert_eq!(anchor.final_psnr(), 23.9);
 //! assert!(Anchor::from_json(r#"{"name": "other", "log": []}"#).is_err());
-//! # Ok::<(), fogray_fit::curves::CurveError>(())
+//! # Ok::<(), fogray_lab::curves::CurveError>(())
 //! ```
 
 use std::path::Path;
 
 use serde::{Deserialize, Serialize};
 
-use crate::train::LogEntry;
+use fogray_fit::train::LogEntry;
 
 use super::reach::check;
 use super::CurveError;

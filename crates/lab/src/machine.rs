@@ -1,6 +1,6 @@
 //! How fast the machine's memory is at the time of a measurement: a short STREAM triad
 //! (`a = b + s c` over arrays far larger than the caches) gives the bytes per second the
-//! cores can stream. `fogray bench` turns it into a bound for the fused composite, and the
+//! cores can stream. `fogray-lab bench` turns it into a bound for the fused composite, and the
 //! grid example's report measures it before and after its timed runs, so that figures taken in
 //! different hours on a shared machine can be compared with the state the machine was in.
 

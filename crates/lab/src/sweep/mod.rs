@@ -17,7 +17,7 @@
 //! ```
 //! use fogray_fit::dataset::{Dataset, View};
 //! use fogray_fit::settings::FitSettings;
-//! use fogray_fit::sweep::{run_configs, RunConfig, SweepOptions};
+//! use fogray_lab::sweep::{run_configs, RunConfig, SweepOptions};
 //! use fogray_ops::{Intrinsics, PinholeCamera};
 //! use ndarray::Array3;
 //!
@@ -46,7 +46,7 @@
 
 use thiserror::Error;
 
-use crate::FitError;
+use fogray_fit::FitError;
 
 pub mod config;
 pub mod pairs;

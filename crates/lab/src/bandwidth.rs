@@ -1,16 +1,16 @@
-//! The machine's memory bound for `fogray bench`: the triad of [`fogray::machine`] gives the
+//! The machine's memory bound for `fogray-lab bench`: the triad of [`crate::machine`] gives the
 //! bytes per second the cores can stream, and the fused composite's bytes per sample turn it
 //! into a bound in samples per second, so that each fused row can say what fraction of the
 //! machine it reaches.
 
-use super::bench::within;
-use super::error::CliError;
+use crate::bench::within;
+use crate::error::LabError;
 
-pub use fogray::machine::Bandwidth;
+pub use crate::machine::Bandwidth;
 
-/// The triad ([`fogray::machine::triad`]) on `pool` (the global pool when `None`).
-pub fn triad(pool: Option<&rayon::ThreadPool>, runs: usize) -> Result<Bandwidth, CliError> {
-    within(pool, || Ok(fogray::machine::triad(runs)))
+/// The triad ([`crate::machine::triad`]) on `pool` (the global pool when `None`).
+pub fn triad(pool: Option<&rayon::ThreadPool>, runs: usize) -> Result<Bandwidth, LabError> {
+    within(pool, || Ok(crate::machine::triad(runs)))
 }
 
 /// Which fused call a byte count is for.

@@ -1,15 +1,15 @@
-//! `fogray bench --markdown DIR [--readme FILE]`: the measurements as a generated report
+//! `fogray-lab bench --markdown DIR [--readme FILE]`: the measurements as a generated report
 //! (`DIR/bench-composite.md` or `DIR/bench-grid.md`, stamped with date, machine and command),
 //! and the headline rows of it in the README's marked block, so that no figure on the front
 //! page is typed by hand.
 
 use std::path::Path;
 
-use fogray::stamp::Stamp;
+use crate::stamp::Stamp;
 
-use super::bench::Measurement;
-use super::error::CliError;
-use super::grid_bench::GridMeasurement;
+use crate::bench::Measurement;
+use crate::error::LabError;
+use crate::grid_bench::GridMeasurement;
 
 /// The full report: the stamp, then the text tables in a code block.
 pub fn report(title: &str, stamp: &Stamp, tables: &str) -> String {
@@ -85,13 +85,13 @@ pub fn grid_headline(results: &[GridMeasurement], stamp: &Stamp) -> String {
 
 /// Replaces what stands between `<!-- headline:NAME:start -->` and `<!-- headline:NAME:end -->`
 /// in `readme` by `block`. Errors if the markers are missing; the file is then unchanged.
-pub fn update_readme(readme: &Path, name: &str, block: &str) -> Result<(), CliError> {
-    let text = std::fs::read_to_string(readme).map_err(CliError::file("read", readme))?;
+pub fn update_readme(readme: &Path, name: &str, block: &str) -> Result<(), LabError> {
+    let text = std::fs::read_to_string(readme).map_err(LabError::file("read", readme))?;
     let (start, end) = (
         format!("<!-- headline:{name}:start -->"),
         format!("<!-- headline:{name}:end -->"),
     );
-    let updated = replace_between(&text, &start, &end, block).ok_or_else(|| CliError::MissingMarkers {
+    let updated = replace_between(&text, &start, &end, block).ok_or_else(|| LabError::MissingMarkers {
         path: readme.display().to_string(),
         start: start.clone(),
         end: end.clone(),

@@ -1,4 +1,4 @@
-//! `fogray bench --keep-freed-memory`: tells glibc to keep freed memory for reuse instead of
+//! `fogray-lab bench --keep-freed-memory`: tells glibc to keep freed memory for reuse instead of
 //! returning it to the kernel, the steady state of a training loop under a caching allocator.
 //! By default every large buffer is fresh memory that the kernel must map and clear page by
 //! page, which the bench shows is a large share of both the fused op's and the tape's time.
@@ -9,11 +9,11 @@
 //! this size afresh (with the setting, the same loop runs far slower on a pool thread than on
 //! the main thread), so their figures are not comparable across the flag.
 
-use super::error::CliError;
+use crate::error::LabError;
 
 /// Serves large allocations from the heap and never trims it.
 #[cfg(all(target_os = "linux", target_env = "gnu"))]
-pub fn keep_freed_memory() -> Result<(), CliError> {
+pub fn keep_freed_memory() -> Result<(), LabError> {
     // SAFETY: mallopt only changes two of glibc's allocation thresholds; it is called from the
     // main thread before the bench allocates anything large or starts a thread pool, and glibc
     // serialises it with its own lock in any case. It returns 1 on success.
@@ -23,7 +23,7 @@ pub fn keep_freed_memory() -> Result<(), CliError> {
     if done {
         Ok(())
     } else {
-        Err(CliError::Unsupported(
+        Err(LabError::Unsupported(
             "glibc refused to change its mmap and trim thresholds",
         ))
     }
@@ -31,6 +31,6 @@ pub fn keep_freed_memory() -> Result<(), CliError> {
 
 /// Serves large allocations from the heap and never trims it.
 #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
-pub fn keep_freed_memory() -> Result<(), CliError> {
-    Err(CliError::Unsupported("--keep-freed-memory needs Linux with glibc"))
+pub fn keep_freed_memory() -> Result<(), LabError> {
+    Err(LabError::Unsupported("--keep-freed-memory needs Linux with glibc"))
 }

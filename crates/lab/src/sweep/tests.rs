@@ -2,11 +2,11 @@
 //! logs (the sweep's fits are the integration tests').
 
 use approx::assert_relative_eq;
+use fogray_fit::settings::{Method, Precision, Sampling};
+use fogray_fit::train::LogEntry;
 
 use super::pairs::{fused_vs_taped_rows, occupancy_vs_uniform_rows};
 use super::{best, ConfigRun, FinalPictures, RunConfig, SweepError, DEFAULT_CONFIGS};
-use crate::settings::{Method, Precision, Sampling};
-use crate::train::LogEntry;
 
 #[test]
 fn configuration_names_read_back() {

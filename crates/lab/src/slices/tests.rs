@@ -1,13 +1,13 @@
 //! The planes' geometry against hand-placed points, a fresh model's density, and the
 //! occupancy grid's planes drawn the right way up.
 
+use fogray_fit::dense::DenseGrid;
+use fogray_fit::images::ImageError;
 use fogray_ops::rays::Aabb;
 use fogray_ops::sample::{CellPoints, GridAxis, OccupancyConfig, OccupancyGrid};
 use ndarray::{Array1, ArrayView2};
 
 use super::*;
-use crate::dense::DenseGrid;
-use crate::images::ImageError;
 
 #[test]
 fn pixel_centres_run_right_along_the_first_axis_and_up_the_second() {
@@ -72,7 +72,7 @@ fn occupancy_planes_are_drawn_right_way_up() {
 
 #[test]
 fn plane_pictures_reject_bad_input() {
-    let dir = std::env::temp_dir().join(format!("fogray-fit-slices-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("fogray-lab-slices-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let path = dir.join("planes.png");
     let small = planes(&SceneBox::UNIT, 4, |p| p[0]);

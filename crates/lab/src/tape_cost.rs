@@ -8,12 +8,13 @@ use fogray_tape::{Float, Tape};
 use ndarray::Array1;
 use serde::Serialize;
 
-use super::bench::median_secs;
-use super::error::CliError;
+use crate::bench::median_secs;
+use crate::error::LabError;
 
 /// One precision's tape costs (a JSON object of `"tape_overhead"`).
 #[derive(Debug, Clone, Serialize)]
 pub struct TapeCost {
+    /// `"f32"` or `"f64"`.
     pub precision: &'static str,
     /// Forward record plus backward of one op on one-element values.
     pub ns_per_op: f64,
@@ -29,8 +30,8 @@ pub struct TapeCost {
 /// Ops in the chain that measures the per-op cost.
 const CHAIN: usize = 20_000;
 
-fn per_op<F: Float>() -> Result<f64, CliError> {
-    let run = || -> Result<(), CliError> {
+fn per_op<F: Float>() -> Result<f64, LabError> {
+    let run = || -> Result<(), LabError> {
         let mut tape = Tape::<F>::new();
         let x = tape.param(Array1::from(vec![F::lit(0.5)]).into_dyn());
         let mut y = x;
@@ -44,7 +45,7 @@ fn per_op<F: Float>() -> Result<f64, CliError> {
     Ok(median_secs(5, run)? / CHAIN as f64 * 1e9)
 }
 
-fn per_byte<F: Float>(elements: usize) -> Result<f64, CliError> {
+fn per_byte<F: Float>(elements: usize) -> Result<f64, LabError> {
     let a = Array1::from(vec![F::lit(0.25); elements]).into_dyn();
     let b = Array1::from(vec![F::lit(0.75); elements]).into_dyn();
     let g = Array1::from(vec![F::one(); elements]).into_dyn();
@@ -67,7 +68,7 @@ fn per_byte<F: Float>(elements: usize) -> Result<f64, CliError> {
     Ok((full - base).max(1e-12) / bytes as f64 * 1e9)
 }
 
-fn measure<F: Float>(elements: usize) -> Result<TapeCost, CliError> {
+fn measure<F: Float>(elements: usize) -> Result<TapeCost, LabError> {
     let ns_per_byte = per_byte::<F>(elements)?;
     Ok(TapeCost {
         precision: F::NAME,
@@ -80,7 +81,7 @@ fn measure<F: Float>(elements: usize) -> Result<TapeCost, CliError> {
 
 /// The tape's costs in f32 and f64, in the global pool (the element-wise add of the large
 /// values runs on all its threads; the 1-element ops on the calling one).
-pub fn run(quick: bool) -> Result<Vec<TapeCost>, CliError> {
+pub fn run(quick: bool) -> Result<Vec<TapeCost>, LabError> {
     let elements = if quick { 1 << 20 } else { 1 << 22 };
     Ok(vec![measure::<f32>(elements)?, measure::<f64>(elements)?])
 }

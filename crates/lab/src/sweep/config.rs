@@ -4,7 +4,7 @@
 use std::fmt;
 use std::str::FromStr;
 
-use crate::settings::{Method, Precision, Sampling};
+use fogray_fit::settings::{Method, Precision, Sampling};
 
 use super::SweepError;
 

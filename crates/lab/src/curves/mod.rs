@@ -12,7 +12,7 @@
 //! - [`anchor`]: an outside pipeline's log ([`Anchor`]), read from JSON.
 //!
 //! ```
-//! use fogray_fit::curves::{psnr_at, reach};
+//! use fogray_lab::curves::{psnr_at, reach};
 //! use fogray_fit::train::LogEntry;
 //!
 //! let e = |step, seconds, test_psnr| LogEntry { step, seconds, train_loss: 0.0, test_psnr, test_ssim: f64::NAN, samples: 100 * step };
@@ -20,7 +20,7 @@
 //! assert_eq!(psnr_at(&log, 1.0)?, Some(15.0)); // halfway from 10 dB to 20 dB
 //! assert_eq!(reach(&log, 22.0)?.unwrap().seconds, 3.0);
 //! assert_eq!(psnr_at(&log, 5.0)?, None); // the run stopped at 4 s
-//! # Ok::<(), fogray_fit::curves::CurveError>(())
+//! # Ok::<(), fogray_lab::curves::CurveError>(())
 //! ```
 
 use thiserror::Error;

@@ -15,10 +15,10 @@
 
 use serde::Serialize;
 
-use crate::dataset::Dataset;
-use crate::settings::Method;
-use crate::settings::{Budget, FitSettings};
-use crate::train::Progress;
+use fogray_fit::dataset::Dataset;
+use fogray_fit::settings::Method;
+use fogray_fit::settings::{Budget, FitSettings};
+use fogray_fit::train::Progress;
 
 use super::config::{shared_name, RunConfig};
 use super::run::{run_config, ConfigRun, SweepOptions};

@@ -1,9 +1,9 @@
 //! The curves on hand-made logs, against numbers computed by hand.
 
 use approx::assert_relative_eq;
+use fogray_fit::train::LogEntry;
 
 use super::{against_anchor, fused_vs_taped, occupancy_vs_uniform, psnr_at, reach, Anchor, CurveError};
-use crate::train::LogEntry;
 
 fn entry(step: usize, seconds: f64, test_psnr: f64, samples: usize) -> LogEntry {
     LogEntry {

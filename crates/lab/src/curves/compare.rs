@@ -5,7 +5,7 @@
 
 use serde::Serialize;
 
-use crate::train::LogEntry;
+use fogray_fit::train::LogEntry;
 
 use super::reach::{final_psnr, reach, Reach};
 use super::CurveError;

@@ -1,4 +1,4 @@
-//! `fogray bench`: samples per second of the fused op (1 thread and all) and of the stable and
+//! `fogray-lab bench`: samples per second of the fused op (1 thread and all) and of the stable and
 //! naive taped twins, in f32 and f64, each beside its error against an independent f64
 //! reference on the same rays and its peak extra memory (`docs/performance.md`).
 //!
@@ -18,14 +18,14 @@ use ndarray::{Array1, Array2, ArrayD, ArrayViewD};
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
 
-use super::bandwidth::{fraction_of_bound, fused_bytes_per_sample, Bandwidth, FusedPath};
-use super::error::CliError;
-use super::reference::{errors, reference, Rays};
+use crate::bandwidth::{fraction_of_bound, fused_bytes_per_sample, Bandwidth, FusedPath};
+use crate::error::LabError;
+use crate::reference::{errors, reference, Rays};
 
-/// The workloads of the issue: rays x samples per ray.
 /// Colour channels of every workload (RGB).
 const CHANNELS: usize = 3;
 
+/// The workloads of the issue: rays x samples per ray.
 pub const WORKLOADS: [(usize, usize); 4] = [(4096, 64), (65536, 64), (16384, 256), (1024, 4096)];
 
 /// How the bench counts bytes: the binary's global allocator.
@@ -39,9 +39,13 @@ pub trait Memory: Sync {
 /// One measurement (one JSON object of `{"results": [...]}`).
 #[derive(Debug, Clone, Serialize)]
 pub struct Measurement {
+    /// `"fused"`, `"taped"` or `"taped-naive"`.
     pub method: &'static str,
+    /// `"f32"` or `"f64"`.
     pub precision: &'static str,
+    /// Threads of the rayon pool the row ran on.
     pub threads: usize,
+    /// Rays of the workload.
     pub rays: usize,
     /// Samples per ray.
     pub samples: usize,
@@ -58,6 +62,7 @@ pub struct Measurement {
     /// (`evaluate_vjp_into`, into kept buffers; the same bits as the two calls).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub samples_per_sec_one_pass: Option<f64>,
+    /// The forward alone, from the median run.
     pub samples_per_sec_forward: f64,
     /// Worst element-wise relative error of the colour.
     pub err_color: f64,
@@ -78,7 +83,7 @@ pub struct Measurement {
     pub value_bytes: usize,
 }
 
-/// A fused row's speeds as fractions of what the machine can stream (see [`super::bandwidth`]).
+/// A fused row's speeds as fractions of what the machine can stream (see [`crate::bandwidth`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct MemoryBound {
     /// The triad's bytes per second on the row's thread count.
@@ -123,7 +128,7 @@ pub struct Data {
 
 impl Data {
     /// The composite of these rays, over their shared background.
-    pub fn op(&self) -> Result<Composite, CliError> {
+    pub fn op(&self) -> Result<Composite, LabError> {
         Ok(Composite::new(&self.offsets)?.background(Background::Shared))
     }
 
@@ -187,7 +192,7 @@ impl<F: Float> Typed<F> {
 }
 
 /// The rays of `d` in precision F.
-pub fn typed<F: Float>(d: &Data) -> Result<Typed<F>, CliError> {
+pub fn typed<F: Float>(d: &Data) -> Result<Typed<F>, LabError> {
     let n = d.sigma.len();
     let rays = d.offsets.len() - 1;
     Ok(Typed {
@@ -203,7 +208,9 @@ pub fn typed<F: Float>(d: &Data) -> Result<Typed<F>, CliError> {
 /// median (robust to the odd outlier run; 0 with a single run).
 #[derive(Debug, Clone, Copy)]
 pub struct Timing {
+    /// The median run's seconds.
     pub median: f64,
+    /// The interquartile range of the runs' seconds over their median.
     pub spread: f64,
 }
 
@@ -214,7 +221,7 @@ const MAX_RUNS: usize = 200;
 
 /// Times at least `reps` runs of `f` (more for short runs when `reps > 1`, see [`MIN_SECS`]),
 /// after one warm-up run when `reps > 1`.
-pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), CliError>) -> Result<Timing, CliError> {
+pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), LabError>) -> Result<Timing, LabError> {
     if reps > 1 {
         f()?;
     }
@@ -236,7 +243,7 @@ pub fn time_runs(reps: usize, mut f: impl FnMut() -> Result<(), CliError>) -> Re
 }
 
 /// Median wall time of `reps` runs of `f` (see [`time_runs`]).
-pub fn median_secs(reps: usize, f: impl FnMut() -> Result<(), CliError>) -> Result<f64, CliError> {
+pub fn median_secs(reps: usize, f: impl FnMut() -> Result<(), LabError>) -> Result<f64, LabError> {
     Ok(time_runs(reps, f)?.median)
 }
 
@@ -251,13 +258,13 @@ struct Outcome {
     peak_extra: usize,
 }
 
-fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result<Outcome, CliError> {
+fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result<Outcome, LabError> {
     let views = x.views();
     mem.reset();
     let (outs, res) = op.evaluate(&views)?;
     let grads = op.vjp(&views, &res, &x.upstream(), SIGMA_AND_COLOR)?;
     let peak_extra = mem.peak_since_reset();
-    let g = grads.sigma.as_ref().ok_or(CliError::Missing("no sigma gradient"))?;
+    let g = grads.sigma.as_ref().ok_or(LabError::Missing("no sigma gradient"))?;
     Ok(Outcome {
         color: to_f64(outs.color.view()),
         grad_sigma: to_f64(g.view()),
@@ -267,7 +274,7 @@ fn fused_run<F: Float>(op: &Composite, x: &Typed<F>, mem: &dyn Memory) -> Result
 
 /// The fused op's forward, and with `backward` its gradients for sigma and colour, each call
 /// allocating what it returns.
-pub fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), CliError> {
+pub fn fused_step<F: Float>(op: &Composite, x: &Typed<F>, backward: bool) -> Result<(), LabError> {
     let views = x.views();
     let (outs, res) = op.evaluate(&views)?;
     if backward {
@@ -320,7 +327,7 @@ const SIGMA_AND_COLOR: CompositeWanted = CompositeWanted {
 };
 
 /// [`fused_step`] through the `_into` API, forward and backward, into `b`.
-pub fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
+pub fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), LabError> {
     let views = x.views();
     let (mut outputs, mut gradients) = b.split();
     let res = op.evaluate_into(&views, &mut outputs)?;
@@ -331,12 +338,12 @@ pub fn fused_step_into<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F
 
 /// [`fused_step_into`] in one pass per ray (`evaluate_vjp_into`), the upstream gradient of
 /// each ray handed over by the callback.
-pub fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), CliError> {
+pub fn fused_step_one_pass<F: Float>(op: &Composite, x: &Typed<F>, b: &mut Buffers<F>) -> Result<(), LabError> {
     let views = x.views();
     let upstream = x
         .grad_color
         .as_slice()
-        .ok_or(CliError::Missing("upstream gradient not contiguous"))?;
+        .ok_or(LabError::Missing("upstream gradient not contiguous"))?;
     let (mut outputs, mut gradients) = b.split();
     op.evaluate_vjp_into(
         &views,
@@ -368,7 +375,7 @@ pub fn put_inputs<F: Float>(tape: &mut Tape<F>, x: &Typed<F>) -> CompositeInputs
     }
 }
 
-fn twin<F: Float>(tape: &mut Tape<F>, op: &Composite, inputs: &CompositeInputs, naive: bool) -> Result<Var, CliError> {
+fn twin<F: Float>(tape: &mut Tape<F>, op: &Composite, inputs: &CompositeInputs, naive: bool) -> Result<Var, LabError> {
     let out = if naive {
         twins::naive(tape, op, inputs)
     } else {
@@ -379,7 +386,7 @@ fn twin<F: Float>(tape: &mut Tape<F>, op: &Composite, inputs: &CompositeInputs, 
 
 /// The stable (or with `naive` the naive) taped twin on a new tape, forward and with `backward`
 /// its backward from dL/dC.
-pub fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), CliError> {
+pub fn taped_step<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, backward: bool) -> Result<(), LabError> {
     let (mut tape, inputs) = tape_with_inputs(x);
     let color = twin(&mut tape, op, &inputs, naive)?;
     if backward {
@@ -397,7 +404,7 @@ pub fn taped_step_reused<F: Float>(
     x: &Typed<F>,
     naive: bool,
     tape: &mut Tape<F>,
-) -> Result<(), CliError> {
+) -> Result<(), LabError> {
     tape.clear();
     let inputs = put_inputs(tape, x);
     let color = twin(tape, op, &inputs, naive)?;
@@ -407,13 +414,13 @@ pub fn taped_step_reused<F: Float>(
     Ok(())
 }
 
-fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, CliError> {
+fn taped_run<F: Float>(op: &Composite, x: &Typed<F>, naive: bool, mem: &dyn Memory) -> Result<Outcome, LabError> {
     let (mut tape, inputs) = tape_with_inputs(x);
     mem.reset();
     let color = twin(&mut tape, op, &inputs, naive)?;
     let g = tape.backward_with(color, x.grad_color.clone())?;
     let peak_extra = mem.peak_since_reset();
-    let gs = g.get(inputs.sigma).ok_or(CliError::Missing("no sigma gradient"))?;
+    let gs = g.get(inputs.sigma).ok_or(LabError::Missing("no sigma gradient"))?;
     Ok(Outcome {
         color: to_f64(tape.value(color)?),
         grad_sigma: to_f64(gs),
@@ -436,10 +443,10 @@ fn measure<F: Float>(
     samples: usize,
     reps: usize,
     mem: &dyn Memory,
-    refs: &super::reference::Reference,
+    refs: &crate::reference::Reference,
     out: &mut Vec<Measurement>,
     log: &mut dyn FnMut(&Measurement),
-) -> Result<(), CliError> {
+) -> Result<(), LabError> {
     let x = typed::<F>(d)?;
     let rays = d.offsets.len() - 1;
     let n = d.sigma.len() as f64;
@@ -525,14 +532,14 @@ fn measure<F: Float>(
     Ok(())
 }
 
-/// The triad on 1 thread and on all (see [`super::bandwidth::triad`]), once per bench run.
-pub fn bandwidths(quick: bool) -> Result<Vec<Bandwidth>, CliError> {
+/// The triad on 1 thread and on all (see [`crate::bandwidth::triad`]), once per bench run.
+pub fn bandwidths(quick: bool) -> Result<Vec<Bandwidth>, LabError> {
     // A pass takes milliseconds: even --quick keeps the best of several.
     let runs = if quick { 5 } else { 20 };
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
-    let mut out = vec![super::bandwidth::triad(Some(&one), runs)?];
+    let mut out = vec![crate::bandwidth::triad(Some(&one), runs)?];
     if rayon::current_num_threads() > 1 {
-        out.push(super::bandwidth::triad(None, runs)?);
+        out.push(crate::bandwidth::triad(None, runs)?);
     }
     Ok(out)
 }
@@ -564,7 +571,7 @@ pub fn run(
     quick: bool,
     mem: &dyn Memory,
     log: &mut dyn FnMut(&Measurement),
-) -> Result<Vec<Measurement>, CliError> {
+) -> Result<Vec<Measurement>, LabError> {
     let reps = if quick { 1 } else { 5 };
     let mut out = Vec::new();
     for &(rays, samples) in workloads {
@@ -585,15 +592,15 @@ pub fn run(
 }
 
 /// Parses `RxS`.
-pub fn parse_workload(s: &str) -> Result<(usize, usize), CliError> {
+pub fn parse_workload(s: &str) -> Result<(usize, usize), LabError> {
     let (r, n) = s
         .split_once('x')
-        .ok_or_else(|| CliError::Option(format!("workload {s:?} is not RxS (for example 4096x64)")))?;
+        .ok_or_else(|| LabError::Option(format!("workload {s:?} is not RxS (for example 4096x64)")))?;
     let parse = |v: &str| {
         v.parse::<usize>()
             .ok()
             .filter(|&x| x > 0)
-            .ok_or_else(|| CliError::Option(format!("workload {s:?}: {v:?} is not a positive integer")))
+            .ok_or_else(|| LabError::Option(format!("workload {s:?}: {v:?} is not a positive integer")))
     };
     Ok((parse(r)?, parse(n)?))
 }

@@ -28,11 +28,15 @@ impl Compensated {
 
 /// Packed rays in f64 with an upstream colour gradient.
 pub struct Rays<'a> {
+    /// Density per sample, `[n]`.
     pub sigma: &'a [f64],
+    /// Sample length, `[n]`.
     pub delta: &'a [f64],
     /// `[n * ch]`.
     pub color: &'a [f64],
+    /// Colour channels.
     pub ch: usize,
+    /// `[R + 1]`: ray `r` owns samples `offsets[r]..offsets[r + 1]`.
     pub offsets: &'a [usize],
     /// Shared `[ch]`.
     pub background: &'a [f64],
@@ -43,8 +47,11 @@ pub struct Rays<'a> {
 /// Reference colour `[R * ch]`, dL/dsigma `[n]`, and each dL/dsigma_k's term scale
 /// `delta_k (T_{k+1} |v_k| + sum_{i>k} w_i |v_i| + T_end |v_bg|)` with `v = gC . c`.
 pub struct Reference {
+    /// `[R * ch]`.
     pub color: Vec<f64>,
+    /// `[n]`.
     pub grad_sigma: Vec<f64>,
+    /// `[n]`: the size of the terms behind each dL/dsigma_k.
     pub grad_scale: Vec<f64>,
 }
 

@@ -3,11 +3,11 @@
 
 use std::path::Path;
 
+use fogray_fit::images::{canvas, save_canvas, ImageError};
 use fogray_ops::sample::GridAxis;
 use plotters::prelude::*;
 
 use super::{axis_name, in_plane_axes, PlaneImage};
-use crate::images::{canvas, save_canvas, ImageError};
 
 const FONT: &str = "sans-serif";
 const GAP: i32 = 10;

@@ -1,19 +1,19 @@
 //! Running a sweep's fits, one after another (they are timed, so never side by side), and
 //! keeping of each what a report shows: its log and figures, and pictures of its final model.
 
+use fogray_fit::dataset::Dataset;
+use fogray_fit::dispatch::{with_field, FieldWork};
+use fogray_fit::model::RadianceField;
+use fogray_fit::settings::{FitSettings, SceneBox};
+use fogray_fit::train::{fit, FitResult, LogEntry, Progress};
+use fogray_fit::FitError;
 use fogray_tape::Float;
 use ndarray::Array3;
 use serde::Serialize;
 
-use crate::dataset::Dataset;
-use crate::dispatch::{with_field, FieldWork};
-use crate::model::RadianceField;
-use crate::settings::{FitSettings, SceneBox};
-use crate::slices::{model_density_planes, occupancy_planes, PlaneImage};
-use crate::train::{fit, FitResult, LogEntry, Progress};
-
 use super::config::RunConfig;
 use super::SweepError;
+use crate::slices::{model_density_planes, occupancy_planes, PlaneImage};
 
 /// What a sweep runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,7 +104,7 @@ fn keep<F: Float, M: RadianceField<F>>(
 ) -> Result<ConfigRun, SweepError> {
     let density = model_density_planes(&result.model, &density_box, slice_pixels)?;
     let occupancy = match &result.occupancy {
-        Some(grid) => Some(occupancy_planes(grid).map_err(crate::FitError::from)?),
+        Some(grid) => Some(occupancy_planes(grid).map_err(FitError::from)?),
         None => None,
     };
     Ok(ConfigRun {

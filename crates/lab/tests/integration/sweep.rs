@@ -4,7 +4,7 @@
 use crate::common::ball_dataset;
 use fogray_fit::dataset::Dataset;
 use fogray_fit::settings::{Budget, FitSettings};
-use fogray_fit::sweep::{run_configs, same_steps, SweepError, SweepOptions, DEFAULT_CONFIGS};
+use fogray_lab::sweep::{run_configs, same_steps, SweepError, SweepOptions, DEFAULT_CONFIGS};
 
 fn tiny() -> (Dataset, FitSettings) {
     let config = FitSettings {

@@ -4,7 +4,7 @@
 //!
 //! ```
 //! use fogray_fit::settings::SceneBox;
-//! use fogray_fit::slices::{planes, AXES};
+//! use fogray_lab::slices::{planes, AXES};
 //! use fogray_ops::sample::GridAxis;
 //!
 //! // A ball of density 40 and radius 0.5 at the centre of the unit box.
@@ -15,13 +15,12 @@
 //! assert_eq!((z.values[[16, 16]], z.values[[0, 0]]), (40.0, 0.0)); // the centre, a corner
 //! ```
 
+use fogray_fit::settings::SceneBox;
+use fogray_fit::{FitError, RadianceField};
 use fogray_ops::sample::{GridAxis, OccupancyGrid};
 use fogray_ops::OpsError;
 use fogray_tape::Float;
 use ndarray::Array2;
-
-use crate::settings::SceneBox;
-use crate::{FitError, RadianceField};
 
 pub mod draw;
 
