@@ -18,7 +18,7 @@ const ROWS_PER_TASK: usize = 1024;
 
 /// Every training pixel of a dataset, numbered across its views.
 #[derive(Debug, Clone)]
-pub struct TrainingTable<'a> {
+pub(crate) struct TrainingTable<'a> {
     data: &'a Dataset,
     /// `starts[v]` is the number of view `v`'s first pixel; the last entry is the total.
     starts: Vec<usize>,
@@ -26,7 +26,7 @@ pub struct TrainingTable<'a> {
 
 /// The pixels one step trains on.
 #[derive(Debug, Clone)]
-pub struct TrainingBatch<F: Float> {
+pub(crate) struct TrainingBatch<F: Float> {
     /// Their rays.
     pub rays: RayBatch<F>,
     /// Their exact colours `[n, 3]`, composited over the dataset's background where their
@@ -43,7 +43,7 @@ impl<F: Float> TrainingBatch<F> {
     /// rounded to `F`; the colours themselves without alpha.
     ///
     /// Errors: [`FitError::Config`] if `backgrounds` is not `[n, 3]`.
-    pub fn colors_over(&self, from: [f64; 3], backgrounds: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
+    pub(crate) fn colors_over(&self, from: [f64; 3], backgrounds: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
         if backgrounds.dim() != self.colors.dim() {
             return Err(FitError::Config(format!(
                 "backgrounds {:?} for a batch of {} pixels",

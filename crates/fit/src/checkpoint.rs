@@ -55,9 +55,9 @@ use crate::settings::{FitSettings, Precision, Sampling};
 use crate::state::{Start, TrainingState};
 
 /// The `format` of the metadata.
-pub const FORMAT: &str = "fogray model";
+pub(crate) const FORMAT: &str = "fogray model";
 /// The `version` of the metadata this module writes and reads.
-pub const VERSION: &str = "2";
+pub(crate) const VERSION: &str = "2";
 
 /// Why a model file could not be written, read or used.
 #[non_exhaustive]

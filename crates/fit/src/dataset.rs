@@ -225,7 +225,7 @@ impl Dataset {
     }
 
     /// Whether any training view has an alpha channel.
-    pub fn training_alpha(&self) -> bool {
+    pub(crate) fn training_alpha(&self) -> bool {
         self.train.iter().any(|v| v.alpha.is_some())
     }
 

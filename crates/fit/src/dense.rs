@@ -47,7 +47,7 @@ use crate::space::FieldSpace;
 pub const CHANNELS: usize = VIEW_INDEPENDENT_CHANNELS;
 
 /// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
-pub const GRID: &str = "grid";
+pub(crate) const GRID: &str = "grid";
 
 /// A dense grid of raw density and colour, its parameters kept in a [`Params`] store.
 #[derive(Debug)]
@@ -68,7 +68,7 @@ pub struct DenseGrid<F: Float> {
 impl<F: Float> DenseGrid<F> {
     /// The same grid over the contracted cube of `contraction` (its box must be
     /// [`Contraction::cube`]); `None` for a field of its box.
-    pub fn with_contraction(mut self, contraction: Option<Contraction>) -> Self {
+    pub(crate) fn with_contraction(mut self, contraction: Option<Contraction>) -> Self {
         self.contraction = contraction;
         self
     }

@@ -100,7 +100,7 @@ pub(crate) fn check_same(what: &str, a: &ArrayView3<'_, f64>, b: &ArrayView3<'_,
 }
 
 /// `|render - exact|` per pixel and channel. Error: [`ImageError::Shape`] if the shapes differ.
-pub fn abs_error(render: ArrayView3<'_, f64>, exact: ArrayView3<'_, f64>) -> Result<Array3<f64>, ImageError> {
+pub(crate) fn abs_error(render: ArrayView3<'_, f64>, exact: ArrayView3<'_, f64>) -> Result<Array3<f64>, ImageError> {
     check_same("render", &render, &exact)?;
     Ok(Zip::from(&render).and(&exact).map_collect(|r, e| (r - e).abs()))
 }

@@ -12,7 +12,7 @@ use crate::error::FitError;
 /// at each run of occupied cells, tested in vector lanes instead of a walk through every cell).
 ///
 /// Errors: a step that is not finite and positive.
-pub fn sample_rays<F: Float>(
+pub(crate) fn sample_rays<F: Float>(
     bounds: &Aabb,
     occupancy: Option<&OccupancyGrid>,
     rays: &RayBatch<F>,

@@ -65,7 +65,7 @@ impl Framing {
     /// their optical axes, and their median distance to it).
     ///
     /// Errors: cameras that frame nothing (one camera, all at one point).
-    pub fn of_cameras(data: &Dataset) -> Result<Framing, FitError> {
+    pub(crate) fn of_cameras(data: &Dataset) -> Result<Framing, FitError> {
         let centres: Vec<[f64; 3]> = data.train.iter().map(|v| v.camera.centre()).collect();
         let axes: Vec<[f64; 3]> = data
             .train

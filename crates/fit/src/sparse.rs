@@ -43,7 +43,7 @@ use crate::space::FieldSpace;
 pub const DATA: &str = "sparse_grid";
 
 /// The name of the kept-node mask `[N, N, N]` in a checkpoint.
-pub const KEPT: &str = "sparse_grid.kept";
+pub(crate) const KEPT: &str = "sparse_grid.kept";
 
 /// Occupancy cells around an occupied one whose nodes a growth keeps.
 pub const DILATION: usize = 2;
@@ -73,7 +73,7 @@ fn node_position(scene_box: &SceneBox, nodes: usize, a: usize, i: usize) -> f64 
 impl<F: Float> SparseGrid<F> {
     /// The same grid over the contracted cube of `contraction` (its box must be
     /// [`Contraction::cube`]); `None` for a field of its box.
-    pub fn with_contraction(mut self, contraction: Option<Contraction>) -> Self {
+    pub(crate) fn with_contraction(mut self, contraction: Option<Contraction>) -> Self {
         self.contraction = contraction;
         self
     }
@@ -197,7 +197,7 @@ impl<F: Float> SparseGrid<F> {
 /// over `scene_box`), one entry per cell in the grid's order. A point in lattice cell `i` reads
 /// nodes `i` and `i + 1` on each axis; each occupancy cell's range of nodes is widened by one
 /// on each side against rounding, so a cell is only ever marked when it is surely empty.
-pub fn cells_without_kept_nodes(index: &NodeIndex, scene_box: &SceneBox, occupancy: &OccupancyGrid) -> Vec<bool> {
+pub(crate) fn cells_without_kept_nodes(index: &NodeIndex, scene_box: &SceneBox, occupancy: &OccupancyGrid) -> Vec<bool> {
     let n = index.nodes();
     let r = occupancy.resolution();
     let (lo, hi) = (occupancy.bounds().min(), occupancy.bounds().max());

@@ -15,7 +15,7 @@ pub fn view(i: usize, eye: [f64; 3]) -> View {
 }
 
 /// Three training views and one test view on a circle of radius 3, white background.
-pub fn small_dataset() -> Dataset {
+pub(crate) fn small_dataset() -> Dataset {
     let eyes = [[3.0, 0.0, 0.5], [0.0, 3.0, 0.5], [-3.0, 0.0, 0.5], [0.0, -3.0, 0.5]];
     let mut views: Vec<View> = eyes.iter().enumerate().map(|(i, &e)| view(i, e)).collect();
     let test = views.split_off(3);

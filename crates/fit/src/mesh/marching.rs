@@ -26,7 +26,7 @@ const NODE_MARGIN: f64 = 1e-3;
 const NONE: u32 = u32::MAX;
 
 /// The most vertices a mesh may have: a PLY face's indices are signed 32-bit integers.
-pub const MAX_VERTICES: usize = i32::MAX as usize;
+pub(crate) const MAX_VERTICES: usize = i32::MAX as usize;
 
 /// The surface of a lattice: vertex positions and triangles of vertex indices, each triangle
 /// counter-clockwise seen from outside (from where the density is below the level).

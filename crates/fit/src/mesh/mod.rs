@@ -246,7 +246,7 @@ pub fn extract<F: Float, M: RadianceField<F>>(model: &M, options: &MeshOptions) 
 /// just outside the box (a cap's) takes the colour at the nearest point of the box.
 ///
 /// Errors: the model's.
-pub fn vertex_colors<F: Float, M: RadianceField<F>>(
+pub(crate) fn vertex_colors<F: Float, M: RadianceField<F>>(
     model: &M,
     positions: &[[f32; 3]],
 ) -> Result<Vec<[u8; 3]>, FitError> {

@@ -39,7 +39,7 @@ pub enum Budget {
 }
 
 /// Training seconds when neither `steps` nor `seconds` is set.
-pub const DEFAULT_SECONDS: f64 = 60.0;
+pub(crate) const DEFAULT_SECONDS: f64 = 60.0;
 
 /// The longest training budget accepted, in seconds: one week (a longer one is a typo or a
 /// budget meant never to end).
@@ -257,7 +257,7 @@ impl FitSettings {
     ///
     /// Errors: a contracted space without a framing, or a framing that is not finite and
     /// positive.
-    pub fn field_space(&self) -> Result<FieldSpace, FitError> {
+    pub(crate) fn field_space(&self) -> Result<FieldSpace, FitError> {
         match (self.space, self.framing) {
             (SpaceChoice::Contracted, Some(framing)) => Ok(FieldSpace::Contracted(framing.contraction()?)),
             (SpaceChoice::Contracted, None) => Err(FitError::Config(

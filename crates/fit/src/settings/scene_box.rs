@@ -30,7 +30,7 @@ impl SceneBox {
 
     /// Half the spacing of a lattice of `nodes` per axis along the box's shortest side: the
     /// sample step that resolves a grid over the box (`1 / (nodes - 1)` for `[-1, 1]^3`).
-    pub fn half_node_spacing(&self, nodes: usize) -> f64 {
+    pub(crate) fn half_node_spacing(&self, nodes: usize) -> f64 {
         let side = (0..3).map(|a| self.max[a] - self.min[a]).fold(f64::INFINITY, f64::min);
         side / (2 * (nodes - 1)) as f64
     }

@@ -12,11 +12,11 @@ use crate::dataset::Dataset;
 use crate::error::FitError;
 
 /// Opacity below which a picture's pixel shows its background.
-pub const EMPTY_ALPHA: f64 = 0.5;
+pub(crate) const EMPTY_ALPHA: f64 = 0.5;
 
 /// Points of the visual hull and their colours.
 #[derive(Debug, Clone, PartialEq)]
-pub struct HullPoints {
+pub(crate) struct HullPoints {
     /// Positions (world frame).
     pub points: Vec<[f64; 3]>,
     /// The mean colour of the pixels each point falls in over the views that see it.
@@ -29,7 +29,7 @@ pub struct HullPoints {
 /// with) or no candidate survives.
 ///
 /// Errors: an empty or non-finite box ([`FitError::Config`]).
-pub fn visual_hull(
+pub(crate) fn visual_hull(
     data: &Dataset,
     bounds: [[f64; 3]; 2],
     candidates: usize,

@@ -16,9 +16,9 @@ use crate::error::FitError;
 use crate::trainer::{StepContext, StepPolicy};
 
 /// The factor a split divides its splat's scales by (3DGS's).
-pub const SPLIT_SHRINK: f64 = 1.6;
+pub(crate) const SPLIT_SHRINK: f64 = 1.6;
 /// Splats whose largest scale exceeds this fraction of the scene's extent are pruned.
-pub const HUGE_FRACTION: f64 = 0.1;
+pub(crate) const HUGE_FRACTION: f64 = 0.1;
 
 /// Adaptive density control (see the [module docs](self)).
 #[derive(Debug, Clone)]
@@ -73,7 +73,7 @@ impl Densify {
     ///
     /// Errors: more splats than the cap's memory allows; the optimiser's state not of the
     /// model.
-    pub fn densify<F: Float>(
+    pub(crate) fn densify<F: Float>(
         &mut self,
         model: &mut SplatModel<F>,
         optimiser: &mut fogray_tape::optim::Adam<F>,

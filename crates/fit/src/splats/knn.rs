@@ -9,7 +9,7 @@ pub const NEIGHBOURS: usize = 3;
 
 /// For each point, the mean distance to its [`NEIGHBOURS`] nearest other points (fewer where
 /// there are fewer others; 0 for a lone point). Expects finite coordinates.
-pub fn mean_neighbour_distance(points: &[[f64; 3]]) -> Vec<f64> {
+pub(crate) fn mean_neighbour_distance(points: &[[f64; 3]]) -> Vec<f64> {
     let n = points.len();
     if n < 2 {
         return vec![0.0; n];

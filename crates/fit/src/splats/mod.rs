@@ -16,7 +16,7 @@
 //! ```
 
 pub mod carve;
-pub mod densify;
+pub(crate) mod densify;
 pub mod knn;
 pub mod model;
 pub mod ply;

@@ -65,7 +65,7 @@ pub struct SplatModel<F: Float> {
 }
 
 /// Refuses `n` splats beyond `cap` or beyond the memory their copies need.
-pub fn check_count(n: usize, cap: usize) -> Result<(), FitError> {
+pub(crate) fn check_count(n: usize, cap: usize) -> Result<(), FitError> {
     if n > cap {
         return Err(FitError::TooManySplats { count: n, cap });
     }
@@ -195,7 +195,7 @@ impl<F: Float> SplatModel<F> {
     /// that 3DGS thresholds; its norm is the 2-D one times about `focal / depth`.
     ///
     /// Errors: a gradient of another shape ([`FitError::Config`]).
-    pub fn observe(&mut self, means_gradient: ArrayViewD<'_, F>) -> Result<(), FitError> {
+    pub(crate) fn observe(&mut self, means_gradient: ArrayViewD<'_, F>) -> Result<(), FitError> {
         if means_gradient.shape() != [self.len(), 3] {
             return Err(FitError::Config(format!(
                 "a means gradient {:?} for {} splats",
@@ -214,7 +214,7 @@ impl<F: Float> SplatModel<F> {
     }
 
     /// Each splat's mean gradient norm over the steps that saw it (0 if none did).
-    pub fn mean_gradients(&self) -> Vec<f64> {
+    pub(crate) fn mean_gradients(&self) -> Vec<f64> {
         self.gradient_sum
             .iter()
             .zip(&self.seen)
@@ -243,7 +243,7 @@ impl<F: Float> SplatModel<F> {
     }
 
     /// Trainable values: 11 a splat and its colour coefficients.
-    pub fn parameter_count(&self) -> usize {
+    pub(crate) fn parameter_count(&self) -> usize {
         self.len() * (11 + self.colour.coefficient_count())
     }
 
@@ -275,7 +275,7 @@ impl<F: Float> SplatModel<F> {
 
     /// The unit directions `[n, 3]` from `centre` to each mean (a mean at the centre looks
     /// along +z: any unit vector will do where no ray reaches).
-    pub fn directions_from(&self, centre: [f64; 3]) -> Result<Array2<F>, FitError> {
+    pub(crate) fn directions_from(&self, centre: [f64; 3]) -> Result<Array2<F>, FitError> {
         let means = self.params.get(self.ids.means)?;
         let n = self.len();
         let mut out = Array2::<F>::zeros((n, 3));

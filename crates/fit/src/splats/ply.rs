@@ -21,7 +21,7 @@ use super::model::SplatModel;
 use crate::error::FitError;
 
 /// The property names of a file of colour degree `degree`, in the file's order.
-pub fn property_names(degree: usize) -> Vec<String> {
+pub(crate) fn property_names(degree: usize) -> Vec<String> {
     let rest = 3 * ((degree + 1) * (degree + 1) - 1);
     let mut names: Vec<String> = ["x", "y", "z", "nx", "ny", "nz", "f_dc_0", "f_dc_1", "f_dc_2"]
         .iter()
@@ -46,7 +46,7 @@ fn sigmoid(x: f64) -> f64 {
 /// `model` in the 3DGS PLY layout (see the [module docs](self)), as the file's bytes.
 ///
 /// Errors: a parameter lent to a tape ([`FitError::Param`]).
-pub fn splats_ply<F: Float>(model: &SplatModel<F>) -> Result<Vec<u8>, FitError> {
+pub(crate) fn splats_ply<F: Float>(model: &SplatModel<F>) -> Result<Vec<u8>, FitError> {
     let a = model.arrays()?;
     let basis = (model.degree() + 1) * (model.degree() + 1);
     let names = property_names(model.degree());

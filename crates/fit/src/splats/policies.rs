@@ -32,7 +32,7 @@ impl SplatRates {
 
     /// The means' rate at budget fraction `t` in `[0, 1]`: log-linear between the settings'
     /// two, times the extent (a scene twice as large moves its splats twice as far).
-    pub fn means_rate(&self, t: f64) -> f64 {
+    pub(crate) fn means_rate(&self, t: f64) -> f64 {
         let [a, b] = self.settings.means_lr;
         let t = t.clamp(0.0, 1.0);
         (a.ln() * (1.0 - t) + b.ln() * t).exp() * self.extent

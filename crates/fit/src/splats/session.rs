@@ -30,7 +30,7 @@ const PIXELS_PER_SPLAT: usize = 8;
 /// How many splats a fit of `data` starts with: `most`, or fewer where the training pictures
 /// have fewer pixels of the object (where alpha is at least one half; every pixel of a
 /// picture without alpha) than [`PIXELS_PER_SPLAT`] for each; at least 1.
-pub fn start_count(data: &Dataset, most: usize) -> usize {
+pub(crate) fn start_count(data: &Dataset, most: usize) -> usize {
     let pixels: usize = data
         .train
         .iter()
@@ -44,7 +44,7 @@ pub fn start_count(data: &Dataset, most: usize) -> usize {
 
 /// Where a random start puts its splats: the fit's inner region when its space was framed
 /// from the cameras (a capture), else its box (`[min, max]` corners).
-pub fn start_region(settings: &FitSettings) -> [[f64; 3]; 2] {
+pub(crate) fn start_region(settings: &FitSettings) -> [[f64; 3]; 2] {
     match &settings.framing {
         Some(f) => [f.centre.map(|c| c - f.radius), f.centre.map(|c| c + f.radius)],
         None => {

@@ -80,7 +80,7 @@ impl Default for SplatSettings {
 impl SplatSettings {
     /// The splat settings of a fit: its budget, seed, colour degree and random background,
     /// the rest as [`SplatSettings::default`].
-    pub fn of_fit(settings: &FitSettings) -> Self {
+    pub(crate) fn of_fit(settings: &FitSettings) -> Self {
         SplatSettings {
             budget: settings.budget(),
             seed: settings.seed,

@@ -45,7 +45,7 @@ pub struct SplatTrainer<'d, F: Float> {
 
 /// The scene's extent as 3DGS takes it: 1.1 times the largest distance of a training camera
 /// from their mean centre (1 for a single camera, so that rates stay positive).
-pub fn scene_extent(data: &Dataset) -> f64 {
+pub(crate) fn scene_extent(data: &Dataset) -> f64 {
     let centres: Vec<[f64; 3]> = data.train.iter().map(|v| v.camera.centre()).collect();
     let n = centres.len().max(1) as f64;
     let mean = [0, 1, 2].map(|a| centres.iter().map(|c| c[a]).sum::<f64>() / n);
@@ -252,7 +252,7 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     }
 
     /// The model, ending the fit.
-    pub fn into_model(self) -> SplatModel<F> {
+    pub(crate) fn into_model(self) -> SplatModel<F> {
         self.model
     }
 }
@@ -276,7 +276,7 @@ impl<F: Float> Stepper for SplatTrainer<'_, F> {
 /// `view` rendered by `model` over `background`: colour, opacity, no depth.
 ///
 /// Errors: the ops'.
-pub fn render_view<F: Float>(
+pub(crate) fn render_view<F: Float>(
     model: &SplatModel<F>,
     view: &View,
     background: [f64; 3],

@@ -30,7 +30,7 @@ pub fn undistorted(data: &Dataset) -> Result<Option<Dataset>, FitError> {
 /// [module docs](self)); a view without distortion is copied.
 ///
 /// Errors: a camera the pinhole cannot be made of.
-pub fn undistorted_view(view: &View) -> Result<View, FitError> {
+pub(crate) fn undistorted_view(view: &View) -> Result<View, FitError> {
     let lens = *view.camera.distortion();
     let pinhole = view.camera.clone().with_distortion(LensDistortion::NONE)?;
     if lens.is_none() {

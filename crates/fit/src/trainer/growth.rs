@@ -51,7 +51,7 @@ impl Growth {
     }
 
     /// The nodes per axis a fresh fit of `settings` starts with.
-    pub fn first_nodes(settings: &FitSettings) -> usize {
+    pub(crate) fn first_nodes(settings: &FitSettings) -> usize {
         growth_stages(settings)[0].1
     }
 

@@ -261,7 +261,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     }
 
     /// Steps this trainer took (a resumed fit's earlier steps not counted).
-    pub fn steps_taken(&self) -> usize {
+    pub(crate) fn steps_taken(&self) -> usize {
         self.step - self.first_step
     }
 
@@ -388,7 +388,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     }
 
     /// The model and the occupancy grid, ending the fit.
-    pub fn into_parts(self) -> (M, Option<OccupancyGrid>) {
+    pub(crate) fn into_parts(self) -> (M, Option<OccupancyGrid>) {
         (self.model, self.occupancy)
     }
 }
