@@ -63,7 +63,7 @@ impl<F: Float> TrainingBatch<F> {
 
 impl<'a> TrainingTable<'a> {
     /// The training pixels of `data`.
-    pub fn new(data: &'a Dataset) -> Self {
+    pub(crate) fn new(data: &'a Dataset) -> Self {
         let mut starts = vec![0];
         for v in &data.train {
             starts.push(starts[starts.len() - 1] + v.pixels());
@@ -72,7 +72,7 @@ impl<'a> TrainingTable<'a> {
     }
 
     /// Training pixels in the table.
-    pub fn pixels(&self) -> usize {
+    pub(crate) fn pixels(&self) -> usize {
         self.starts[self.starts.len() - 1]
     }
 
@@ -82,7 +82,7 @@ impl<'a> TrainingTable<'a> {
     ///
     /// Errors: [`FitError::Config`] for a row past the last pixel (nothing is gathered), or
     /// an error of [`RayBatch::new`] (no rows at all).
-    pub fn gather<F: Float>(&self, rows: &[usize]) -> Result<TrainingBatch<F>, FitError> {
+    pub(crate) fn gather<F: Float>(&self, rows: &[usize]) -> Result<TrainingBatch<F>, FitError> {
         if let Some(&bad) = rows.iter().find(|&&r| r >= self.pixels()) {
             return Err(FitError::Config(format!(
                 "training pixel {bad} asked of a table of {}",

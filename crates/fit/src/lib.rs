@@ -67,6 +67,9 @@
 //! ```
 
 #![warn(missing_docs)]
+// A `pub` item no path outside the crate reaches is `pub(crate)`: the public surface is what the
+// modules and their re-exports show, nothing more.
+#![warn(unreachable_pub)]
 
 pub mod backdrop;
 pub mod batch;

@@ -197,7 +197,11 @@ impl<F: Float> SparseGrid<F> {
 /// over `scene_box`), one entry per cell in the grid's order. A point in lattice cell `i` reads
 /// nodes `i` and `i + 1` on each axis; each occupancy cell's range of nodes is widened by one
 /// on each side against rounding, so a cell is only ever marked when it is surely empty.
-pub(crate) fn cells_without_kept_nodes(index: &NodeIndex, scene_box: &SceneBox, occupancy: &OccupancyGrid) -> Vec<bool> {
+pub(crate) fn cells_without_kept_nodes(
+    index: &NodeIndex,
+    scene_box: &SceneBox,
+    occupancy: &OccupancyGrid,
+) -> Vec<bool> {
     let n = index.nodes();
     let r = occupancy.resolution();
     let (lo, hi) = (occupancy.bounds().min(), occupancy.bounds().max());

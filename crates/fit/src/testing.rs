@@ -7,7 +7,7 @@ use crate::dataset::{Dataset, View};
 use fogray_ops::{Intrinsics, PinholeCamera};
 
 /// View `i` of 8 x 8 pixels from `eye`, looking at the origin, its picture a ramp.
-pub fn view(i: usize, eye: [f64; 3]) -> View {
+pub(crate) fn view(i: usize, eye: [f64; 3]) -> View {
     let k = Intrinsics::from_vertical_fov(8, 8, 40f64.to_radians()).unwrap();
     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
     let image = Array3::from_shape_fn((8, 8, 3), |(a, b, c)| ((a * 8 + b) * 3 + c + i) as f64 / 200.0);

@@ -33,9 +33,9 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-pub mod lattice;
-pub mod marching;
-pub mod ply;
+pub(crate) mod lattice;
+pub(crate) mod marching;
+pub(crate) mod ply;
 mod tables;
 
 use fogray_tape::Float;

@@ -5,7 +5,7 @@
 use std::collections::HashMap;
 
 /// How many neighbours the initial scale averages over (3DGS's choice).
-pub const NEIGHBOURS: usize = 3;
+pub(crate) const NEIGHBOURS: usize = 3;
 
 /// For each point, the mean distance to its [`NEIGHBOURS`] nearest other points (fewer where
 /// there are fewer others; 0 for a lone point). Expects finite coordinates.

@@ -15,19 +15,19 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-pub mod carve;
+pub(crate) mod carve;
 pub(crate) mod densify;
-pub mod knn;
-pub mod model;
-pub mod ply;
-pub mod policies;
-pub mod resize;
-pub mod session;
-pub mod settings;
+pub(crate) mod knn;
+pub(crate) mod model;
+pub(crate) mod ply;
+pub(crate) mod policies;
+pub(crate) mod resize;
+pub(crate) mod session;
+pub(crate) mod settings;
 #[cfg(test)]
 mod tests;
-pub mod trainer;
-pub mod undistort;
+pub(crate) mod trainer;
+pub(crate) mod undistort;
 
 pub use densify::Densify;
 pub use model::{SplatArraysOwned, SplatIds, SplatModel};

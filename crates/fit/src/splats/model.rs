@@ -18,7 +18,7 @@ use super::knn::mean_neighbour_distance;
 use crate::error::FitError;
 
 /// The opacity every splat starts with (3DGS's), stored as its logit.
-pub const INITIAL_OPACITY: f64 = 0.1;
+pub(crate) const INITIAL_OPACITY: f64 = 0.1;
 
 /// The splats' parameters as plain arrays, `n` rows each (shapes as [`SplatVars`], but for
 /// the colour, which is spherical harmonics).

@@ -92,7 +92,7 @@ pub(crate) fn splats_ply<F: Float>(model: &SplatModel<F>) -> Result<Vec<u8>, Fit
 /// Writes `model` to the file `path` whole or not at all ([`fogray_data::write_atomic`]).
 ///
 /// Errors: the file cannot be written (naming it), a parameter lent to a tape.
-pub fn write_ply<F: Float>(path: &Path, model: &SplatModel<F>) -> Result<(), FitError> {
+pub(crate) fn write_ply<F: Float>(path: &Path, model: &SplatModel<F>) -> Result<(), FitError> {
     let bytes = splats_ply(model)?;
     fogray_data::write_atomic(path, |out| out.write_all(&bytes))
         .map_err(|e| FitError::Config(format!("{}: the splats cannot be written: {e}", path.display())))

@@ -11,7 +11,7 @@ use crate::error::FitError;
 use crate::trainer::{StepContext, StepPolicy};
 
 /// The opacity a reset caps every splat's at (3DGS's).
-pub const RESET_OPACITY: f64 = 0.01;
+pub(crate) const RESET_OPACITY: f64 = 0.01;
 
 /// Per-parameter learning rates, set before every step (the optimiser's base rate is 1 and
 /// each parameter's scale is its rate, so a densification's new optimiser gets them back).

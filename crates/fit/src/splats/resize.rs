@@ -37,7 +37,7 @@ fn gather<F: Float>(moment: &ArrayD<F>, origin: &[Option<usize>]) -> Result<Arra
 ///
 /// Errors: `origin` not one per row or naming a missing row, arrays that do not fit
 /// ([`FitError::Config`]).
-pub fn resize<F: Float>(
+pub(crate) fn resize<F: Float>(
     model: &mut SplatModel<F>,
     optimiser: &mut Adam<F>,
     arrays: SplatArraysOwned<F>,

@@ -16,7 +16,7 @@ use crate::error::FitError;
 /// view has a lens distortion.
 ///
 /// Errors: a camera the pinhole cannot be made of.
-pub fn undistorted(data: &Dataset) -> Result<Option<Dataset>, FitError> {
+pub(crate) fn undistorted(data: &Dataset) -> Result<Option<Dataset>, FitError> {
     let all = || data.train.iter().chain(&data.test);
     if all().all(|v| v.camera.distortion().is_none()) {
         return Ok(None);

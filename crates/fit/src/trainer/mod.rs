@@ -33,11 +33,11 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
-pub mod budget;
-pub mod growth;
-pub mod policy;
-pub mod rate;
-pub mod refresh;
+pub(crate) mod budget;
+pub(crate) mod growth;
+pub(crate) mod policy;
+pub(crate) mod rate;
+pub(crate) mod refresh;
 #[cfg(test)]
 mod tests;
 
