@@ -168,6 +168,3 @@ pub fn render_ray(scene: &Scene, ray: &Ray) -> ExactPixel {
         depth,
     }
 }
-
-#[cfg(test)]
-mod tests;

@@ -5,6 +5,7 @@
 mod cli;
 mod common;
 mod datasets;
+mod exact;
 mod fit;
 mod persist;
 mod persist_cli;

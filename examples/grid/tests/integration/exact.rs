@@ -1,7 +1,7 @@
 //! The exact render against hand-derived values and brute-force quadrature.
 
-use super::*;
-use crate::scene::{Cuboid, Primitive, Scene, Sphere};
+use fogray_grid::exact::*;
+use fogray_grid::scene::{Cuboid, Primitive, Scene, Sphere};
 
 fn sphere(center: [f64; 3], radius: f64, density: f64, color: [f64; 3]) -> Primitive {
     Primitive::Sphere(Sphere {
