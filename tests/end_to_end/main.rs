@@ -6,11 +6,13 @@
 //! - [`lesson_tables`]: the lesson's worked tables, reproduced by the fused composite and its
 //!   taped twin;
 //! - [`fused_vs_taped`]: the fused composite against its taped twin, finite differences and
-//!   itself across precisions, thread counts and packings.
+//!   itself across precisions, thread counts and packings;
+//! - [`fit_a_ball`]: a whole fit of a known scene, scored on held-out views.
 //!
 //! The README's examples (and docs/your-own-renderer.md's) are not here: they run as doctests
 //! of the facade (`ReadmeDoctests` in src/lib.rs), `cargo test -p fogray --doc`.
 
 mod composite_common;
+mod fit_a_ball;
 mod fused_vs_taped;
 mod lesson_tables;
