@@ -8,8 +8,8 @@
 use crate::composite_common;
 
 use composite_common::{assert_close_scaled, grad_scale, run, worst_scaled, Method, Rays};
-use fogray_ops::{twins, Background, Composite, CompositeInputs};
-use fogray_tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
+use fogray::ops::{twins, Background, Composite, CompositeInputs};
+use fogray::tape::{gradcheck, GradcheckOptions, Tape, TapeError, Var};
 use ndarray::{Array1, ArrayD};
 use proptest::prelude::*;
 use rand::{Rng, SeedableRng};
