@@ -327,7 +327,12 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
             inputs = inputs.file(file);
         }
     }
-    fogray_data::plan_fit_outputs(&inputs, args.save_model.as_deref(), args.out.as_deref())?;
+    fogray_data::plan_fit_outputs(
+        &inputs,
+        args.save_model.as_deref(),
+        args.out.as_deref(),
+        &crate::fit_report::REPORT_FOLDERS,
+    )?;
     // The same rule as the training bar's: --json asks for a quiet run.
     let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args, !args.json)?;
     let settings = FitSettings {

@@ -21,6 +21,10 @@ use crate::fit::{FitPlan, FitSummary};
 /// in an 18-pixel font) takes about 180, and a narrower view's titles run into each other.
 const MIN_PANEL_WIDTH: usize = 200;
 
+/// The report's folders under `--out` (each checked before the fit trains: a link there into
+/// the dataset, or a file in its place, is refused before any work).
+pub const REPORT_FOLDERS: [&str; 1] = ["test"];
+
 /// How many times a view `width` pixels wide is magnified in its panels: the least whole
 /// factor that makes it [`MIN_PANEL_WIDTH`] wide (1 for views at least that wide).
 fn panel_scale(width: usize) -> u32 {
@@ -40,7 +44,7 @@ pub fn write_out(
     summary: &FitSummary,
     held_out: &[RenderedView],
 ) -> Result<(), CliError> {
-    let views = dir.join("test");
+    let views = dir.join(REPORT_FOLDERS[0]);
     std::fs::create_dir_all(&views).map_err(CliError::file("create", &views))?;
     for (t, view) in data.test.iter().zip(held_out) {
         let render = &view.color;

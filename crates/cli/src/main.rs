@@ -30,7 +30,9 @@ enum Command {
     /// test split, else every 8th view) at intervals off the clock, and print the log.
     // The defaults are the library's recommended settings (FitSettings::RECOMMENDED, which
     // says why each differs from FitSettings::DEFAULT).
+    // Negative numbers are values (`--lr -1` is a bad rate, refused by name, not a flag).
     #[command(
+        allow_negative_numbers = true,
         long_about = FIT_HELP,
         mut_arg("sh_degree", |a| a.default_value(fit::recommended("sh_degree"))),
         mut_arg("model", |a| a.default_value(fit::recommended("model"))),
@@ -45,10 +47,12 @@ enum Command {
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms
     /// file, or from N cameras orbiting its scene box: DIR/<name>.png, 8-bit RGB, over the
     /// model's background; with --depth its depth maps, with --gif (an orbit) an animated GIF.
+    #[command(allow_negative_numbers = true)]
     Render(render::RenderArgs),
     /// Export a model saved by `fogray fit --save-model` for other tools: --mesh OUT.ply, the
     /// surface where its density crosses a level (marching cubes), binary PLY with vertex
     /// colours, which MeshLab, Blender and trimesh open.
+    #[command(allow_negative_numbers = true)]
     Export(export::ExportArgs),
     /// Pose a folder of photographs (or a video's frames) with COLMAP, run as a child process,
     /// into the folder `fogray fit --data DIR` reads: DIR/images (the photographs, linked or
@@ -58,6 +62,7 @@ enum Command {
     /// 127.0.0.1 (the address is printed) where dragging orbits the camera, shift- or
     /// right-dragging pans and the wheel zooms; frames rendered as `fogray render` renders
     /// them. Ctrl-C stops it (exit status 130).
+    #[command(allow_negative_numbers = true)]
     View(fogray_cli::view::ViewArgs),
     /// Composite packed rays given as JSON; print colour, opacity, depth, weights, transmittance
     /// and, with grad_color, the gradients, as JSON.

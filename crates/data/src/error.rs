@@ -359,7 +359,8 @@ pub enum DataError {
 /// A number as a message writes it: in full up to 1e15, in scientific notation beyond (Rust
 /// writes 1e308 in all its 309 digits).
 fn number(value: f64) -> String {
-    if value.is_finite() && value.abs() >= 1e15 {
+    // Huge and tiny values in exponent form (1e-300 is not 300 zeros).
+    if value.is_finite() && value != 0.0 && !(1e-6..1e15).contains(&value.abs()) {
         format!("{value:e}")
     } else {
         value.to_string()

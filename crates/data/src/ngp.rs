@@ -206,12 +206,20 @@ fn scene_box(top: Obj<'_>) -> Result<([f64; 3], [f64; 3]), DataError> {
     }
     let (min, max) = ngp_scene_box(aabb_scale, scale, offset);
     // A tiny `scale` or a huge `offset` sends the box out of any scene's reach.
-    if let Some(&v) = min.iter().chain(&max).find(|v| v.is_nan() || v.abs() > MAX_COORDINATE) {
-        return Err(top.bad_value(
-            "aabb_scale",
-            v,
-            "the scene box it gives (with scale, offset, aabb) must lie within 1e6 of the origin",
-        ));
+    if min.iter().chain(&max).any(|v| v.is_nan() || v.abs() > MAX_COORDINATE) {
+        // Named after the entry the file gives that moves the box furthest: its corners are
+        // not in the file.
+        let rule = "the scene box it gives (with aabb_scale, scale, offset, aabb) must lie within 1e6 of the origin";
+        let farthest = |v: [f64; 3]| v.into_iter().fold(0.0f64, |m, x| if x.abs() > m.abs() { x } else { m });
+        return Err(if top.get("aabb").is_some() {
+            top.bad_value("aabb", farthest(min).abs().max(farthest(max).abs()), rule)
+        } else if top.get("offset").is_some() {
+            top.bad_value("offset", farthest(offset), rule)
+        } else if top.get("scale").is_some() {
+            top.bad_value("scale", scale, rule)
+        } else {
+            top.bad_value("aabb_scale", aabb_scale, rule)
+        });
     }
     Ok((min, max))
 }

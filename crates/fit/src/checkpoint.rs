@@ -396,10 +396,20 @@ impl Meta<'_> {
                 settings.precision.name()
             )));
         }
+        // What a reader allocates follows the nodes and the settings' grid: both are checked
+        // against the settings' ranges and the machine's memory before anything is built.
+        settings.check().map_err(|e| self.error(format!("its settings: {e}")))?;
+        let nodes: usize = self.parse("nodes")?;
+        if !(2..=settings.grid).contains(&nodes) {
+            return Err(self.error(format!(
+                "metadata entry \"nodes\" is {nodes}, outside 2 to the settings' grid of {}",
+                settings.grid
+            )));
+        }
         Ok(ModelInfo {
             settings,
             kind: self.text("model")?.to_string(),
-            nodes: self.parse("nodes")?,
+            nodes,
             step: self.parse("step")?,
             seconds: self.finite("seconds")?,
             extra: self.extra(),

@@ -209,7 +209,7 @@ fn run_field<F: Float, M: RadianceField<F>>(
         .clone()
         .unwrap_or_else(|| plan.save_on_interrupt.clone());
     let from = match &plan.resume {
-        Some(file) => format!(", from step {first_step} of {}", file.display()),
+        Some(file) => format!(", from step {first_step} of {}", fogray_data::shown(file)),
         None => String::new(),
     };
     let mut trainer = Trainer::<F, M>::new(data, settings, start)?;
@@ -355,7 +355,7 @@ impl<'a> SessionBar<'a> {
                         self.plan.tool,
                         self.data.train.len(),
                         self.data.test.len(),
-                        saved.display()
+                        fogray_data::shown(&saved)
                     )
                 });
             }

@@ -8,7 +8,7 @@ use crate::outputs::write_model;
 
 #[test]
 fn every_flag_error_is_one_line() {
-    let cases: [(&[&str], &str); 7] = [
+    let cases: [(&[&str], &str); 9] = [
         (&["fit", "--data", "d", "--background", "2,2,2"], "fit"),
         (&["fit", "--data", "d", "--box", "0"], "fit"),
         (
@@ -25,6 +25,9 @@ fn every_flag_error_is_one_line() {
         ),
         (&["export", "--model", "m"], "export"),
         (&["composite", "--method", "nope"], "composite"),
+        // A negative number is a value, refused by the flag's own check.
+        (&["fit", "--data", "d", "--lr", "-1"], "fit"),
+        (&["view", "--model", "m", "--port", "-1"], "view"),
     ];
     for (args, subcommand) in cases {
         let run = fogray(args);
@@ -35,7 +38,12 @@ fn every_flag_error_is_one_line() {
         assert!(run.stderr.starts_with(&prefix), "{args:?}: {:?}", run.stderr);
         assert!(!run.stderr.contains("Usage"), "{args:?}: {:?}", run.stderr);
     }
-    // What the error names survives the folding: the missing flag, the possible values.
+    // What the error names survives the folding: the missing flag, the possible values, the
+    // flag a negative number was given to.
+    assert!(fogray(&["fit", "--data", "d", "--lr", "-1"]).stderr.contains("--lr"));
+    assert!(fogray(&["view", "--model", "m", "--port", "-1"])
+        .stderr
+        .contains("--port"));
     assert!(fogray(&["export", "--model", "m"]).stderr.contains("--mesh"));
     assert!(fogray(&["composite", "--method", "nope"])
         .stderr

@@ -203,6 +203,21 @@ fn a_fit_saving_onto_its_transforms_or_reporting_into_its_dataset_is_refused_bef
         "it is a folder, where a file is expected",
         "--save-model a folder",
     );
+    // A report folder whose test/ links into the dataset: its held-out pictures would be
+    // overwritten by the report's panels.
+    #[cfg(unix)]
+    {
+        let report = dir.path().join("report");
+        std::fs::create_dir(&report).unwrap();
+        std::os::unix::fs::symlink(&data, report.join("test")).unwrap();
+        let mut args = vec!["fit", "--data", arg(&data), "--out", arg(&report)];
+        args.extend(TINY_FIT);
+        assert_refused(
+            &fogray(&args),
+            "lies inside the input dataset folder",
+            "--out whose test/ links into the dataset",
+        );
+    }
     assert_eq!(snapshot(&data), before);
 }
 

@@ -116,12 +116,12 @@ impl fmt::Display for ImageSource {
                 folder,
                 downscale: 1,
                 why,
-            } => write!(f, "{} at full size ({why})", folder.display()),
+            } => write!(f, "{} at full size ({why})", crate::shown(folder)),
             ImageSource::FullSize { folder, downscale, why } => {
-                write!(f, "{} downscaled by {downscale} on load ({why})", folder.display())
+                write!(f, "{} downscaled by {downscale} on load ({why})", crate::shown(folder))
             }
             ImageSource::Prescaled { folder, factor } => {
-                write!(f, "{} as stored (already downscaled by {factor})", folder.display())
+                write!(f, "{} as stored (already downscaled by {factor})", crate::shown(folder))
             }
         }
     }

@@ -228,15 +228,28 @@ fn writable(folder: &Path, probed: &mut HashSet<PathBuf>) -> Result<(), OutputPr
 /// Checks the outputs of a fit before it trains (see [`check_outputs`]): `save_model`, the
 /// model file, is not an input, not a folder, and its folder takes a new file (or is
 /// `out_dir`, which the fit creates); `out_dir`, the report's folder, is not an input, and the
-/// dataset and the report's folder do not overlap, neither inside the other.
+/// dataset and the report's folder do not overlap, neither inside the other; and each of
+/// `report_folders` (the report's own subfolders, by name under `out_dir`), resolved through
+/// any link already there, is a folder or absent and lies in no input (a link `out/test` to
+/// the dataset's `test` would otherwise have the report's pictures written over its
+/// photographs).
 ///
 /// `inputs` are what the fit reads: `Inputs::new().dataset(data)?`, and the model it resumes
 /// from if the fit flow does not mean to save over it.
 ///
 /// Errors: [`DataError::Output`] naming the path and why.
-pub fn plan_fit_outputs(inputs: &Inputs, save_model: Option<&Path>, out_dir: Option<&Path>) -> Result<(), DataError> {
-    let mut outputs = Vec::with_capacity(2);
+pub fn plan_fit_outputs(
+    inputs: &Inputs,
+    save_model: Option<&Path>,
+    out_dir: Option<&Path>,
+    report_folders: &[&str],
+) -> Result<(), DataError> {
+    let subfolders: Vec<PathBuf> = out_dir
+        .map(|out| report_folders.iter().map(|name| out.join(name)).collect())
+        .unwrap_or_default();
+    let mut outputs = Vec::with_capacity(2 + subfolders.len());
     outputs.extend(out_dir.map(Output::SeparateFolder));
+    outputs.extend(subfolders.iter().map(|p| Output::SeparateFolder(p)));
     outputs.extend(save_model.map(Output::File));
     check_outputs(inputs, &outputs)
 }

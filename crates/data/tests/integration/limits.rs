@@ -47,7 +47,18 @@ fn pictures_claimed_larger_than_memory_are_refused_before_decoding() {
 
 #[test]
 fn numbers_no_camera_or_scene_can_have_are_refused_naming_the_file() {
-    let cases: [(Value, Value, &str); 5] = [
+    let cases: [(Value, Value, &str); 7] = [
+        // A box sent beyond any scene is blamed on the entry the file gives, with its value.
+        (
+            json!({ "offset": [1e300, 0.0, 0.0] }),
+            json!({}),
+            "`offset` is 1e300 (the scene box it gives",
+        ),
+        (
+            json!({ "scale": 1e-300 }),
+            json!({}),
+            "`scale` is 1e-300 (the scene box it gives",
+        ),
         (
             json!({ "fl_x": 1e308 }),
             json!({}),

@@ -27,7 +27,7 @@ mod scene_box;
 mod tests;
 
 pub use kinds::{Method, ModelKind, Precision, Sampling};
-pub use scene_box::SceneBox;
+pub use scene_box::{SceneBox, MAX_BOX_COORDINATE};
 
 /// When training stops.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -4,6 +4,10 @@ use serde::{Deserialize, Serialize};
 
 use crate::error::FitError;
 
+/// The farthest a box's corner may lie from the origin on any axis: a dataset's own scene box
+/// is held to the same bound.
+pub const MAX_BOX_COORDINATE: f64 = 1e6;
+
 /// The box a model covers: `min` to `max` on each axis (world units).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SceneBox {
@@ -43,6 +47,13 @@ impl SceneBox {
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
                 return Err(FitError::Config(format!(
                     "--box: axis {a} runs from {lo} to {hi} (must be finite and increasing)"
+                )));
+            }
+            // A scene's coordinates lie within what a dataset may give (fogray-data's range):
+            // beyond it steps and distances overflow in the samplers.
+            if lo.abs().max(hi.abs()) > MAX_BOX_COORDINATE {
+                return Err(FitError::Config(format!(
+                    "--box: axis {a} runs from {lo:e} to {hi:e}, beyond {MAX_BOX_COORDINATE:e} from the origin"
                 )));
             }
         }

@@ -80,6 +80,17 @@ fn every_setting_is_checked() {
         (FitSettings { lr: f64::NAN, ..ok }, "--lr"),
         (FitSettings { lr_final: 0.0, ..ok }, "--lr-final"),
         (FitSettings { tv: -1.0, ..ok }, "--tv"),
+        // Finite corners whose span overflows (the samplers' step would be infinite).
+        (
+            FitSettings {
+                scene_box: Some(SceneBox {
+                    min: [-1e308; 3],
+                    max: [1e308; 3],
+                }),
+                ..ok
+            },
+            "--box",
+        ),
         (
             FitSettings {
                 shift: f64::INFINITY,

@@ -178,7 +178,22 @@ fn bad_files_are_refused_with_a_typed_error() {
         (
             "tensor \"grid\" is F32 [4, 4, 4, 4]",
             Box::new(|_, m| {
-                m.insert("nodes".into(), "5".into());
+                m.insert("nodes".into(), "3".into());
+            }),
+        ),
+        // A node count that would have a reader allocate without bound is refused first.
+        (
+            "metadata entry \"nodes\" is 100000, outside 2 to the settings' grid of 4",
+            Box::new(|_, m| {
+                m.insert("nodes".into(), "100000".into());
+            }),
+        ),
+        (
+            "would need",
+            Box::new(|_, m| {
+                let s = m["settings"].replace("\"grid\":4", "\"grid\":100000");
+                m.insert("settings".into(), s);
+                m.insert("nodes".into(), "100000".into());
             }),
         ),
         // The settings are one entry (JSON); a setting missing from it reads its default.

@@ -75,7 +75,7 @@ fn a_report_folder_may_not_hold_the_dataset() {
     let dir = tempfile::tempdir().unwrap();
     let (data, _) = scene(dir.path());
     let inputs = Inputs::new().dataset(&data).unwrap();
-    let problem = plan_fit_outputs(&inputs, None, Some(dir.path())).unwrap_err();
+    let problem = plan_fit_outputs(&inputs, None, Some(dir.path()), &["test"]).unwrap_err();
     assert!(
         matches!(
             &problem,
@@ -96,7 +96,7 @@ fn a_model_file_is_checked_against_its_folder() {
     let (data, _) = scene(dir.path());
     let inputs = Inputs::new().dataset(&data).unwrap();
     let transforms = data.join("transforms_train.json");
-    let err = plan_fit_outputs(&inputs, Some(&transforms), None).unwrap_err();
+    let err = plan_fit_outputs(&inputs, Some(&transforms), None, &["test"]).unwrap_err();
     assert!(
         err.to_string().starts_with(&format!(
             "{}: refused as an output: it is the input",
@@ -114,7 +114,7 @@ fn a_model_file_is_checked_against_its_folder() {
     );
     // Into the report's folder, which the fit creates.
     let out = dir.path().join("report");
-    plan_fit_outputs(&inputs, Some(&out.join("model.safetensors")), Some(&out)).unwrap();
+    plan_fit_outputs(&inputs, Some(&out.join("model.safetensors")), Some(&out), &["test"]).unwrap();
     let file = dir.path().join("model.safetensors");
     let under_a_file = file.join("x.png");
     assert_eq!(
@@ -133,4 +133,43 @@ fn resolution_follows_dot_dot_through_missing_names() {
         real.parent().unwrap().join("x")
     );
     assert_eq!(resolved(&dir.path().join("./.")), real);
+}
+
+#[cfg(unix)]
+#[test]
+fn a_report_subfolder_linked_into_the_dataset_or_a_file_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let (data, _) = scene(dir.path());
+    let inputs = Inputs::new().dataset(&data).unwrap();
+    let out = dir.path().join("report");
+    std::fs::create_dir(&out).unwrap();
+    // The report's folder itself is fine; its test/ is a link to a folder of the dataset.
+    std::os::unix::fs::symlink(data.join("train"), out.join("test")).unwrap();
+    let err = plan_fit_outputs(&inputs, None, Some(&out), &["test"]).unwrap_err();
+    assert!(
+        matches!(
+            &err,
+            DataError::Output {
+                problem: OutputProblem::InsideInput { .. },
+                ..
+            }
+        ),
+        "{err:?}"
+    );
+    // Without the subfolder named, the link goes unseen: the check is what names it.
+    plan_fit_outputs(&inputs, None, Some(&out), &[]).unwrap();
+    // A file where the report puts a folder.
+    std::fs::remove_file(out.join("test")).unwrap();
+    std::fs::write(out.join("test"), b"x").unwrap();
+    let err = plan_fit_outputs(&inputs, None, Some(&out), &["test"]).unwrap_err();
+    assert!(
+        matches!(
+            &err,
+            DataError::Output {
+                problem: OutputProblem::NotAFolder { .. },
+                ..
+            }
+        ),
+        "{err:?}"
+    );
 }
