@@ -339,8 +339,13 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         scene_box: Some(plan.settings.scene_box.unwrap_or(scene_box)),
         ..plan.settings
     };
+    // Removed again (while empty) if the fit fails: a failed fit leaves no empty folder.
+    let mut created = crate::created_dirs::CreatedDirs::new();
     if let Some(dir) = &args.out {
-        std::fs::create_dir_all(dir).map_err(CliError::file("create", dir))?;
+        created.create(dir)?;
+        for sub in crate::fit_report::REPORT_FOLDERS {
+            created.create(&dir.join(sub))?;
+        }
     }
     let load_seconds = clock.elapsed().as_secs_f64();
     let name = "fogray-model.safetensors";
@@ -358,13 +363,17 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         announce: !args.json,
     };
     let report = match session::run(&data, &session_plan)? {
-        SessionOutcome::Interrupted { saved, .. } => return Ok(FitOutcome::Interrupted(saved)),
+        SessionOutcome::Interrupted { saved, .. } => {
+            created.keep();
+            return Ok(FitOutcome::Interrupted(saved));
+        }
         SessionOutcome::Finished(report) => report,
     };
     let summary = summary(&report, &data, load_seconds);
     if let Some(dir) = &args.out {
         crate::fit_report::write_out(dir, &plan, &report.settings, &data, &summary, &report.held_out)?;
     }
+    created.keep();
     if args.json {
         return Ok(FitOutcome::Done(serde_json::to_string(&summary)?));
     }

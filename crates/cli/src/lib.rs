@@ -4,6 +4,7 @@
 
 pub mod animation;
 pub mod composite;
+pub mod created_dirs;
 pub mod error;
 pub mod evaluate;
 pub mod export;

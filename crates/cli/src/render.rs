@@ -185,13 +185,17 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
         }
         _ => None,
     };
-    std::fs::create_dir_all(&args.out).map_err(CliError::file("create", &args.out))?;
-    saved.with(Output {
+    // Removed again (while empty) if the render fails: a failed render leaves no empty folder.
+    let mut created = crate::created_dirs::CreatedDirs::new();
+    created.create(&args.out)?;
+    let result = saved.with(Output {
         args,
         background,
         gif,
         views: &views,
-    })
+    })?;
+    created.keep();
+    Ok(result)
 }
 
 /// Refuses, before any work, outputs that would land on the model or the dataset of
