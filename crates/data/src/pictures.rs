@@ -184,11 +184,13 @@ impl PictureShape {
     }
 }
 
-/// Refuses frames whose kept pictures (`f32`, [`limits::FRAME_PIXEL_BYTES`] a pixel) and the
-/// caller's copies of them (`copies.float_bytes` a channel) cannot fit in `available` bytes,
-/// once their pictures (`shapes`, by slot) are decoded and before any frame is copied. Both are
-/// counted in full: the caller copies the frames one by one, dropping each frame as it goes,
-/// but a frame small enough to come from the heap leaves its memory with the process.
+/// Refuses frames whose pictures cannot be copied in `available` bytes once the distinct
+/// pictures (`shapes`, by slot) are decoded (and are counted in what the process holds), before
+/// any frame is copied: each further frame naming a decoded picture takes a copy of it (`f32`,
+/// [`limits::FRAME_PIXEL_BYTES`] a pixel), and the caller copies every frame
+/// (`copies.float_bytes` a channel). The caller's copies are counted beside the frames: it
+/// drops each frame as it copies it, but a frame small enough to come from the heap leaves its
+/// memory with the process.
 pub(crate) fn check_frames(
     specs: &[FrameSpec],
     slots: &[usize],
@@ -200,16 +202,22 @@ pub(crate) fn check_frames(
         return Ok(());
     };
     let mut need = Bytes(0);
-    for shape in slots.iter().filter_map(|&s| shapes.get(s)) {
+    let mut copied = vec![false; shapes.len()];
+    for &s in slots {
+        let Some(shape) = shapes.get(s) else {
+            continue;
+        };
+        // The first frame naming a picture takes the decoded one; the others, a copy.
+        if std::mem::replace(&mut copied[s], true) {
+            need = need.plus(limits::frame_bytes(shape.width, shape.height));
+        }
         let pixels = [shape.width as u64, shape.height as u64];
-        need = need
-            .plus(limits::frame_bytes(shape.width, shape.height))
-            .plus(Bytes::product(&[
-                pixels[0],
-                pixels[1],
-                shape.channels,
-                copies.float_bytes,
-            ]));
+        need = need.plus(Bytes::product(&[
+            pixels[0],
+            pixels[1],
+            shape.channels,
+            copies.float_bytes,
+        ]));
     }
     let largest = shapes.iter().max_by_key(|s| s.width.saturating_mul(s.height));
     let what = match largest {
@@ -323,8 +331,9 @@ mod tests {
     }
 
     /// 10 000 frames naming one 800x800 picture with alpha, downscaled by 8: 100x100 pixels,
-    /// 4 channels each, kept in f32 (16 bytes a pixel) and copied in f64 (32 bytes a pixel):
-    /// 10 000 x 10 000 x 48 = 4.8e9 bytes.
+    /// 4 channels each. The picture decoded once is held already; the 9 999 other frames take
+    /// a copy in f32 (16 bytes a pixel) and all 10 000 are copied in f64 (32 bytes a pixel):
+    /// 9 999 x 10 000 x 16 + 10 000 x 10 000 x 32 = 4 799 840 000 bytes.
     #[test]
     fn frames_whose_copies_cannot_fit_are_refused_naming_the_transforms_file() {
         let specs: Vec<FrameSpec> = (0..10_000).map(spec).collect();
@@ -338,8 +347,8 @@ mod tests {
             float_bytes: 8,
             downscale: 8,
         };
-        let need = 10_000 * 10_000 * (16 + 4 * 8);
-        assert_eq!(need, 4_800_000_000u64);
+        let need = 9_999 * 10_000 * 16 + 10_000 * 10_000 * 4 * 8;
+        assert_eq!(need, 4_799_840_000u64);
         assert!(check_frames(&specs, &slots, &shapes, copies, Bytes(need)).is_ok());
         let e = check_frames(&specs, &slots, &shapes, copies, Bytes(need - 1)).unwrap_err();
         assert_eq!(
@@ -347,20 +356,26 @@ mod tests {
             "scene/transforms.json: 10000 frames, the largest 100x100, would need 4.80 GB for their \
              pictures and a copy in 64-bit floats; 4.80 GB available"
         );
-        // Without alpha the copy has 3 channels: 10 000 x 10 000 x (16 + 24) = 4.0e9 bytes.
+        // Without alpha the copy has 3 channels: 1 599 840 000 + 10 000 x 10 000 x 24.
         let opaque = [PictureShape {
             channels: 3,
             ..shapes[0]
         }];
-        assert!(check_frames(&specs, &slots, &opaque, copies, Bytes(4_000_000_000)).is_ok());
-        assert!(check_frames(&specs, &slots, &opaque, copies, Bytes(3_999_999_999)).is_err());
-        // A caller that keeps the frames as loaded: 1.6e9 bytes.
+        assert!(check_frames(&specs, &slots, &opaque, copies, Bytes(3_999_840_000)).is_ok());
+        assert!(check_frames(&specs, &slots, &opaque, copies, Bytes(3_999_839_999)).is_err());
+        // A caller that keeps the frames as loaded: the 9 999 copies in f32 alone.
         let kept = Copies {
             float_bytes: 0,
             ..copies
         };
-        assert!(check_frames(&specs, &slots, &opaque, kept, Bytes(1_600_000_000)).is_ok());
-        assert!(check_frames(&specs, &slots, &opaque, kept, Bytes(1_599_999_999)).is_err());
+        assert!(check_frames(&specs, &slots, &opaque, kept, Bytes(1_599_840_000)).is_ok());
+        assert!(check_frames(&specs, &slots, &opaque, kept, Bytes(1_599_839_999)).is_err());
+        // Frames each naming their own picture: all decoded already, only the f64 copies to
+        // come: 4 x 10 000 x 4 x 8.
+        let own: Vec<usize> = (0..4).collect();
+        let four = [shapes[0]; 4];
+        assert!(check_frames(&specs[..4], &own, &four, copies, Bytes(1_280_000)).is_ok());
+        assert!(check_frames(&specs[..4], &own, &four, copies, Bytes(1_279_999)).is_err());
     }
 
     /// Before decoding, the sizes the file states (800x800 downscaled by 8) count the kept
