@@ -136,6 +136,22 @@ pub enum CliError {
     /// the machine has, refused before anything was allocated.
     #[error(transparent)]
     TooLarge(#[from] fogray_ops::limits::TooLarge),
+    /// Outputs that cannot fit in their disk's free space, refused before the work
+    /// ([`crate::disk_room`]).
+    #[error(
+        "{} {} at least {need}; {} disk has {free} free",
+        .outputs.join(" and "),
+        if .outputs.len() > 1 { "need" } else { "needs" },
+        if .outputs.len() > 1 { "their" } else { "its" }
+    )]
+    NoRoom {
+        /// The outputs, each named with what it is (`m.safetensors (the model file)`).
+        outputs: Vec<String>,
+        /// The fewest bytes they take together.
+        need: fogray_ops::limits::Bytes,
+        /// The bytes free on their disk.
+        free: fogray_ops::limits::Bytes,
+    },
     /// A computation that should have produced a value did not (a gradient missing...).
     #[error("{0}")]
     Missing(&'static str),

@@ -8,6 +8,7 @@ use std::time::Instant;
 use fogray_data::{LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
+use fogray_fit::file_floor::model_file_floor;
 use fogray_fit::metrics::{haze_fraction, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::session::{self, FitReport, SessionOutcome, SessionPlan};
@@ -82,6 +83,7 @@ impl DataArgs {
             downscale: self.downscale,
             background: self.background,
             skip_missing: self.skip_missing,
+            copy_float_bytes: 0,
         }
     }
 }
@@ -214,7 +216,12 @@ pub fn views(frames: Vec<fogray_data::Frame>) -> Result<Vec<View>, CliError> {
 ///
 /// Errors: a bad dataset, naming the file.
 pub fn load_fit_data(path: &Path, data_args: &DataArgs, progress: bool) -> Result<(Dataset, SceneBox), CliError> {
-    let scene: SceneData = crate::load_bar::load_showing_progress(path, &data_args.options(), progress)?;
+    // The views widen every frame to f64 ([`views`]): counted before any frame is copied.
+    let options = LoadOptions {
+        copy_float_bytes: std::mem::size_of::<f64>(),
+        ..data_args.options()
+    };
+    let scene: SceneData = crate::load_bar::load_showing_progress(path, &options, progress)?;
     if scene.skipped > 0 {
         eprintln!(
             "fogray fit: --skip-missing dropped {} frames whose image is missing",
@@ -333,6 +340,8 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         args.out.as_deref(),
         &crate::fit_report::REPORT_FOLDERS,
     )?;
+    // Before anything is read: the outputs' disks have room for the least they will take.
+    crate::disk_room::check(&outputs(args, &plan.settings), crate::disk_room::room)?;
     // The same rule as the training bar's: --json asks for a quiet run.
     let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args, !args.json)?;
     let settings = FitSettings {
@@ -396,6 +405,23 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         report.train_views_psnr
     );
     Ok(FitOutcome::Done(text))
+}
+
+/// What a fit with `args` and `settings` will write, each with the fewest bytes it takes: the
+/// model file ([`model_file_floor`]) and the report (of one held-out view, the fewest a fit
+/// has: [`crate::fit_report::report_floor`]).
+pub fn outputs(args: &FitArgs, settings: &FitSettings) -> Vec<crate::disk_room::Output> {
+    let model = args.save_model.iter().map(|path| crate::disk_room::Output {
+        path: path.clone(),
+        what: "the model file",
+        floor: model_file_floor(settings),
+    });
+    let report = args.out.iter().map(|dir| crate::disk_room::Output {
+        path: dir.clone(),
+        what: "the report",
+        floor: crate::fit_report::report_floor(1),
+    });
+    model.chain(report).collect()
 }
 
 /// What `fogray fit --json` prints and `--out` keeps, from the session's report; `load_seconds`

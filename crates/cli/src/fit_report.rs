@@ -25,6 +25,25 @@ const MIN_PANEL_WIDTH: usize = 200;
 /// the dataset, or a file in its place, is refused before any work).
 pub const REPORT_FOLDERS: [&str; 1] = ["test"];
 
+/// The fewest bytes a PNG file takes: its signature (8) and the frames of its header chunk
+/// (25 with the header's 13 bytes), of one data chunk (12) and of its end chunk (12).
+pub const PNG_FLOOR: u64 = 8 + 25 + 12 + 12;
+
+/// The report's files besides the held-out views' pictures: the two plots as PNG and SVG,
+/// fit.json and report.md.
+const FIXED_PNGS: u64 = 2;
+const FIXED_TEXTS: u64 = 4;
+
+/// The fewest bytes the report of a fit with `held_out` views takes on its disk: a
+/// comparison PNG for each view and the two plots' PNGs at [`PNG_FLOOR`], the plots' SVGs,
+/// fit.json and report.md at a byte each (what [`crate::disk_room`] checks before a fit trains).
+pub fn report_floor(held_out: usize) -> u64 {
+    (held_out as u64)
+        .saturating_add(FIXED_PNGS)
+        .saturating_mul(PNG_FLOOR)
+        .saturating_add(FIXED_TEXTS)
+}
+
 /// How many times a view `width` pixels wide is magnified in its panels: the least whole
 /// factor that makes it [`MIN_PANEL_WIDTH`] wide (1 for views at least that wide).
 fn panel_scale(width: usize) -> u32 {

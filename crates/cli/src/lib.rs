@@ -5,6 +5,7 @@
 pub mod animation;
 pub mod composite;
 pub mod created_dirs;
+pub mod disk_room;
 pub mod error;
 pub mod evaluate;
 pub mod export;

@@ -34,6 +34,11 @@ pub struct LoadOptions {
     /// [`SceneData::skipped`]) instead of failing (a COLMAP image registered but not on
     /// disk likewise). Default false.
     pub skip_missing: bool,
+    /// Bytes per float of the copy the caller will make of every frame's colour and alpha once
+    /// loaded (a fit's `f64` views: 8); 0, the default, for a caller that keeps the frames as
+    /// they are. The copies are counted with the frames in the check of the machine's memory,
+    /// so that frames whose copies cannot fit are refused before any is copied.
+    pub copy_float_bytes: usize,
 }
 
 impl Default for LoadOptions {
@@ -42,6 +47,7 @@ impl Default for LoadOptions {
             downscale: 1,
             background: [1.0; 3],
             skip_missing: false,
+            copy_float_bytes: 0,
         }
     }
 }
@@ -260,7 +266,7 @@ pub(crate) fn load_frames(
     same_size: bool,
 ) -> Result<Vec<Frame>, DataError> {
     let factor = options.downscale;
-    let decoded = decode_pictures(specs, factor, options.background)?;
+    let decoded = decode_pictures(specs, factor, options.background, options.copy_float_bytes)?;
     let mut frames = Vec::with_capacity(specs.len());
     let mut first: Option<(&Path, (usize, usize))> = None;
     for (spec, (size, picture)) in specs.iter().zip(decoded) {

@@ -80,6 +80,7 @@ pub mod depth;
 pub mod dispatch;
 pub mod environment;
 pub mod error;
+pub mod file_floor;
 mod grid_model;
 pub mod images;
 pub mod interrupt;

@@ -29,6 +29,8 @@ use thiserror::Error;
 
 use crate::rays::PinholeCamera;
 
+pub mod headroom;
+
 /// A number of bytes; displayed in decimal units to three significant digits (`12.3 TB`).
 /// Arithmetic on it saturates: a size too large to count is `u64::MAX` bytes, refused like any
 /// other.
@@ -109,13 +111,16 @@ pub struct TooLarge {
     pub available: Bytes,
 }
 
-/// The memory this process can still take without swapping: Linux's `MemAvailable` (free
-/// memory plus the caches the kernel would drop), else [`FALLBACK_AVAILABLE`].
+/// The memory this process can still take without swapping or failing: the smallest of
+/// Linux's `MemAvailable` (free memory plus the caches the kernel would drop, else
+/// [`FALLBACK_AVAILABLE`]), its address-space limit less what it has mapped, and its control
+/// groups' limits less what they hold ([`headroom::process_headroom`]).
 pub fn available() -> Bytes {
-    std::fs::read_to_string("/proc/meminfo")
+    let machine = std::fs::read_to_string("/proc/meminfo")
         .ok()
         .and_then(|text| mem_available(&text))
-        .unwrap_or(FALLBACK_AVAILABLE)
+        .unwrap_or(FALLBACK_AVAILABLE);
+    headroom::process_headroom().map_or(machine, |process| machine.min(process))
 }
 
 /// The `MemAvailable:` line of a `/proc/meminfo` text, in bytes (the file counts kibibytes).

@@ -4,6 +4,7 @@
 mod bad_files;
 mod cli;
 mod common;
+mod disk_room;
 mod export;
 mod fit_render;
 mod interrupt;

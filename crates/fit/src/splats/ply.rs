@@ -43,6 +43,18 @@ fn sigmoid(x: f64) -> f64 {
     }
 }
 
+/// The PLY header of `count` splats of colour degree `degree`: what a file holds before its
+/// splats' floats.
+pub(crate) fn header(degree: usize, count: usize) -> String {
+    let mut header = format!(
+        "ply\nformat binary_little_endian 1.0\ncomment fogray splats, colour degree {degree}\nelement vertex {count}\n"
+    );
+    for name in property_names(degree) {
+        header += &format!("property float {name}\n");
+    }
+    header + "end_header\n"
+}
+
 /// `model` in the 3DGS PLY layout (see the [module docs](self)), as the file's bytes.
 ///
 /// Errors: a parameter lent to a tape ([`FitError::Param`]).
@@ -51,16 +63,7 @@ pub(crate) fn splats_ply<F: Float>(model: &SplatModel<F>) -> Result<Vec<u8>, Fit
     let basis = (model.degree() + 1) * (model.degree() + 1);
     let names = property_names(model.degree());
     let mut out = Vec::with_capacity(64 * 1024 + 4 * names.len() * model.len());
-    let mut header = format!(
-        "ply\nformat binary_little_endian 1.0\ncomment fogray splats, colour degree {}\nelement vertex {}\n",
-        model.degree(),
-        model.len()
-    );
-    for name in &names {
-        header += &format!("property float {name}\n");
-    }
-    header += "end_header\n";
-    out.extend_from_slice(header.as_bytes());
+    out.extend_from_slice(header(model.degree(), model.len()).as_bytes());
     for i in 0..model.len() {
         let mut push = |v: f64| out.extend_from_slice(&(v as f32).to_le_bytes());
         for k in 0..3 {
