@@ -91,7 +91,7 @@ pub fn write_out(
         label: "fogray fit".into(),
         log: summary.log,
     }];
-    plots::psnr_curves(&dir.join("psnr"), &curve)?;
+    plots::metric_curves(&dir.join("psnr"), &curve, XAxis::Seconds, Metric::Psnr, &[])?;
     plots::metric_curves(&dir.join("ssim"), &curve, XAxis::Seconds, Metric::Ssim, &[])?;
     let path = dir.join("fit.json");
     let json = serde_json::to_string_pretty(summary)?;

@@ -24,7 +24,7 @@ const PLAIN_SHARE: f64 = 0.95;
 /// The colour of the plain backdrop behind `views`, if their borders show one: the per-channel
 /// median of every border pixel of every view, when at least [`PLAIN_SHARE`] of them lie within
 /// [`SAME_COLOUR`] of it in every channel. `None` for no views, or borders that vary.
-pub fn plain_backdrop(views: &[View]) -> Option<[f64; 3]> {
+pub(crate) fn plain_backdrop(views: &[View]) -> Option<[f64; 3]> {
     let mut border: Vec<[f64; 3]> = Vec::new();
     for view in views {
         let (h, w, _) = view.image.dim();

@@ -173,7 +173,7 @@ impl ModelInfo {
     /// Checks that the file's model is one a fit with `precision` and `grid` nodes per axis
     /// can continue. Errors: [`CheckpointError::Mismatch`] naming the first setting that
     /// differs.
-    pub fn check_matches(&self, path: &Path, precision: Precision, grid: usize) -> Result<(), CheckpointError> {
+    pub(crate) fn check_matches(&self, path: &Path, precision: Precision, grid: usize) -> Result<(), CheckpointError> {
         let mismatch = |setting, file: String, asked: String| CheckpointError::Mismatch {
             path: path.to_path_buf(),
             setting,
@@ -595,3 +595,6 @@ fn occupancy_state<F: Float, M: RadianceField<F>>(
     grid.restore(&state).map_err(|e| meta.error(e.to_string()))?;
     Ok(Some(state))
 }
+
+#[cfg(test)]
+mod tests;

@@ -135,7 +135,7 @@ impl View {
     }
 
     /// Pixels of the picture.
-    pub fn pixels(&self) -> usize {
+    pub(crate) fn pixels(&self) -> usize {
         let [h, w] = self.size();
         h * w
     }
@@ -233,7 +233,7 @@ impl Dataset {
     /// the `n`, for `i` in `0..count`, spread through the training list as the held-out views
     /// are through the file. What a fit's PSNR on its own views is measured on, whatever the
     /// model.
-    pub fn spread_training_views(&self, count: usize) -> Vec<&View> {
+    pub(crate) fn spread_training_views(&self, count: usize) -> Vec<&View> {
         let n = self.train.len();
         let count = count.min(n);
         (0..count).map(|i| &self.train[i * n / count]).collect()

@@ -40,11 +40,8 @@ use crate::error::FitError;
 use crate::grid_model::GridModel;
 use crate::model::{RadianceField, RenderWanted, TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method, SceneBox};
-use crate::shading::{Shading, VIEW_INDEPENDENT_CHANNELS};
+use crate::shading::Shading;
 use crate::space::FieldSpace;
-
-/// Channels of a view-independent grid's raw value: density, then red, green, blue.
-pub const CHANNELS: usize = VIEW_INDEPENDENT_CHANNELS;
 
 /// The name of the raw grid `[N, N, N, 4]` in the parameter store (and in a checkpoint).
 pub(crate) const GRID: &str = "grid";
@@ -77,7 +74,7 @@ impl<F: Float> DenseGrid<F> {
     /// sample weights) weighted by `weight` in its training objective.
     ///
     /// Errors: a weight that is negative or not finite.
-    pub fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
+    pub(crate) fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
         if !(weight.is_finite() && weight >= 0.0) {
             return Err(FitError::Config(format!(
                 "--distortion {weight}: must be finite and non-negative"
@@ -85,11 +82,6 @@ impl<F: Float> DenseGrid<F> {
         }
         self.distortion = weight;
         Ok(self)
-    }
-
-    /// The distortion loss's weight.
-    pub fn distortion(&self) -> f64 {
-        self.distortion
     }
 
     /// A grid of `nodes^3` nodes (at least 2) over `scene_box`, every raw value 0: density
@@ -108,7 +100,8 @@ impl<F: Float> DenseGrid<F> {
     /// colour.
     ///
     /// Errors: as [`DenseGrid::new`], and a degree above 3.
-    pub fn view_dependent(
+    #[cfg(test)]
+    pub(crate) fn view_dependent(
         scene_box: SceneBox,
         nodes: usize,
         shift: f64,
@@ -144,17 +137,12 @@ impl<F: Float> DenseGrid<F> {
 
     /// Channels of a raw value: the density, then the colour's (3, or the spherical
     /// harmonics' coefficients).
-    pub fn channels(&self) -> usize {
+    pub(crate) fn channels(&self) -> usize {
         self.shading.channels()
     }
 
-    /// The degree of the spherical harmonics of the colour (0 for view-independent).
-    pub fn sh_degree(&self) -> usize {
-        self.shading.sh_degree()
-    }
-
     /// The box the grid covers.
-    pub fn scene_box(&self) -> SceneBox {
+    pub(crate) fn scene_box(&self) -> SceneBox {
         SceneBox {
             min: self.bounds.min(),
             max: self.bounds.max(),
@@ -304,3 +292,6 @@ impl<F: Float> GridModel<F> for DenseGrid<F> {
         }
     }
 }
+
+#[cfg(test)]
+pub(crate) mod tests;

@@ -24,7 +24,7 @@ use crate::images::{canvas, save_canvas, ImageError};
 use crate::render::BACKGROUND_OPACITY;
 
 /// The colour of background pixels (no depth).
-pub const BACKGROUND: RGBColor = RGBColor(215, 215, 215);
+pub(crate) const BACKGROUND: RGBColor = RGBColor(215, 215, 215);
 
 const FONT: &str = "sans-serif";
 const TITLE_HEIGHT: u32 = 26;

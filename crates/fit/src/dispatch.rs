@@ -56,7 +56,7 @@ pub trait FieldWork {
 }
 
 /// Work to run in one float type `F` (a model class that is not a field, such as the splats).
-pub trait FloatWork {
+pub(crate) trait FloatWork {
     /// What the work gives.
     type Output;
     /// Does the work in `F`.
@@ -74,7 +74,7 @@ pub fn with_field<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) 
 }
 
 /// Runs `work` in the float type of `precision`.
-pub fn with_float<W: FloatWork>(precision: Precision, work: W) -> W::Output {
+pub(crate) fn with_float<W: FloatWork>(precision: Precision, work: W) -> W::Output {
     match precision {
         Precision::F32 => work.run::<f32>(),
         Precision::F64 => work.run::<f64>(),

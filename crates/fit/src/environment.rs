@@ -5,21 +5,6 @@
 //! coefficients for the whole scene, learned with the grid). Without it such a capture's
 //! background must be painted into the box (haze at its walls) or stays an error the fit
 //! cannot remove.
-//!
-//! ```
-//! use fogray_fit::environment::Environment;
-//! use fogray_tape::Tape;
-//! use ndarray::{arr2, Array2};
-//!
-//! let environment = Environment::new(2)?;
-//! assert_eq!(environment.coefficient_count(), 27);
-//! let coefficients = Array2::<f64>::zeros((1, environment.coefficient_count()));
-//! let directions = arr2(&[[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]]);
-//! // Fresh coefficients are 0: grey (sigmoid 0) from every direction.
-//! let colors = environment.colors(coefficients.view(), directions.view())?;
-//! assert!(colors.iter().all(|&c| c == 0.5));
-//! # Ok::<(), Box<dyn std::error::Error>>(())
-//! ```
 
 use fogray_ops::ShColor;
 use fogray_tape::params::Params;
@@ -31,11 +16,11 @@ use crate::shading::Shading;
 
 /// The name of the coefficients `[1, 3 (degree + 1)^2]` in a model's parameter store and a
 /// checkpoint.
-pub const ENVIRONMENT: &str = "environment";
+pub(crate) const ENVIRONMENT: &str = "environment";
 
 /// The learned background's colour model (its coefficients are a model's parameter).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Environment {
+pub(crate) struct Environment {
     colour: ShColor,
 }
 
@@ -45,13 +30,13 @@ impl Environment {
     /// side; 3 follows a room's walls a little further (reports/grid/capture.md).
     ///
     /// Errors: [`FitError::Config`] for a degree above 3, naming the flag.
-    pub fn new(degree: usize) -> Result<Self, FitError> {
+    pub(crate) fn new(degree: usize) -> Result<Self, FitError> {
         let colour = ShColor::new(degree).map_err(|e| FitError::Config(format!("--background-degree: {e}")))?;
         Ok(Environment { colour })
     }
 
     /// Values of its coefficients: 3 channels of `(degree + 1)^2`.
-    pub fn coefficient_count(&self) -> usize {
+    pub(crate) fn coefficient_count(&self) -> usize {
         self.colour.coefficient_count()
     }
 
@@ -61,7 +46,7 @@ impl Environment {
     ///
     /// Errors: from the ops (coefficients not `[1, 3 B]`, a direction that is not a unit
     /// vector).
-    pub fn record<F: Float>(
+    pub(crate) fn record<F: Float>(
         &self,
         tape: &mut Tape<F>,
         coefficients: Var,
@@ -76,7 +61,8 @@ impl Environment {
     /// (`[1, 3 B]`), without a tape.
     ///
     /// Errors: [`FitError::Config`] for coefficients not `[1, 3 B]`; the op's errors.
-    pub fn colors<F: Float>(
+    #[cfg(test)]
+    pub(crate) fn colors<F: Float>(
         &self,
         coefficients: ArrayView2<'_, F>,
         directions: ArrayView2<'_, F>,
@@ -130,3 +116,6 @@ pub(crate) fn copy_environment<F: Float>(from: &Params<F>, to: &mut Params<F>) -
         )),
     }
 }
+
+#[cfg(test)]
+mod tests;

@@ -55,7 +55,7 @@ pub enum ImageError {
 
 /// One titled image of a row.
 #[derive(Debug, Clone)]
-pub struct Panel<'a> {
+pub(crate) struct Panel<'a> {
     /// Drawn above the image.
     pub title: String,
     /// `[rows][columns][3]`, values clamped to `[0, 1]` for display.
@@ -66,14 +66,6 @@ pub struct Panel<'a> {
 pub fn to_u8(v: f64) -> u8 {
     // NaN clamps to NaN and casts to 0.
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
-}
-
-/// The image as nested vectors `[row][column][channel]`, the layout of the JSON outputs.
-pub fn nested(image: ArrayView3<'_, f64>) -> Vec<Vec<Vec<f64>>> {
-    image
-        .outer_iter()
-        .map(|row| row.outer_iter().map(|px| px.to_vec()).collect())
-        .collect()
 }
 
 fn check_rgb(what: &str, image: &ArrayView3<'_, f64>) -> Result<(), ImageError> {
@@ -119,7 +111,7 @@ fn rgb(image: &ArrayView3<'_, f64>, row: usize, column: usize) -> RGBColor {
 
 /// An RGB canvas of `size` (width, height) for plotters' [`BitMapBackend::with_buffer`], all
 /// black; [`save_canvas`] writes it.
-pub fn canvas((w, h): (u32, u32)) -> Vec<u8> {
+pub(crate) fn canvas((w, h): (u32, u32)) -> Vec<u8> {
     vec![0; w as usize * h as usize * 3]
 }
 
@@ -163,7 +155,7 @@ pub fn write_png(path: &Path, image: ArrayView3<'_, f64>) -> Result<(), ImageErr
 ///
 /// Errors: [`ImageError::Empty`], [`ImageError::Shape`], [`ImageError::Write`] (including a
 /// `scale` of 0).
-pub fn write_row_png(path: &Path, panels: &[Panel<'_>], scale: u32) -> Result<(), ImageError> {
+pub(crate) fn write_row_png(path: &Path, panels: &[Panel<'_>], scale: u32) -> Result<(), ImageError> {
     let first = panels.first().ok_or(ImageError::Empty)?;
     check_rgb(&first.title, &first.image)?;
     for p in panels {

@@ -7,7 +7,7 @@
 //!
 //! let stop = StopFlag::on_ctrl_c()?;
 //! // ... fit_from(&data, &settings, None, Some(stop.flag()), &mut |_| {}) ...
-//! # Ok::<(), fogray_fit::error::FitError>(())
+//! # Ok::<(), fogray_fit::FitError>(())
 //! ```
 
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -30,22 +30,18 @@ pub fn exit_on_ctrl_c() -> Result<(), FitError> {
     .map_err(|e| FitError::Config(format!("cannot catch Ctrl-C: {e}")))
 }
 
-/// A flag raised by Ctrl-C (or by [`StopFlag::raise`]).
+/// A flag raised by Ctrl-C (or by [`StopFlag::raise`]); `StopFlag::default()` is one that
+/// nothing raises but [`StopFlag::raise`].
 #[derive(Debug, Clone, Default)]
 pub struct StopFlag(Arc<AtomicBool>);
 
 impl StopFlag {
-    /// A flag that nothing raises but [`StopFlag::raise`].
-    pub fn new() -> Self {
-        StopFlag::default()
-    }
-
     /// A flag that Ctrl-C raises (SIGINT; SIGTERM too on Unix where the `ctrlc` crate
     /// catches it).
     ///
     /// Errors: [`FitError::Config`] if the process's handler is already set (once a process).
     pub fn on_ctrl_c() -> Result<Self, FitError> {
-        let stop = StopFlag::new();
+        let stop = StopFlag::default();
         let flag = Arc::clone(&stop.0);
         ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
             .map_err(|e| FitError::Config(format!("cannot catch Ctrl-C: {e}")))?;
@@ -53,7 +49,7 @@ impl StopFlag {
     }
 
     /// The flag, as [`fit_from`](crate::train::fit_from) takes it.
-    pub fn flag(&self) -> &AtomicBool {
+    pub(crate) fn flag(&self) -> &AtomicBool {
         &self.0
     }
 

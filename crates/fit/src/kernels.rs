@@ -14,7 +14,7 @@ use fogray_tape::{Float, Tape, TapeError, Var};
 use crate::settings::Method;
 
 /// The ops a model records, with their arguments as the fused ops take them.
-pub trait Kernels<F: Float> {
+pub(crate) trait Kernels<F: Float> {
     /// The composite's colour, opacity and (if configured) depth: [`Composite::apply`].
     fn composite(
         &self,
@@ -65,7 +65,7 @@ struct Taped;
 
 impl Method {
     /// The kernels of this method.
-    pub fn kernels<F: Float>(self) -> &'static dyn Kernels<F> {
+    pub(crate) fn kernels<F: Float>(self) -> &'static dyn Kernels<F> {
         match self {
             Method::Fused => &Fused,
             Method::Taped => &Taped,

@@ -8,9 +8,9 @@
 //!   over the model run with the types that settings or a model file name;
 //! - [`settings`]: one settings struct ([`FitSettings`]) for the command line, the checkpoint
 //!   and resume;
-//! - [`dataset`], [`batch`]: views (a camera and its picture) to training rays and test views;
-//! - [`train`]: the training loop with its schedules ([`schedule`]), the occupancy grid's
-//!   refresh ([`sampling`]) and a step profile ([`profile`]); [`interrupt`]: Ctrl-C;
+//! - [`dataset`], `batch`: views (a camera and its picture) to training rays and test views;
+//! - [`train`]: the training loop with its schedules (`schedule`), the occupancy grid's
+//!   refresh (`sampling`) and a step profile ([`profile`]); [`interrupt`]: Ctrl-C;
 //! - [`render`]: any rays or views rendered in chunks without a tape's record (colour,
 //!   opacity, depth);
 //! - [`checkpoint`]: a fit to a safetensors file and back; [`metrics`]: PSNR;
@@ -71,35 +71,35 @@
 // modules and their re-exports show, nothing more.
 #![warn(unreachable_pub)]
 
-pub mod backdrop;
-pub mod batch;
+mod backdrop;
+mod batch;
 pub mod checkpoint;
 pub mod dataset;
 pub mod dense;
 pub mod depth;
 pub mod dispatch;
-pub mod environment;
-pub mod error;
+mod environment;
+mod error;
 pub mod file_floor;
 mod grid_model;
 pub mod images;
 pub mod interrupt;
-pub mod kernels;
+mod kernels;
 pub mod mesh;
 pub mod metrics;
 pub mod model;
 pub mod plots;
 pub mod profile;
 pub mod render;
-pub mod sampling;
-pub mod schedule;
+mod sampling;
+mod schedule;
 pub mod session;
 pub mod settings;
-pub mod shading;
+mod shading;
 pub mod space;
 pub mod space_picture;
 pub mod sparse;
-pub mod splats;
+mod splats;
 pub mod stamp;
 pub mod state;
 #[cfg(test)]

@@ -161,3 +161,6 @@ pub trait RadianceField<F: Float>: Sized + Sync {
     /// [`Shading::base_colors`]: crate::shading::Shading::base_colors
     fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError>;
 }
+
+#[cfg(test)]
+mod tests;

@@ -3,7 +3,7 @@
 //!
 //! ```
 //! use fogray_fit::train::LogEntry;
-//! use fogray_fit::plots::{psnr_curves, Curve};
+//! use fogray_fit::plots::{metric_curves, Curve, Metric, XAxis};
 //!
 //! let log = [
 //!     LogEntry { step: 0, seconds: 0.0, train_loss: f64::NAN, test_psnr: 10.0, test_ssim: 0.3, samples: 0 },
@@ -11,7 +11,8 @@
 //! ];
 //! let dir = std::env::temp_dir().join(format!("fogray-fit-plots-doc-{}", std::process::id()));
 //! std::fs::create_dir_all(&dir)?;
-//! psnr_curves(&dir.join("psnr"), &[Curve { label: "fused".into(), log: &log }])?;
+//! let curves = [Curve { label: "fused".into(), log: &log }];
+//! metric_curves(&dir.join("psnr"), &curves, XAxis::Seconds, Metric::Psnr, &[])?;
 //! assert!(dir.join("psnr.png").exists() && dir.join("psnr.svg").exists());
 //! # std::fs::remove_dir_all(&dir)?;
 //! # Ok::<(), Box<dyn std::error::Error>>(())
@@ -260,26 +261,12 @@ fn draw_legend<DB: DrawingBackend>(
     Ok(())
 }
 
-/// Writes `<stem>.svg` and `<stem>.png` with one curve per entry of `curves` against training
-/// seconds (points whose PSNR is not finite are left out).
+/// Writes `<stem>.svg` and `<stem>.png` with one curve of `metric` per entry of `curves`
+/// against `x` (training seconds or steps), the curves whose indices are in `dashed` drawn
+/// dashed (points where the metric is not finite are left out).
 ///
 /// Errors: [`ImageError::Empty`] for no curve, [`ImageError::Write`] if a file cannot be drawn
 /// or written.
-pub fn psnr_curves(stem: &Path, curves: &[Curve<'_>]) -> Result<(), ImageError> {
-    psnr_curves_against(stem, curves, XAxis::Seconds, &[])
-}
-
-/// As [`psnr_curves`], against training seconds or steps, the curves whose indices are in
-/// `dashed` drawn dashed.
-///
-/// Errors: as [`psnr_curves`].
-pub fn psnr_curves_against(stem: &Path, curves: &[Curve<'_>], x: XAxis, dashed: &[usize]) -> Result<(), ImageError> {
-    metric_curves(stem, curves, x, Metric::Psnr, dashed)
-}
-
-/// As [`psnr_curves_against`], of `metric` (points where it is not finite are left out).
-///
-/// Errors: as [`psnr_curves`].
 pub fn metric_curves(
     stem: &Path,
     curves: &[Curve<'_>],

@@ -40,7 +40,7 @@ pub struct StepProfile {
 
 /// A phase as written out.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct PhaseRow {
+pub(crate) struct PhaseRow {
     /// The phase's name.
     pub name: &'static str,
     /// Milliseconds a step.
@@ -49,7 +49,7 @@ pub struct PhaseRow {
 
 /// An op of the tape as written out.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct OpRow {
+pub(crate) struct OpRow {
     /// The op's name.
     pub name: &'static str,
     /// Calls a step.
@@ -64,16 +64,16 @@ pub struct OpRow {
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ProfileTable {
     /// Steps profiled.
-    pub steps: usize,
+    pub(crate) steps: usize,
     /// The phases, in step order.
-    pub phases: Vec<PhaseRow>,
+    pub(crate) phases: Vec<PhaseRow>,
     /// The tape's ops, the most time first.
-    pub ops: Vec<OpRow>,
+    pub(crate) ops: Vec<OpRow>,
 }
 
 impl StepProfile {
     /// Means per step in milliseconds (zeros when no step was taken).
-    pub fn table(&self) -> ProfileTable {
+    pub(crate) fn table(&self) -> ProfileTable {
         // With no step every sum is zero, and so is every mean.
         let steps = self.steps.max(1) as f64;
         let per_step = |d: Duration| 1e3 * d.as_secs_f64() / steps;

@@ -31,12 +31,12 @@ pub(crate) fn sample_rays<F: Float>(
 /// default (64 steps) costs a minute's fit a good part of its budget. By step 16 Adam has
 /// already raised the density where the views put matter, and on lego a fit first refreshed
 /// there ends where one first refreshed at step 64 does, step for step.
-pub const FIT_REFRESH: Refresh = Refresh { warmup: 16, every: 16 };
+pub(crate) const FIT_REFRESH: Refresh = Refresh { warmup: 16, every: 16 };
 
 /// Cells per axis of a fit's occupancy grid at most: past it a cell spans several voxels, so
 /// that its refresh (a density per cell) costs what a 128^3 grid's does however fine the
 /// model.
-pub const OCCUPANCY_CELLS_MAX: usize = 128;
+pub(crate) const OCCUPANCY_CELLS_MAX: usize = 128;
 
 /// An occupancy grid as a fit of `grid` nodes per axis over `bounds` keeps one: one cell per
 /// voxel (up to [`OCCUPANCY_CELLS_MAX`] per axis), a cell occupied while a step of half the final voxel through it would stop at least
@@ -45,7 +45,7 @@ pub const OCCUPANCY_CELLS_MAX: usize = 128;
 /// [`FIT_REFRESH`] times.
 ///
 /// Errors: fewer than 2 nodes.
-pub fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitError> {
+pub(crate) fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitError> {
     if grid < 2 {
         return Err(FitError::Config("--grid must be at least 2".into()));
     }

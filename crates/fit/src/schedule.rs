@@ -1,31 +1,20 @@
 //! The training loop's schedules over the budget: the learning rate's anneal and the grid's
 //! coarse-to-fine growth, both as functions of the fraction of the budget spent (so that a fit
 //! of seconds and a fit of steps follow the same shape).
-//!
-//! ```
-//! use fogray_fit::schedule::{growth_stages, learning_rate};
-//! use fogray_fit::settings::FitSettings;
-//!
-//! let s = FitSettings { lr: 0.2, lr_final: 0.02, ..FitSettings::default() };
-//! assert_eq!(learning_rate(&s, 0.5), 0.2);
-//! // Geometric from 60 % of the budget: half way through the anneal, sqrt(0.2 * 0.02).
-//! assert!((learning_rate(&s, 0.8) - (0.2f64 * 0.02).sqrt()).abs() < 1e-15);
-//! assert_eq!(growth_stages(&s), vec![(0.0, 16), (0.1, 32), (0.3, 64)]);
-//! ```
 
 use crate::settings::FitSettings;
 
 /// The fraction of the budget from which the learning rate anneals from `lr` to `lr_final`.
 /// Adam at a constant rate keeps the grid jittering about its fit; shrinking the steps over
 /// the last part settles it.
-pub const ANNEAL_START: f64 = 0.6;
+pub(crate) const ANNEAL_START: f64 = 0.6;
 
 /// Fractions of the budget at which a growing grid doubles its nodes per axis.
-pub const GROWTH: [f64; 2] = [0.1, 0.3];
+pub(crate) const GROWTH: [f64; 2] = [0.1, 0.3];
 
 /// Adam's learning rate at `fraction` of the budget: `lr` until [`ANNEAL_START`], then
 /// geometric to `lr_final` at the end.
-pub fn learning_rate(settings: &FitSettings, fraction: f64) -> f64 {
+pub(crate) fn learning_rate(settings: &FitSettings, fraction: f64) -> f64 {
     if fraction <= ANNEAL_START {
         return settings.lr;
     }
@@ -35,7 +24,7 @@ pub fn learning_rate(settings: &FitSettings, fraction: f64) -> f64 {
 
 /// The grid's nodes per axis from each fraction of the budget on: a quarter, a half and all
 /// of `grid` at 0 and [`GROWTH`] for a growing fit of at least 8 nodes, else `grid` throughout.
-pub fn growth_stages(settings: &FitSettings) -> Vec<(f64, usize)> {
+pub(crate) fn growth_stages(settings: &FitSettings) -> Vec<(f64, usize)> {
     let n = settings.grid;
     if !settings.grow || n < 8 {
         return vec![(0.0, n)];
@@ -46,6 +35,19 @@ pub fn growth_stages(settings: &FitSettings) -> Vec<(f64, usize)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_rate_anneals_geometrically_from_60_percent_and_the_grid_grows_in_three_stages() {
+        let s = FitSettings {
+            lr: 0.2,
+            lr_final: 0.02,
+            ..FitSettings::default()
+        };
+        assert_eq!(learning_rate(&s, 0.5), 0.2);
+        // Geometric from 60 % of the budget: half way through the anneal, sqrt(0.2 * 0.02).
+        assert!((learning_rate(&s, 0.8) - (0.2f64 * 0.02).sqrt()).abs() < 1e-15);
+        assert_eq!(growth_stages(&s), vec![(0.0, 16), (0.1, 32), (0.3, 64)]);
+    }
 
     #[test]
     fn the_rate_is_continuous_and_ends_at_lr_final() {

@@ -118,10 +118,6 @@ pub enum SessionOutcome {
     },
 }
 
-/// The exit status of a tool whose fit Ctrl-C stopped (after saving it): 128 + SIGINT, as a
-/// shell reports a command stopped by Ctrl-C.
-pub const INTERRUPTED_EXIT: u8 = 130;
-
 /// A resumed fit's settings: `flags`' for the settings `given` names (by field name), the
 /// file's for the rest, with the file's model info. `--grid` and `--precision`, if given,
 /// must be the file's.

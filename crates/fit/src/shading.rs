@@ -17,11 +17,11 @@ use crate::model::{TrainingBackground, TrainingLoss};
 use crate::settings::{FitSettings, Method};
 
 /// Channels of a view-independent raw value: density, then red, green, blue.
-pub const VIEW_INDEPENDENT_CHANNELS: usize = 4;
+pub(crate) const VIEW_INDEPENDENT_CHANNELS: usize = 4;
 
 /// How raw values become density and colour.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Shading {
+pub(crate) struct Shading {
     /// The density's shift and the view-independent colour's sigmoid.
     pub activation: DensityColor,
     /// View-dependent colour: channels `1..` of a raw value are its coefficients.
@@ -33,7 +33,7 @@ pub struct Shading {
 
 /// What [`Shading::composite_inputs`] records.
 #[derive(Debug)]
-pub struct Shaded {
+pub(crate) struct Shaded {
     /// The composite over the samples' rays.
     pub composite: Composite,
     /// Its inputs on the tape.
@@ -46,7 +46,7 @@ impl Shaded {
     /// Records the composite (colour, opacity and the depth if it was asked for).
     ///
     /// Errors: from the ops.
-    pub fn render<F: Float>(self, tape: &mut Tape<F>, method: Method) -> Result<CompositeVars, TapeError> {
+    pub(crate) fn render<F: Float>(self, tape: &mut Tape<F>, method: Method) -> Result<CompositeVars, TapeError> {
         method.kernels().composite(tape, &self.composite, &self.inputs)
     }
 
@@ -56,7 +56,7 @@ impl Shaded {
     /// `prior`, where there are.
     ///
     /// Errors: from the ops.
-    pub fn training_loss<F: Float>(
+    pub(crate) fn training_loss<F: Float>(
         self,
         tape: &mut Tape<F>,
         target: Var,
@@ -80,7 +80,7 @@ impl Shading {
     ///
     /// Errors: a shift that is not finite, a degree above 3 ([`FitError::Config`] naming the
     /// flag).
-    pub fn new(shift: f64, degree: usize) -> Result<Self, FitError> {
+    pub(crate) fn new(shift: f64, degree: usize) -> Result<Self, FitError> {
         let sh = match degree {
             0 => None,
             d => Some(ShColor::new(d).map_err(|e| FitError::Config(format!("--sh-degree: {e}")))?),
@@ -96,7 +96,7 @@ impl Shading {
     /// background if they ask for one.
     ///
     /// Errors: as [`Shading::new`].
-    pub fn of(settings: &FitSettings) -> Result<Self, FitError> {
+    pub(crate) fn of(settings: &FitSettings) -> Result<Self, FitError> {
         let environment = match settings.learn_background {
             true => Some(Environment::new(settings.background_degree)?),
             false => None,
@@ -110,7 +110,7 @@ impl Shading {
     /// The density of raw values `raw` (`[m, C]`, as a grid field's lookup returns them).
     ///
     /// Errors: raw values that are not 2-d, a NaN density.
-    pub fn densities<F: Float>(&self, raw: ndarray::ArrayD<F>) -> Result<ndarray::Array1<F>, FitError> {
+    pub(crate) fn densities<F: Float>(&self, raw: ndarray::ArrayD<F>) -> Result<ndarray::Array1<F>, FitError> {
         let raw = raw
             .into_dimensionality::<ndarray::Ix2>()
             .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
@@ -125,7 +125,7 @@ impl Shading {
     /// Each value is computed by the render's own ops, so it rounds as a render does.
     ///
     /// Errors: raw values that are not 2-d or have too few channels, a NaN value.
-    pub fn base_colors<F: Float>(&self, raw: ndarray::ArrayD<F>) -> Result<Array2<F>, FitError> {
+    pub(crate) fn base_colors<F: Float>(&self, raw: ndarray::ArrayD<F>) -> Result<Array2<F>, FitError> {
         let raw = raw
             .into_dimensionality::<ndarray::Ix2>()
             .map_err(|e| FitError::Config(format!("raw values: {e}")))?;
@@ -155,14 +155,9 @@ impl Shading {
 
     /// Channels of a raw value: the density, then the colour's (3, or the spherical
     /// harmonics' coefficients).
-    pub fn channels(&self) -> usize {
+    pub(crate) fn channels(&self) -> usize {
         self.sh
             .map_or(VIEW_INDEPENDENT_CHANNELS, |sh| 1 + sh.coefficient_count())
-    }
-
-    /// The degree of the spherical harmonics (0 for view-independent colour).
-    pub fn sh_degree(&self) -> usize {
-        self.sh.as_ref().map_or(0, ShColor::degree)
     }
 
     /// Records `lookup` (sample positions `[n, 3]` to raw values `[n, C]`) of `samples` of
@@ -174,7 +169,7 @@ impl Shading {
     /// shared `background`; a per-ray background (random colours against pictures with alpha)
     /// is still composited over as given.
     #[allow(clippy::too_many_arguments)] // one call site each in the grid models' render and loss
-    pub fn composite_inputs<F: Float>(
+    pub(crate) fn composite_inputs<F: Float>(
         &self,
         tape: &mut Tape<F>,
         rays: &RayBatch<F>,

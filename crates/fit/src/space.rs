@@ -40,7 +40,7 @@ pub enum SpaceChoice {
 
 impl SpaceChoice {
     /// `auto`, `box` or `contracted`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             SpaceChoice::Auto => "auto",
             SpaceChoice::Box => "box",
@@ -85,7 +85,7 @@ impl Framing {
     /// The contraction around this inner region.
     ///
     /// Errors: a radius that is not finite and positive, a centre that is not finite.
-    pub fn contraction(&self) -> Result<Contraction, FitError> {
+    pub(crate) fn contraction(&self) -> Result<Contraction, FitError> {
         Ok(Contraction::new(InnerRegion::new(self.centre, self.radius)?)?)
     }
 }
@@ -102,18 +102,10 @@ pub enum FieldSpace {
 
 impl FieldSpace {
     /// The contraction, for a contracted space.
-    pub fn contraction(&self) -> Option<Contraction> {
+    pub(crate) fn contraction(&self) -> Option<Contraction> {
         match self {
             FieldSpace::Box(_) => None,
             FieldSpace::Contracted(c) => Some(*c),
-        }
-    }
-
-    /// The box the field's grid covers: the world box, or the contracted cube.
-    pub fn bounds(&self) -> Aabb {
-        match self {
-            FieldSpace::Box(bounds) => *bounds,
-            FieldSpace::Contracted(_) => Contraction::cube(),
         }
     }
 
@@ -133,7 +125,7 @@ impl FieldSpace {
     /// Depths of a contracted field are therefore distances along the contracted path.
     ///
     /// Errors: a step that is not finite and positive, the samplers' errors.
-    pub fn sample<F: Float>(
+    pub(crate) fn sample<F: Float>(
         &self,
         occupancy: Option<&OccupancyGrid>,
         rays: &RayBatch<F>,
@@ -325,7 +317,7 @@ pub struct SpaceDecision {
 /// capture: what lies beyond any box is real and must be modelled); a contracted space without a framing is framed from the training cameras.
 ///
 /// Errors: cameras that frame nothing.
-pub fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, SpaceDecision), FitError> {
+pub(crate) fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, SpaceDecision), FitError> {
     let alpha = data.training_alpha();
     let (space, why) = match settings.space {
         SpaceChoice::Auto if alpha => (

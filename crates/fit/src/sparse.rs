@@ -40,13 +40,13 @@ use crate::shading::Shading;
 use crate::space::FieldSpace;
 
 /// The name of the packed raw values `[kept, C]` in the parameter store and a checkpoint.
-pub const DATA: &str = "sparse_grid";
+pub(crate) const DATA: &str = "sparse_grid";
 
 /// The name of the kept-node mask `[N, N, N]` in a checkpoint.
 pub(crate) const KEPT: &str = "sparse_grid.kept";
 
 /// Occupancy cells around an occupied one whose nodes a growth keeps.
-pub const DILATION: usize = 2;
+pub(crate) const DILATION: usize = 2;
 
 /// A sparse grid of raw density and colour, its packed values kept in a [`Params`] store.
 #[derive(Debug)]
@@ -82,7 +82,7 @@ impl<F: Float> SparseGrid<F> {
     /// sample weights) weighted by `weight` in its training objective.
     ///
     /// Errors: a weight that is negative or not finite.
-    pub fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
+    pub(crate) fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
         if !(weight.is_finite() && weight >= 0.0) {
             return Err(FitError::Config(format!(
                 "--distortion {weight}: must be finite and non-negative"
@@ -92,17 +92,12 @@ impl<F: Float> SparseGrid<F> {
         Ok(self)
     }
 
-    /// The distortion loss's weight.
-    pub fn distortion(&self) -> f64 {
-        self.distortion
-    }
-
     /// The grid over `scene_box` of the lattice nodes `index` keeps (`nodes^3`), every raw
     /// value 0, with `shading`; `smoothness` weighs its total-variation prior (0 for none).
     ///
     /// Errors: a bad box, a lattice that is not `nodes^3`, a smoothness that is negative or
     /// not finite.
-    pub fn new(
+    pub(crate) fn new(
         scene_box: SceneBox,
         nodes: usize,
         index: NodeIndex,
@@ -141,28 +136,23 @@ impl<F: Float> SparseGrid<F> {
     }
 
     /// Which lattice nodes are stored.
-    pub fn index(&self) -> &NodeIndex {
+    pub(crate) fn index(&self) -> &NodeIndex {
         self.field.index()
     }
 
     /// The box the lattice covers.
-    pub fn scene_box(&self) -> SceneBox {
+    pub(crate) fn scene_box(&self) -> SceneBox {
         SceneBox {
             min: self.bounds.min(),
             max: self.bounds.max(),
         }
     }
 
-    /// The degree of the spherical harmonics of the colour (0 for view-independent).
-    pub fn sh_degree(&self) -> usize {
-        self.shading.sh_degree()
-    }
-
     /// The same field on a lattice of `nodes^3` keeping the nodes `keep` marks: each kept
     /// node takes this grid's raw value at its position.
     ///
     /// Errors: a mask that is not one entry per node.
-    pub fn resampled_onto(&self, nodes: usize, keep: &[bool]) -> Result<Self, FitError> {
+    pub(crate) fn resampled_onto(&self, nodes: usize, keep: &[bool]) -> Result<Self, FitError> {
         let scene_box = self.scene_box();
         let mut grown = SparseGrid::<F>::new(
             scene_box,
@@ -258,7 +248,12 @@ pub(crate) fn cells_without_kept_nodes(
 
 /// The nodes of a `nodes^3` lattice over `scene_box` within `dilation` cells (per axis) of an
 /// occupied cell of `occupancy`: one entry per node, in linear order.
-pub fn keep_near_occupied(scene_box: &SceneBox, nodes: usize, occupancy: &OccupancyGrid, dilation: usize) -> Vec<bool> {
+pub(crate) fn keep_near_occupied(
+    scene_box: &SceneBox,
+    nodes: usize,
+    occupancy: &OccupancyGrid,
+    dilation: usize,
+) -> Vec<bool> {
     let r = occupancy.resolution();
     let mut near: Vec<bool> = (0..r * r * r)
         .map(|l| occupancy.is_occupied([l / (r * r), l / r % r, l % r]))
@@ -438,3 +433,6 @@ impl<F: Float> GridModel<F> for SparseGrid<F> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

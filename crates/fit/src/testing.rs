@@ -3,6 +3,10 @@
 
 use ndarray::Array3;
 
+mod scenes;
+
+pub(crate) use scenes::*;
+
 use crate::dataset::{Dataset, View};
 use fogray_ops::{Intrinsics, PinholeCamera};
 

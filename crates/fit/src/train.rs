@@ -81,7 +81,8 @@ pub struct Progress {
 /// occupancy grid a model fitted with one was trained with.
 ///
 /// Errors: the ops' errors.
-pub fn render_test_views<F: Float, M: RadianceField<F>>(
+#[cfg(test)]
+pub(crate) fn render_test_views<F: Float, M: RadianceField<F>>(
     model: &M,
     data: &Dataset,
     settings: &FitSettings,
@@ -119,7 +120,7 @@ fn render_views<F: Float, M: RadianceField<F>>(
 /// learnt the scene has a small gap; one that has learnt its training views, a large one.
 ///
 /// Errors: a count of 0, the ops' errors.
-pub fn training_views_psnr<F: Float, M: RadianceField<F>>(
+pub(crate) fn training_views_psnr<F: Float, M: RadianceField<F>>(
     model: &M,
     data: &Dataset,
     settings: &FitSettings,
@@ -136,30 +137,14 @@ pub fn training_views_psnr<F: Float, M: RadianceField<F>>(
     Ok(psnr(&r, &e)?)
 }
 
-impl<F: Float, M: RadianceField<F>> FitResult<F, M> {
-    /// [`training_views_psnr`] of the fitted model on as many of `data`'s training views as it
-    /// has held-out ones, with the fit's occupancy grid: the figure to set beside
-    /// [`FitResult::final_test_psnr`].
-    ///
-    /// Errors: the ops' errors.
-    pub fn training_views_psnr(&self, data: &Dataset, settings: &FitSettings) -> Result<f64, FitError> {
-        training_views_psnr(&self.model, data, settings, self.occupancy.as_ref(), data.test.len())
-    }
-}
+impl<F: Float, M: RadianceField<F>> FitResult<F, M> {}
 
 /// The PSNR of `renders` against the test views' pictures.
 ///
 /// Errors: renders that do not match the views.
-pub fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
+#[cfg(test)]
+pub(crate) fn test_psnr(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
     held_out_psnr(&renders.iter().map(|a| a.view()).collect::<Vec<_>>(), data)
-}
-
-/// The mean SSIM of `renders` against the test views' pictures; NaN (not measured) when a
-/// view is smaller than SSIM's 11 x 11 window, so that tiny test scenes still fit.
-///
-/// Errors: renders that do not match the views.
-pub fn test_ssim(renders: &[Array3<f64>], data: &Dataset) -> Result<f64, FitError> {
-    held_out_ssim(&renders.iter().map(|a| a.view()).collect::<Vec<_>>(), data)
 }
 
 /// [`test_psnr`] of renders held as views.
@@ -168,7 +153,8 @@ pub(crate) fn held_out_psnr(colors: &[ArrayView3<f64>], data: &Dataset) -> Resul
     Ok(psnr(colors, &e)?)
 }
 
-/// [`test_ssim`] of renders held as views.
+/// The SSIM of renders held as views against the test views' pictures (NaN when a test
+/// view is smaller than the SSIM window).
 pub(crate) fn held_out_ssim(colors: &[ArrayView3<f64>], data: &Dataset) -> Result<f64, FitError> {
     if data.test.iter().any(|t| t.size().iter().any(|&n| n < SSIM_WINDOW)) {
         return Ok(f64::NAN);
@@ -223,7 +209,7 @@ pub fn fit<F: Float, M: RadianceField<F>>(
 /// a constant rate) and a budget of steps (a budget of seconds stops where the clock says).
 ///
 /// Errors: as [`Trainer::new`] and [`Trainer::step`].
-pub fn fit_from<F: Float, M: RadianceField<F>>(
+pub(crate) fn fit_from<F: Float, M: RadianceField<F>>(
     data: &Dataset,
     settings: &FitSettings,
     start: Option<Start<F, M>>,
@@ -259,3 +245,9 @@ pub fn fit_from<F: Float, M: RadianceField<F>>(
         profile,
     })
 }
+
+#[cfg(test)]
+mod tests;
+
+#[cfg(test)]
+mod negative_tests;

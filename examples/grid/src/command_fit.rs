@@ -82,7 +82,7 @@ pub(crate) fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()>
                 "fogray-grid: interrupted after step {step}: the fit is saved to {} (continue it with --resume)",
                 saved.display()
             );
-            std::process::exit(session::INTERRUPTED_EXIT.into());
+            std::process::exit(fogray::fit::interrupt::INTERRUPTED_STATUS);
         }
         SessionOutcome::Finished(report) => report_fit(&args, &settings, &data, &report),
     }
@@ -153,12 +153,15 @@ fn report_fit(args: &FitArgs, settings: &FitSettings, data: &Dataset, report: &F
             settings.precision.name(),
             settings.sampling.name()
         );
-        plots::psnr_curves(
+        plots::metric_curves(
             &dir.join("psnr"),
             &[plots::Curve {
                 label,
                 log: &report.log,
             }],
+            plots::XAxis::Seconds,
+            plots::Metric::Psnr,
+            &[],
         )?;
     }
     let summary = FitSummary {

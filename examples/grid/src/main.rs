@@ -18,7 +18,7 @@ use fogray::fit::checkpoint::{self, ModelInfo};
 use fogray::fit::dataset::Dataset;
 use fogray::fit::depth::write_depth_png;
 use fogray::fit::dispatch::{with_field, FieldWork};
-use fogray::fit::images::{nested, write_comparison_png, write_png};
+use fogray::fit::images::{write_comparison_png, write_png};
 use fogray::fit::metrics::psnr;
 use fogray::fit::plots;
 use fogray::fit::render::{render_picture, RenderOptions};
@@ -396,5 +396,30 @@ fn main() -> ExitCode {
     match run(cli, &matches) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => fail(&format!("{e:#}")),
+    }
+}
+
+/// The image as nested vectors `[row][column][channel]`, the layout of the JSON outputs.
+fn nested(image: ndarray::ArrayView3<'_, f64>) -> Vec<Vec<Vec<f64>>> {
+    image
+        .outer_iter()
+        .map(|row| row.outer_iter().map(|px| px.to_vec()).collect())
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use ndarray::Array3;
+
+    use super::nested;
+
+    #[test]
+    fn nested_keeps_row_column_channel_order() {
+        let card = Array3::from_shape_fn((3, 5, 3), |(a, b, c)| (a * 15 + b * 3 + c) as f64 / 44.0);
+        let n = nested(card.view());
+        assert_eq!((n.len(), n[0].len(), n[0][0].len()), (3, 5, 3));
+        // Value (a, b, c) of the card is (15 a + 3 b + c) / 44.
+        assert_eq!(n[2][1][0], 33.0 / 44.0);
+        assert_eq!(n[0][4][2], 14.0 / 44.0);
     }
 }

@@ -5,7 +5,7 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
-use fogray_fit::plots::{psnr_curves_against, Curve, XAxis};
+use fogray_fit::plots::{metric_curves, Curve, Metric, XAxis};
 use fogray_fit::train::LogEntry;
 use fogray_lab::curves::{against_anchor, psnr_at, reach, Anchor, AnchorPoint};
 use fogray_lab::stamp::Stamp;
@@ -92,8 +92,14 @@ pub fn report(args: &Args, runs: &[Run], outside: Option<&Anchor>, stamp: &Stamp
         });
     }
     let dashed: Vec<usize> = (runs.len()..curves.len()).collect();
-    psnr_curves_against(&out.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &dashed)
-        .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
+    metric_curves(
+        &out.join("psnr-vs-seconds"),
+        &curves,
+        XAxis::Seconds,
+        Metric::Psnr,
+        &dashed,
+    )
+    .map_err(|e| anyhow::anyhow!("plot: {e}"))?;
 
     let first = &runs[0].result;
     let mut md = String::new();

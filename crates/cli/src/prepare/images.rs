@@ -55,14 +55,14 @@ mod tests {
         }
         let to = dir.path().join("out").join("images");
         std::fs::create_dir(dir.path().join("out")).unwrap();
-        let placed = place(&from, &names, &to, &StopFlag::new()).unwrap();
+        let placed = place(&from, &names, &to, &StopFlag::default()).unwrap();
         assert_eq!(placed.linked + placed.copied, 2);
         for (i, name) in names.iter().enumerate() {
             assert_eq!(std::fs::read(to.join(name)).unwrap(), [i as u8; 3]);
             assert_eq!(std::fs::read(from.join(name)).unwrap(), [i as u8; 3]);
         }
         // A stop raised before the first photograph places none.
-        let stop = StopFlag::new();
+        let stop = StopFlag::default();
         stop.raise();
         let again = dir.path().join("again");
         assert_eq!(place(&from, &names, &again, &stop).unwrap(), Placed::default());

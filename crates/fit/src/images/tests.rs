@@ -60,15 +60,6 @@ fn psnr_clamps_the_render_and_averages_over_all_images() {
 }
 
 #[test]
-fn nested_keeps_row_column_channel_order() {
-    let n = nested(card().view());
-    assert_eq!((n.len(), n[0].len(), n[0][0].len()), (3, 5, 3));
-    // Value (a, b, c) of the card is (15 a + 3 b + c) / 44.
-    assert_eq!(n[2][1][0], 33.0 / 44.0);
-    assert_eq!(n[0][4][2], 14.0 / 44.0);
-}
-
-#[test]
 fn abs_error_is_per_value() {
     let (a, b) = (card(), Array3::from_elem((3, 5, 3), 0.5));
     let e = abs_error(a.view(), b.view()).unwrap();

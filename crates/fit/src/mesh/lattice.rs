@@ -17,7 +17,7 @@ const CHUNK_NODES: usize = 1 << 18;
 /// `min + (i, j, k) (max - min) / (nodes - 1)` (a grid model's own node positions when
 /// `nodes` is its node count).
 #[derive(Debug, Clone, PartialEq)]
-pub struct Lattice {
+pub(crate) struct Lattice {
     pub(super) nodes: usize,
     pub(super) bounds: Aabb,
     /// Densities, node `(i, j, k)` at `(i nodes + j) nodes + k`.
@@ -30,7 +30,8 @@ impl Lattice {
     ///
     /// Errors: fewer than 2 nodes ([`MeshError::Resolution`]), values that are not `nodes^3`
     /// or not finite ([`MeshError::Values`]).
-    pub fn new(nodes: usize, bounds: Aabb, values: Vec<f32>) -> Result<Self, MeshError> {
+    #[cfg(test)]
+    pub(crate) fn new(nodes: usize, bounds: Aabb, values: Vec<f32>) -> Result<Self, MeshError> {
         if nodes < 2 {
             return Err(MeshError::Resolution(nodes));
         }
@@ -51,7 +52,7 @@ impl Lattice {
     ///
     /// Errors: fewer than 2 nodes, a lattice larger than memory can hold
     /// ([`MeshError::Resolution`]), the model's (a NaN density).
-    pub fn sample<F: Float, M: RadianceField<F>>(model: &M, nodes: usize) -> Result<Self, FitError> {
+    pub(crate) fn sample<F: Float, M: RadianceField<F>>(model: &M, nodes: usize) -> Result<Self, FitError> {
         let total = nodes
             .checked_pow(3)
             .filter(|&t| nodes >= 2 && t.checked_mul(4).is_some())
@@ -88,13 +89,8 @@ impl Lattice {
         Ok(lattice)
     }
 
-    /// Nodes per axis.
-    pub fn nodes(&self) -> usize {
-        self.nodes
-    }
-
     /// The smallest and the largest density on the lattice.
-    pub fn range(&self) -> (f64, f64) {
+    pub(crate) fn range(&self) -> (f64, f64) {
         self.values
             .iter()
             .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {

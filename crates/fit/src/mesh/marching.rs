@@ -31,7 +31,7 @@ pub(crate) const MAX_VERTICES: usize = i32::MAX as usize;
 /// The surface of a lattice: vertex positions and triangles of vertex indices, each triangle
 /// counter-clockwise seen from outside (from where the density is below the level).
 #[derive(Debug, Clone, PartialEq, Default)]
-pub struct Surface {
+pub(crate) struct Surface {
     /// Vertex positions, in the lattice's units.
     pub positions: Vec<[f32; 3]>,
     /// Triangles, three indices into `positions` each.
@@ -170,7 +170,7 @@ impl Builder<'_> {
 /// Errors: a level that is not above 0 or not finite ([`MeshError::Level`] without a
 /// range: the padding is empty, so such a surface would enclose all space), more vertices than
 /// a PLY file can index ([`MeshError::TooLarge`]).
-pub fn march(lattice: &Lattice, level: f64) -> Result<Surface, MeshError> {
+pub(crate) fn march(lattice: &Lattice, level: f64) -> Result<Surface, MeshError> {
     if !(level.is_finite() && level > EMPTY) {
         return Err(MeshError::Level {
             level,

@@ -45,8 +45,8 @@ use thiserror::Error;
 use crate::error::FitError;
 use crate::model::RadianceField;
 use fogray_ops::space::InnerRegion;
-pub use lattice::Lattice;
-pub use marching::{march, Surface};
+pub(crate) use lattice::Lattice;
+pub(crate) use marching::{march, Surface};
 pub use ply::write_ply;
 
 /// The opacity of one sample step at which [`Level::default`] puts the surface: a tenth of
@@ -137,7 +137,7 @@ impl Level {
     /// opacity `A`.
     ///
     /// Errors: an opacity outside `(0, 1)` ([`MeshError::Opacity`]).
-    pub fn density(self, step: f64) -> Result<f64, MeshError> {
+    pub(crate) fn density(self, step: f64) -> Result<f64, MeshError> {
         match self {
             Level::Density(sigma) => Ok(sigma),
             Level::Opacity(a) if a > 0.0 && a < 1.0 => Ok(-(-a).ln_1p() / step),
@@ -265,3 +265,6 @@ pub(crate) fn vertex_colors<F: Float, M: RadianceField<F>>(
     }
     Ok(colors)
 }
+
+#[cfg(test)]
+mod tests;

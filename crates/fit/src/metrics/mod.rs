@@ -15,7 +15,8 @@
 use ndarray::{ArrayView3, Zip};
 
 mod ssim;
-pub use ssim::{ssim, SSIM_SIGMA, SSIM_WINDOW};
+pub(crate) use ssim::ssim;
+pub(crate) use ssim::SSIM_WINDOW;
 
 use crate::images::{check_same, ImageError};
 
@@ -47,22 +48,8 @@ pub struct ViewScore {
 
 /// Each image pair's PSNR and share of the squared error, with [`psnr`]'s clamping.
 ///
-/// ```
-/// use fogray_fit::metrics::view_scores;
-/// use ndarray::Array3;
-///
-/// // Errors of 0.1 and 0.2 everywhere: MSE 0.01 and 0.04, 20 dB and 13.98 dB, a fifth and
-/// // four fifths of the squared error.
-/// let exact = Array3::from_elem((2, 2, 3), 0.5);
-/// let (a, b) = (Array3::from_elem((2, 2, 3), 0.6), Array3::from_elem((2, 2, 3), 0.3));
-/// let s = view_scores(&[a.view(), b.view()], &[exact.view(), exact.view()])?;
-/// assert!((s[0].psnr - 20.0).abs() < 1e-9 && (s[1].psnr - 13.979400086720377).abs() < 1e-9);
-/// assert!((s[0].share_of_error - 0.2).abs() < 1e-12 && (s[1].share_of_error - 0.8).abs() < 1e-12);
-/// # Ok::<(), fogray_fit::images::ImageError>(())
-/// ```
-///
 /// Errors: as [`psnr`]'s.
-pub fn view_scores(
+pub(crate) fn view_scores(
     renders: &[ArrayView3<'_, f64>],
     exacts: &[ArrayView3<'_, f64>],
 ) -> Result<Vec<ViewScore>, ImageError> {
@@ -79,35 +66,13 @@ pub fn view_scores(
         .collect())
 }
 
-/// The mean of the image pairs' own PSNRs (dB), with [`psnr`]'s clamping: the convention of
-/// the NeRF literature and its tools (nerfstudio's evaluation, instant-ngp, DVGO, Plenoxels),
-/// where [`psnr`] takes the mean squared error over all pairs first. By the concavity of the
+/// The mean of `scores`' PSNRs (dB), scores from [`view_scores`] (NaN for no scores): the mean
+/// of the image pairs' own PSNRs, with [`psnr`]'s clamping, the convention of the NeRF
+/// literature and its tools (nerfstudio's evaluation, instant-ngp, DVGO, Plenoxels), where
+/// [`psnr`] takes the mean squared error over all pairs first. By the concavity of the
 /// logarithm it is never below [`psnr`] for views of one size; a hard view weighs in by its
 /// decibels here, by its squared error there. Infinite when a pair is exact.
-///
-/// ```
-/// use fogray_fit::metrics::{mean_view_psnr, psnr};
-/// use ndarray::Array3;
-///
-/// // Errors of 0.1 and 0.001 everywhere: 20 dB and 60 dB, a mean of 40 dB; the MSE over both,
-/// // (0.01 + 1e-6) / 2, is 23.01 dB.
-/// let exact = Array3::from_elem((2, 2, 3), 0.5);
-/// let (a, b) = (Array3::from_elem((2, 2, 3), 0.6), Array3::from_elem((2, 2, 3), 0.501));
-/// let (r, e) = ([a.view(), b.view()], [exact.view(), exact.view()]);
-/// assert!((mean_view_psnr(&r, &e)? - 40.0).abs() < 1e-9);
-/// assert!((psnr(&r, &e)? - 23.0099).abs() < 1e-4);
-/// assert!(mean_view_psnr(&[], &[]).is_err() && mean_view_psnr(&r[..1], &e).is_err());
-/// # Ok::<(), fogray_fit::images::ImageError>(())
-/// ```
-///
-/// Errors: as [`psnr`]'s.
-pub fn mean_view_psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
-    Ok(mean_psnr(&view_scores(renders, exacts)?))
-}
-
-/// The mean of `scores`' PSNRs: [`mean_view_psnr`] of views already scored by [`view_scores`]
-/// (NaN for no scores).
-pub fn mean_psnr(scores: &[ViewScore]) -> f64 {
+pub(crate) fn mean_psnr(scores: &[ViewScore]) -> f64 {
     scores.iter().map(|s| s.psnr).sum::<f64>() / scores.len() as f64
 }
 
@@ -156,3 +121,6 @@ fn check_pairs(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) 
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests;

@@ -4,20 +4,6 @@
 //! the authors' MATLAB code, mip-NeRF's `compute_ssim` and scikit-image's
 //! `structural_similarity(gaussian_weights=True, sigma=1.5, use_sample_covariance=False,
 //! data_range=1)` do), per channel, then over channels.
-//!
-//! ```
-//! use fogray_fit::metrics::ssim;
-//! use ndarray::Array3;
-//!
-//! // Two flat images: only the luminance term is left, (2ab + C1) / (a^2 + b^2 + C1).
-//! let a = Array3::from_elem((16, 16, 3), 0.2);
-//! let b = Array3::from_elem((16, 16, 3), 0.6);
-//! let c1 = 0.01f64.powi(2);
-//! let expected = (2.0 * 0.2 * 0.6 + c1) / (0.2f64.powi(2) + 0.6f64.powi(2) + c1);
-//! assert!((ssim(&[a.view()], &[b.view()])? - expected).abs() < 1e-12);
-//! assert_eq!(ssim(&[a.view()], &[a.view()])?, 1.0);
-//! # Ok::<(), fogray_fit::images::ImageError>(())
-//! ```
 
 use ndarray::{s, Array2, ArrayView2, ArrayView3, Axis};
 use rayon::prelude::*;
@@ -25,9 +11,9 @@ use rayon::prelude::*;
 use crate::images::ImageError;
 
 /// Taps of the Gaussian window (its radius is 5).
-pub const SSIM_WINDOW: usize = 11;
+pub(crate) const SSIM_WINDOW: usize = 11;
 /// Standard deviation of the Gaussian window, in pixels.
-pub const SSIM_SIGMA: f64 = 1.5;
+pub(crate) const SSIM_SIGMA: f64 = 1.5;
 /// The luminance constant's factor: `C1 = (K1 L)^2` with `L = 1`.
 const K1: f64 = 0.01;
 /// The contrast constant's factor: `C2 = (K2 L)^2`.
@@ -39,7 +25,7 @@ const K2: f64 = 0.03;
 ///
 /// Errors: [`ImageError::Empty`] for no images, [`ImageError::Shape`] if the counts or any
 /// pair's shapes differ or an image is smaller than the window (11 x 11).
-pub fn ssim(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
+pub(crate) fn ssim(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> Result<f64, ImageError> {
     super::check_pairs(renders, exacts)?;
     for (i, r) in renders.iter().enumerate() {
         let (h, w, _) = r.dim();

@@ -77,7 +77,7 @@ impl FitSettings {
     /// it kept every node, as it may.
     ///
     /// Errors: [`FitError::TooLarge`] naming the flag and the bytes it would need.
-    pub fn check_memory(&self, available: Bytes) -> Result<(), FitError> {
+    pub(crate) fn check_memory(&self, available: Bytes) -> Result<(), FitError> {
         let shape = |nodes| GridShape {
             nodes,
             channels: limits::grid_channels(self.sh_degree),
@@ -120,7 +120,11 @@ impl FitSettings {
     ///
     /// Errors: [`FitError::Config`] if the settings cannot be merged (not expected for two
     /// values of this type).
-    pub fn given_over(&self, saved: &FitSettings, given: &dyn Fn(&str) -> bool) -> Result<FitSettings, FitError> {
+    pub(crate) fn given_over(
+        &self,
+        saved: &FitSettings,
+        given: &dyn Fn(&str) -> bool,
+    ) -> Result<FitSettings, FitError> {
         let as_map = |s: &FitSettings| match serde_json::to_value(s) {
             Ok(Value::Object(map)) => Ok(map),
             other => Err(FitError::Config(format!("settings as JSON: {other:?}"))),

@@ -43,7 +43,7 @@ pub enum ModelKind {
 
 impl ModelKind {
     /// `dense`, `sparse` or `splats`.
-    pub fn name(self) -> &'static str {
+    pub(crate) fn name(self) -> &'static str {
         match self {
             ModelKind::Dense => "dense",
             ModelKind::Sparse => "sparse",
@@ -73,7 +73,7 @@ impl Precision {
     }
 
     /// The precision of `F` (`f32` or `f64`, the two [`Float`](fogray_tape::Float) types).
-    pub fn of<F: fogray_tape::Float>() -> Precision {
+    pub(crate) fn of<F: fogray_tape::Float>() -> Precision {
         if std::mem::size_of::<F>() == 4 {
             Precision::F32
         } else {

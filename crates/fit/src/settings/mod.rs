@@ -22,12 +22,14 @@ use crate::space::{FieldSpace, Framing, SpaceChoice};
 
 mod check;
 mod kinds;
+#[cfg(test)]
+mod limits_tests;
 mod scene_box;
 #[cfg(test)]
 mod tests;
 
 pub use kinds::{Method, ModelKind, Precision, Sampling};
-pub use scene_box::{SceneBox, MAX_BOX_COORDINATE};
+pub use scene_box::SceneBox;
 
 /// When training stops.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,7 +45,7 @@ pub(crate) const DEFAULT_SECONDS: f64 = 60.0;
 
 /// The longest training budget accepted, in seconds: one week (a longer one is a typo or a
 /// budget meant never to end).
-pub const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
+pub(crate) const MAX_SECONDS: f64 = 7.0 * 24.0 * 3600.0;
 
 /// The most training steps accepted: a hundred million (more than a week of the fastest
 /// steps; a larger count is a typo or a budget meant never to end).
@@ -53,7 +55,7 @@ pub const MAX_STEPS: usize = 100_000_000;
 /// clock, so a budget of seconds with more evaluations than it has time for
 /// evaluates after every step and never ends in the time asked; the curves of a report need
 /// far fewer points.
-pub const MAX_EVALUATIONS: usize = 10_000;
+pub(crate) const MAX_EVALUATIONS: usize = 10_000;
 
 /// Everything a fit is configured by (see the [module docs](self)).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

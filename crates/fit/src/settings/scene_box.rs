@@ -6,7 +6,7 @@ use crate::error::FitError;
 
 /// The farthest a box's corner may lie from the origin on any axis: a dataset's own scene box
 /// is held to the same bound.
-pub const MAX_BOX_COORDINATE: f64 = 1e6;
+pub(crate) const MAX_BOX_COORDINATE: f64 = 1e6;
 
 /// The box a model covers: `min` to `max` on each axis (world units).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -25,7 +25,7 @@ impl SceneBox {
     };
 
     /// The cube `[-half, half]^3`.
-    pub fn cube(half: f64) -> SceneBox {
+    pub(crate) fn cube(half: f64) -> SceneBox {
         SceneBox {
             min: [-half; 3],
             max: [half; 3],
@@ -41,7 +41,7 @@ impl SceneBox {
 
     /// Errors: [`FitError::Config`] for a bound that is not finite or an axis whose minimum is
     /// not below its maximum.
-    pub fn check(&self) -> Result<(), FitError> {
+    pub(crate) fn check(&self) -> Result<(), FitError> {
         for a in 0..3 {
             let (lo, hi) = (self.min[a], self.max[a]);
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {

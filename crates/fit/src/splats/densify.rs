@@ -22,7 +22,7 @@ pub(crate) const HUGE_FRACTION: f64 = 0.1;
 
 /// Adaptive density control (see the [module docs](self)).
 #[derive(Debug, Clone)]
-pub struct Densify {
+pub(crate) struct Densify {
     settings: SplatSettings,
     extent: f64,
     rng: ChaCha12Rng,
@@ -54,7 +54,7 @@ fn rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
 impl Densify {
     /// The policy for `settings` in a scene of extent `extent` (the radius the cameras span),
     /// drawing its split samples from `seed`.
-    pub fn new(settings: &SplatSettings, extent: f64, seed: u64) -> Self {
+    pub(crate) fn new(settings: &SplatSettings, extent: f64, seed: u64) -> Self {
         Densify {
             settings: *settings,
             extent,

@@ -23,7 +23,7 @@ pub(crate) const INITIAL_OPACITY: f64 = 0.1;
 /// The splats' parameters as plain arrays, `n` rows each (shapes as [`SplatVars`], but for
 /// the colour, which is spherical harmonics).
 #[derive(Debug, Clone, PartialEq)]
-pub struct SplatArraysOwned<F> {
+pub(crate) struct SplatArraysOwned<F> {
     /// Means `[n, 3]`, world frame.
     pub means: Array2<F>,
     /// Log standard deviations `[n, 3]`.
@@ -39,7 +39,7 @@ pub struct SplatArraysOwned<F> {
 
 /// The five parameters' ids in a [`SplatModel`]'s store.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct SplatIds {
+pub(crate) struct SplatIds {
     /// Means.
     pub means: ParamId,
     /// Log-scales.
@@ -54,7 +54,7 @@ pub struct SplatIds {
 
 /// 3-D Gaussian splats as a trainable model (see the [module docs](super)).
 #[derive(Debug)]
-pub struct SplatModel<F: Float> {
+pub(crate) struct SplatModel<F: Float> {
     params: Params<F>,
     ids: SplatIds,
     colour: ShColor,
@@ -78,13 +78,13 @@ pub(crate) fn check_count(n: usize, cap: usize) -> Result<(), FitError> {
 
 impl<F: Float> SplatModel<F> {
     /// The model's name in a model file.
-    pub const KIND: &'static str = "splats";
+    pub(crate) const KIND: &'static str = "splats";
 
     /// The model of `arrays`, whose colours are of spherical-harmonics degree `degree`.
     ///
     /// Errors: a degree above 3, rows that disagree in number or a wrong column count, a
     /// non-finite value ([`FitError::Config`]).
-    pub fn new(arrays: SplatArraysOwned<F>, degree: usize) -> Result<Self, FitError> {
+    pub(crate) fn new(arrays: SplatArraysOwned<F>, degree: usize) -> Result<Self, FitError> {
         let colour = ShColor::new(degree)?;
         let n = arrays.means.nrows();
         let shapes_ok = arrays.means.ncols() == 3
@@ -132,7 +132,12 @@ impl<F: Float> SplatModel<F> {
     /// Errors: no point, more than `cap` points or too many for memory
     /// ([`FitError::TooManySplats`], [`FitError::TooLarge`]), colours not one per point or a
     /// non-finite coordinate ([`FitError::Config`]).
-    pub fn from_points(points: &[[f64; 3]], colors: &[[f64; 3]], degree: usize, cap: usize) -> Result<Self, FitError> {
+    pub(crate) fn from_points(
+        points: &[[f64; 3]],
+        colors: &[[f64; 3]],
+        degree: usize,
+        cap: usize,
+    ) -> Result<Self, FitError> {
         let n = points.len();
         if n == 0 || colors.len() != n {
             return Err(FitError::Config(format!(
@@ -168,7 +173,13 @@ impl<F: Float> SplatModel<F> {
     /// otherwise as [`SplatModel::from_points`], drawn from `seed`.
     ///
     /// Errors: those of [`SplatModel::from_points`], and an empty or non-finite box.
-    pub fn random(bounds: [[f64; 3]; 2], n: usize, degree: usize, seed: u64, cap: usize) -> Result<Self, FitError> {
+    pub(crate) fn random(
+        bounds: [[f64; 3]; 2],
+        n: usize,
+        degree: usize,
+        seed: u64,
+        cap: usize,
+    ) -> Result<Self, FitError> {
         let [lo, hi] = bounds;
         if (0..3).any(|a| !(lo[a].is_finite() && hi[a].is_finite() && lo[a] < hi[a])) {
             return Err(FitError::Config(format!(
@@ -184,7 +195,7 @@ impl<F: Float> SplatModel<F> {
     }
 
     /// How many splats.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.seen.len()
     }
 
@@ -222,23 +233,18 @@ impl<F: Float> SplatModel<F> {
             .collect()
     }
 
-    /// Whether there is no splat.
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
-    }
-
     /// The parameter store (for the optimiser and checkpoints).
-    pub fn params(&self) -> &Params<F> {
+    pub(crate) fn params(&self) -> &Params<F> {
         &self.params
     }
 
     /// The parameter store, mutable (for the optimiser's step).
-    pub fn params_mut(&mut self) -> &mut Params<F> {
+    pub(crate) fn params_mut(&mut self) -> &mut Params<F> {
         &mut self.params
     }
 
     /// The five parameters' ids.
-    pub fn ids(&self) -> SplatIds {
+    pub(crate) fn ids(&self) -> SplatIds {
         self.ids
     }
 
@@ -248,14 +254,14 @@ impl<F: Float> SplatModel<F> {
     }
 
     /// The colours' spherical-harmonics degree.
-    pub fn degree(&self) -> usize {
+    pub(crate) fn degree(&self) -> usize {
         self.colour.degree()
     }
 
     /// A copy of the parameters as arrays.
     ///
     /// Errors: [`FitError::Param`] if a parameter is lent to a tape that was not cleared.
-    pub fn arrays(&self) -> Result<SplatArraysOwned<F>, FitError> {
+    pub(crate) fn arrays(&self) -> Result<SplatArraysOwned<F>, FitError> {
         let two = |id| -> Result<Array2<F>, FitError> {
             let v = self.params.get(id)?.to_owned();
             v.into_dimensionality::<Ix2>()
@@ -298,7 +304,7 @@ impl<F: Float> SplatModel<F> {
     /// colours seen from `centre` (a camera's): the op's inputs.
     ///
     /// Errors: [`FitError::Tape`] if a parameter is of another store.
-    pub fn vars(&self, tape: &mut Tape<F>, centre: [f64; 3]) -> Result<SplatVars, FitError> {
+    pub(crate) fn vars(&self, tape: &mut Tape<F>, centre: [f64; 3]) -> Result<SplatVars, FitError> {
         let sh = tape.param_from(&self.params, self.ids.sh)?;
         let directions = tape.constant(self.directions_from(centre)?);
         Ok(SplatVars {
@@ -314,7 +320,7 @@ impl<F: Float> SplatModel<F> {
     /// `background`, without a tape.
     ///
     /// Errors: those of [`SplatRender`] (a distorted camera, too many tile intersections).
-    pub fn render(&self, camera: &PinholeCamera, background: [f64; 3]) -> Result<Array2<F>, FitError> {
+    pub(crate) fn render(&self, camera: &PinholeCamera, background: [f64; 3]) -> Result<Array2<F>, FitError> {
         let op = SplatRender::new(camera, background)?;
         let mut tape = Tape::<F>::new();
         let vars = self.vars(&mut tape, camera.centre())?;

@@ -16,14 +16,14 @@ pub(crate) const RESET_OPACITY: f64 = 0.01;
 /// Per-parameter learning rates, set before every step (the optimiser's base rate is 1 and
 /// each parameter's scale is its rate, so a densification's new optimiser gets them back).
 #[derive(Debug, Clone, Copy)]
-pub struct SplatRates {
+pub(crate) struct SplatRates {
     settings: SplatSettings,
     extent: f64,
 }
 
 impl SplatRates {
     /// The rates of `settings` in a scene of extent `extent`.
-    pub fn new(settings: &SplatSettings, extent: f64) -> Self {
+    pub(crate) fn new(settings: &SplatSettings, extent: f64) -> Self {
         SplatRates {
             settings: *settings,
             extent,
@@ -57,14 +57,14 @@ impl<F: Float> StepPolicy<F, SplatModel<F>> for SplatRates {
 /// densifies (see the [module docs](self)): a reset after the last densification would leave
 /// no time to earn the opacity back.
 #[derive(Debug, Clone, Copy)]
-pub struct OpacityReset {
+pub(crate) struct OpacityReset {
     every: usize,
     until: f64,
 }
 
 impl OpacityReset {
     /// The resets of `settings` (`reset_every` steps, 0: never; until `densify_until`).
-    pub fn new(settings: &SplatSettings) -> Self {
+    pub(crate) fn new(settings: &SplatSettings) -> Self {
         OpacityReset {
             every: settings.reset_every,
             until: settings.densify_until,

@@ -11,7 +11,7 @@ use crate::settings::{Budget, FitSettings};
 
 /// How a splat fit runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SplatSettings {
+pub(crate) struct SplatSettings {
     /// The budget: steps (each renders one training view) or training seconds.
     pub budget: Budget,
     /// Seed of the view order, the backgrounds and a random start.
@@ -92,7 +92,7 @@ impl SplatSettings {
 
     /// Errors: a zero budget, period or count, a degree above 3, or a rate, threshold or
     /// fraction that is negative or not finite ([`FitError::Config`]).
-    pub fn check(&self) -> Result<(), FitError> {
+    pub(crate) fn check(&self) -> Result<(), FitError> {
         let rates = [
             self.means_lr[0],
             self.means_lr[1],

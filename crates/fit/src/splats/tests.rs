@@ -5,6 +5,8 @@ use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 
 use super::model::SplatArraysOwned;
+use super::settings::SplatSettings;
+use super::trainer::SplatTrainer;
 use super::*;
 use crate::dataset::{camera_rays, Dataset, View};
 
@@ -239,4 +241,14 @@ fn the_ply_file_is_what_3dgs_viewers_read() {
             }
         }
     }
+}
+
+#[test]
+fn random_splats_render_a_picture_of_the_camera_size() -> Result<(), Box<dyn std::error::Error>> {
+    let model = SplatModel::<f32>::random([[-0.5; 3], [0.5; 3]], 50, 1, 7, 1000)?;
+    let k = Intrinsics::from_vertical_fov(16, 16, 0.7)?;
+    let camera = PinholeCamera::look_at(k, [3.0, 0.0, 0.0], [0.0; 3], [0.0, 0.0, 1.0])?;
+    let image = model.render(&camera, [1.0; 3])?;
+    assert_eq!(image.dim(), (256, 3));
+    Ok(())
 }

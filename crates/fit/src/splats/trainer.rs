@@ -22,11 +22,10 @@ use crate::error::FitError;
 use crate::profile::{Phases, StepProfile};
 use crate::render::RenderedView;
 use crate::settings::Budget;
-use crate::state::TrainingState;
 use crate::trainer::{Evaluation, StepContext, StepPolicy, StepReport, Stepper};
 
 /// A splat fit in progress (see the [module docs](self)).
-pub struct SplatTrainer<'d, F: Float> {
+pub(crate) struct SplatTrainer<'d, F: Float> {
     data: &'d Dataset,
     settings: SplatSettings,
     model: SplatModel<F>,
@@ -80,7 +79,7 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     ///
     /// Errors: settings out of range, a model larger than the settings' cap, colours of
     /// another degree than the settings' ([`FitError::Config`], [`FitError::TooManySplats`]).
-    pub fn new(data: &'d Dataset, settings: &SplatSettings, model: SplatModel<F>) -> Result<Self, FitError> {
+    pub(crate) fn new(data: &'d Dataset, settings: &SplatSettings, model: SplatModel<F>) -> Result<Self, FitError> {
         settings.check()?;
         if model.len() > settings.max_splats {
             return Err(FitError::TooManySplats {
@@ -120,12 +119,12 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     }
 
     /// The model as it is now.
-    pub fn model(&self) -> &SplatModel<F> {
+    pub(crate) fn model(&self) -> &SplatModel<F> {
         &self.model
     }
 
     /// The fraction of the budget spent (steps or training seconds).
-    pub fn fraction(&self) -> f64 {
+    pub(crate) fn fraction(&self) -> f64 {
         match self.settings.budget {
             Budget::Steps(n) => self.step as f64 / n as f64,
             Budget::Seconds(s) => self.seconds / s,
@@ -133,7 +132,8 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     }
 
     /// Whether the budget is spent.
-    pub fn is_done(&self) -> bool {
+    #[cfg(test)]
+    pub(crate) fn is_done(&self) -> bool {
         self.fraction() >= 1.0
     }
 
@@ -142,7 +142,7 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     ///
     /// Errors: the ops' (too many tile intersections), a policy's (too many splats); the
     /// trainer should then be dropped.
-    pub fn step(&mut self) -> Result<StepReport, FitError> {
+    pub(crate) fn step(&mut self) -> Result<StepReport, FitError> {
         let start = Instant::now();
         let mut occupancy = None;
         let fraction = self.fraction();
@@ -205,7 +205,7 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     /// scored. Splats have no depth yet.
     ///
     /// Errors: the ops'.
-    pub fn evaluate(&self) -> Result<Evaluation, FitError> {
+    pub(crate) fn evaluate(&self) -> Result<Evaluation, FitError> {
         let views = self
             .data
             .test
@@ -215,25 +215,8 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
         Evaluation::scored(views, self.data, self.step, self.seconds, self.loss, 0)
     }
 
-    /// What resumes the fit's optimiser: steps, seconds and Adam's moments by parameter name
-    /// (the view order's stream is not saved yet; the model's arrays are
-    /// [`SplatModel::arrays`]).
-    ///
-    /// Errors: the optimiser's state not of the model's store.
-    pub fn state(&self) -> Result<TrainingState<F>, FitError> {
-        let mut state = TrainingState::fresh();
-        state.step = self.step;
-        state.seconds = self.seconds;
-        for id in self.model.params().ids() {
-            if let Some(s) = self.optimiser.state(self.model.params(), id)? {
-                state.adam.push((self.model.params().name(id)?.to_string(), s));
-            }
-        }
-        Ok(state)
-    }
-
     /// Where the training time went, phase by phase and op by op.
-    pub fn profile(&mut self) -> StepProfile {
+    pub(crate) fn profile(&mut self) -> StepProfile {
         StepProfile {
             steps: self.step,
             phases: self.phases,
@@ -242,12 +225,12 @@ impl<'d, F: Float> SplatTrainer<'d, F> {
     }
 
     /// Training seconds so far.
-    pub fn seconds(&self) -> f64 {
+    pub(crate) fn seconds(&self) -> f64 {
         self.seconds
     }
 
     /// Steps done.
-    pub fn steps(&self) -> usize {
+    pub(crate) fn steps(&self) -> usize {
         self.step
     }
 

@@ -10,7 +10,7 @@ use crate::error::FitError;
 use crate::train::{LogEntry, Progress};
 
 /// What the budget loop needs of a trainer, whatever its model and however it renders.
-pub trait Stepper {
+pub(crate) trait Stepper {
     /// One training step.
     ///
     /// Errors: the trainer's; it should then be dropped.
@@ -31,7 +31,7 @@ pub trait Stepper {
 
 /// What [`run_budget`] returns.
 #[derive(Debug, Clone)]
-pub struct BudgetRun {
+pub(crate) struct BudgetRun {
     /// The evaluations, in order (the one before the first step included).
     pub log: Vec<LogEntry>,
     /// The final evaluation, with depth, of the model as the loop left it; `None` when the
@@ -48,7 +48,7 @@ pub struct BudgetRun {
 /// the trainer as the step left it.
 ///
 /// Errors: the trainer's.
-pub fn run_budget<T: Stepper>(
+pub(crate) fn run_budget<T: Stepper>(
     trainer: &mut T,
     evaluations: usize,
     stop: Option<&AtomicBool>,

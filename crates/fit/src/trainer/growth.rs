@@ -13,7 +13,7 @@ use crate::trainer::policy::{StepContext, StepPolicy};
 
 /// Where a growing fit is among its stages.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Growth {
+pub(crate) struct Growth {
     /// `(fraction of the budget, nodes per axis)` from which each stage trains.
     stages: Vec<(f64, usize)>,
     /// The stage the model is at.
@@ -30,7 +30,7 @@ impl Growth {
     /// one), for a model of `nodes` per axis; `first_refresh` as [`Growth`] keeps it.
     ///
     /// Errors: [`FitError::Config`] if `nodes` is not the nodes of `stage`.
-    pub fn new(
+    pub(crate) fn new(
         settings: &FitSettings,
         stage: usize,
         nodes: usize,
@@ -56,7 +56,7 @@ impl Growth {
     }
 
     /// The stage the model is at (a checkpoint saves it).
-    pub fn stage(&self) -> usize {
+    pub(crate) fn stage(&self) -> usize {
         self.stage
     }
 

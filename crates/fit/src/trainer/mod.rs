@@ -39,6 +39,8 @@ pub(crate) mod policy;
 pub(crate) mod rate;
 pub(crate) mod refresh;
 #[cfg(test)]
+mod resume_tests;
+#[cfg(test)]
 mod tests;
 
 use std::time::{Duration, Instant};
@@ -50,11 +52,11 @@ use ndarray::Array2;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha12Rng;
 
-pub use budget::{run_budget, BudgetRun, Stepper};
-pub use growth::Growth;
-pub use policy::{StepContext, StepPolicy};
-pub use rate::LearningRate;
-pub use refresh::OccupancyRefresh;
+pub(crate) use budget::{run_budget, Stepper};
+pub(crate) use growth::Growth;
+pub(crate) use policy::{StepContext, StepPolicy};
+pub(crate) use rate::LearningRate;
+pub(crate) use refresh::OccupancyRefresh;
 
 use crate::batch::TrainingTable;
 use crate::dataset::Dataset;
@@ -96,7 +98,7 @@ impl Evaluation {
     /// fit.
     ///
     /// Errors: renders that do not match the views.
-    pub fn scored(
+    pub(crate) fn scored(
         views: Vec<RenderedView>,
         data: &Dataset,
         step: usize,
@@ -218,7 +220,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     }
 
     /// The fraction of the budget spent (steps or training seconds).
-    pub fn fraction(&self) -> f64 {
+    pub(crate) fn fraction(&self) -> f64 {
         match self.settings.budget() {
             Budget::Steps(n) => self.step as f64 / n as f64,
             Budget::Seconds(s) => self.seconds / s,
@@ -231,32 +233,27 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     }
 
     /// The model as it is now.
-    pub fn model(&self) -> &M {
+    pub(crate) fn model(&self) -> &M {
         &self.model
     }
 
     /// The occupancy grid, with occupancy sampling.
-    pub fn occupancy(&self) -> Option<&OccupancyGrid> {
+    pub(crate) fn occupancy(&self) -> Option<&OccupancyGrid> {
         self.occupancy.as_ref()
     }
 
-    /// The settings the trainer runs with.
-    pub fn settings(&self) -> &FitSettings {
-        &self.settings
-    }
-
     /// Steps done.
-    pub fn steps(&self) -> usize {
+    pub(crate) fn steps(&self) -> usize {
         self.step
     }
 
     /// Training seconds so far (evaluations excluded).
-    pub fn seconds(&self) -> f64 {
+    pub(crate) fn seconds(&self) -> f64 {
         self.seconds
     }
 
     /// Training samples over all of this trainer's steps.
-    pub fn samples(&self) -> usize {
+    pub(crate) fn samples(&self) -> usize {
         self.samples
     }
 
@@ -379,7 +376,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
     }
 
     /// Where this trainer's training time went, phase by phase and op by op.
-    pub fn profile(&mut self) -> StepProfile {
+    pub(crate) fn profile(&mut self) -> StepProfile {
         StepProfile {
             steps: self.steps_taken(),
             phases: self.phases,

@@ -11,13 +11,13 @@ use fogray_tape::Float;
 use crate::error::FitError;
 
 /// What a policy may read and change between two steps.
-pub struct StepContext<'a, F: Float, M> {
+pub(crate) struct StepContext<'a, F: Float, M> {
     /// Steps done: before a step, the steps before it; after a step, counting it.
     pub step: usize,
     /// The fraction of the budget spent (in `[0, 1)` before a step; at most 1 after the last).
     pub fraction: f64,
     /// The model being fitted.
-    pub model: &'a mut M,
+    pub(crate) model: &'a mut M,
     /// Adam, whose moments follow the model's parameters.
     pub optimiser: &'a mut Adam<F>,
     /// The occupancy grid, with occupancy sampling.
@@ -25,7 +25,7 @@ pub struct StepContext<'a, F: Float, M> {
 }
 
 /// A rule applied around every training step. Both hooks do nothing by default.
-pub trait StepPolicy<F: Float, M> {
+pub(crate) trait StepPolicy<F: Float, M> {
     /// Called before the step, with the step count and budget fraction before it.
     ///
     /// Errors: whatever the policy's change can raise (a model that cannot grow).

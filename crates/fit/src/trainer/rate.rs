@@ -10,13 +10,13 @@ use crate::trainer::policy::{StepContext, StepPolicy};
 
 /// Sets Adam's rate to [`learning_rate`] of the budget's fraction before every step.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LearningRate {
+pub(crate) struct LearningRate {
     settings: FitSettings,
 }
 
 impl LearningRate {
     /// The schedule of `settings` (`lr`, `lr_final`).
-    pub fn new(settings: &FitSettings) -> Self {
+    pub(crate) fn new(settings: &FitSettings) -> Self {
         LearningRate { settings: *settings }
     }
 }

@@ -12,7 +12,7 @@ use crate::trainer::policy::{StepContext, StepPolicy};
 
 /// Refreshes the occupancy grid when due; never leaves it empty.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
-pub struct OccupancyRefresh;
+pub(crate) struct OccupancyRefresh;
 
 impl<F: Float, M: RadianceField<F>> StepPolicy<F, M> for OccupancyRefresh {
     fn after_step(&mut self, at: &mut StepContext<'_, F, M>) -> Result<(), FitError> {

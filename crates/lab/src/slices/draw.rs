@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use fogray_fit::images::{canvas, save_canvas, ImageError};
+use fogray_fit::images::{save_canvas, ImageError};
 use fogray_ops::sample::GridAxis;
 use plotters::prelude::*;
 
@@ -117,7 +117,8 @@ pub fn write_planes_png(
     let width = GAP + columns * (w + GAP) + GAP + BAR + BAR_LABELS;
     let height = GAP + rows.len() as i32 * (TITLE + h + GAP);
     let size = (width as u32, height as u32);
-    let mut pixels = canvas(size);
+    // An RGB buffer for plotters' bitmap backend, which `save_canvas` writes.
+    let mut pixels = vec![0u8; size.0 as usize * size.1 as usize * 3];
     let root = BitMapBackend::with_buffer(&mut pixels, size).into_drawing_area();
     let e = |e: DrawingAreaErrorKind<_>| wrap(e.to_string());
     root.fill(&WHITE).map_err(e)?;

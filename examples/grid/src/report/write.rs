@@ -10,7 +10,7 @@ use serde::Serialize;
 use crate::scene::Scene;
 use fogray::fit::dataset::Dataset;
 use fogray::fit::images::write_comparison_png;
-use fogray::fit::plots::{psnr_curves_against, Curve, XAxis};
+use fogray::fit::plots::{metric_curves, Curve, Metric, XAxis};
 use fogray::fit::settings::Budget;
 use fogray_lab::curves::{AgainstAnchor, Anchor, FusedVsTaped, OccupancyVsUniform};
 use fogray_lab::slices::{planes, write_planes_png, Colouring, PlaneImage, PlaneRow};
@@ -237,8 +237,14 @@ pub fn write_report(
         .collect();
     // Taped dashed: against steps it follows its fused twin (the same arithmetic).
     let taped: Vec<usize> = (0..runs.len()).filter(|&i| runs[i].method == "taped").collect();
-    psnr_curves_against(&dir.join("psnr-vs-seconds"), &curves, XAxis::Seconds, &taped)?;
-    psnr_curves_against(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, &taped)?;
+    metric_curves(
+        &dir.join("psnr-vs-seconds"),
+        &curves,
+        XAxis::Seconds,
+        Metric::Psnr,
+        &taped,
+    )?;
+    metric_curves(&dir.join("psnr-vs-steps"), &curves, XAxis::Steps, Metric::Psnr, &taped)?;
     let anchor_plot = dir.join("psnr-vs-seconds-log");
     match setup.anchor {
         Some(anchor) => {
@@ -248,7 +254,7 @@ pub fn write_report(
                 label: anchor.name.clone(),
                 log: &log,
             });
-            psnr_curves_against(&anchor_plot, &with_anchor, XAxis::LogSeconds, &taped)?;
+            metric_curves(&anchor_plot, &with_anchor, XAxis::LogSeconds, Metric::Psnr, &taped)?;
         }
         // An earlier report's plot with an anchor would stand beside curves it does not show.
         None => {

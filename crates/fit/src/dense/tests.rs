@@ -1,9 +1,9 @@
 //! The dense grid: its training loss's gradient against central differences, the fused ops
 //! against their taped twins, resampling, and its densities against their closed form.
 
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::{RadianceField, TrainingBackground};
-use fogray_fit::settings::{Method, SceneBox};
+use crate::dense::DenseGrid;
+use crate::model::{RadianceField, TrainingBackground};
+use crate::settings::{Method, SceneBox};
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{PackedSamples, Spacing, Uniform};
 use fogray_tape::gradcheck::{gradcheck, GradcheckOptions};

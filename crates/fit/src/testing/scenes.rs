@@ -4,30 +4,30 @@
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 
-use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::RadianceField;
-use fogray_fit::settings::FitSettings;
-use fogray_fit::state::Start;
-use fogray_fit::train::{fit_from, FitResult, Progress};
+use crate::dataset::{Dataset, View};
+use crate::dense::DenseGrid;
+use crate::model::RadianceField;
+use crate::settings::FitSettings;
+use crate::state::Start;
+use crate::train::{fit_from, FitResult, Progress};
 use fogray_ops::{Intrinsics, PinholeCamera};
 use fogray_tape::Float;
 use ndarray::{Array2, Array3};
 
 /// The colour of the ball of [`ball_dataset`].
-pub const BALL: [f64; 3] = [0.8, 0.3, 0.1];
+pub(crate) const BALL: [f64; 3] = [0.8, 0.3, 0.1];
 
 /// Radius of the ball of [`ball_dataset`], centred at the origin.
-pub const RADIUS: f64 = 0.5;
+pub(crate) const RADIUS: f64 = 0.5;
 
 /// The white background of [`ball_dataset`].
-pub const BACKGROUND: [f64; 3] = [1.0; 3];
+pub(crate) const BACKGROUND: [f64; 3] = [1.0; 3];
 
 /// View `i` of `size x size` pixels from `eye`, looking at the origin (40 degree field of
 /// view), of an opaque ball of colour [`BALL`] and radius [`RADIUS`] at the origin in front of
 /// a white background: a pixel is the ball's colour where its ray passes within the radius of
 /// the origin.
-pub fn ball_view(i: usize, eye: [f64; 3], size: usize) -> View {
+pub(crate) fn ball_view(i: usize, eye: [f64; 3], size: usize) -> View {
     let k = Intrinsics::from_vertical_fov(size, size, 40f64.to_radians()).unwrap();
     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
     let mut view = View::new(format!("{i:03}"), &camera, Array3::zeros((size, size, 3))).unwrap();
@@ -48,7 +48,7 @@ pub fn ball_view(i: usize, eye: [f64; 3], size: usize) -> View {
 /// `train + test` views of the ball of [`ball_view`] from eyes at distance 3 around it,
 /// alternately above and below its equator; view `i` is held out when `i mod e == e / 2`,
 /// `e = (train + test) / test`.
-pub fn ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
+pub(crate) fn ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
     let n = train + test;
     let e = n / test;
     let (mut training, mut held_out) = (Vec::new(), Vec::new());
@@ -72,7 +72,7 @@ pub fn ball_dataset(train: usize, test: usize, size: usize) -> Dataset {
 
 /// [`ball_dataset`]'s views as pictures with alpha: the ball opaque (alpha 1), the rest
 /// transparent (alpha 0) and composited over `background`, the dataset's background.
-pub fn alpha_ball_dataset(train: usize, test: usize, size: usize, background: [f64; 3]) -> Dataset {
+pub(crate) fn alpha_ball_dataset(train: usize, test: usize, size: usize, background: [f64; 3]) -> Dataset {
     let with_alpha = |view: View| {
         let alpha = Array2::from_shape_fn((size, size), |(r, c)| {
             if view.image[[r, c, 0]] == BACKGROUND[0] {
@@ -97,7 +97,7 @@ pub fn alpha_ball_dataset(train: usize, test: usize, size: usize, background: [f
 
 /// A fresh path `name` in this process's temporary directory: the tests share one process and
 /// run in parallel, so two calls never share a path, whatever their `name`.
-pub fn temp(name: &str) -> PathBuf {
+pub(crate) fn temp(name: &str) -> PathBuf {
     static CALLS: AtomicUsize = AtomicUsize::new(0);
     let call = CALLS.fetch_add(1, Ordering::Relaxed);
     let dir = std::env::temp_dir().join(format!("fogray-fit-tests-{}", std::process::id()));
@@ -106,18 +106,18 @@ pub fn temp(name: &str) -> PathBuf {
 }
 
 /// The raw grid's values, as bits.
-pub fn grid_bits<F: Float>(model: &DenseGrid<F>) -> Vec<u64> {
+pub(crate) fn grid_bits<F: Float>(model: &DenseGrid<F>) -> Vec<u64> {
     let grid = model.params().get(model.grid_id()).unwrap();
     grid.iter().map(|v| v.as_f64().to_bits()).collect()
 }
 
 /// Every value of `images`, as bits.
-pub fn image_bits(images: &[Array3<f64>]) -> Vec<u64> {
+pub(crate) fn image_bits(images: &[Array3<f64>]) -> Vec<u64> {
     images.iter().flat_map(|im| im.iter().map(|v| v.to_bits())).collect()
 }
 
 /// A fit of `settings` from `start`, its stop flag raised after step `stop_after`.
-pub fn run<F: Float>(
+pub(crate) fn run<F: Float>(
     data: &Dataset,
     settings: &FitSettings,
     start: Option<Start<F, DenseGrid<F>>>,

@@ -6,14 +6,14 @@
 //! An initial colour, a learned background or a threshold that leaned towards white would
 //! set the two fits apart.
 
-use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::RadianceField;
-use fogray_fit::settings::{FitSettings, ModelKind};
-use fogray_fit::sparse::SparseGrid;
-use fogray_fit::train::{fit, FitResult};
+use crate::dataset::{Dataset, View};
+use crate::dense::DenseGrid;
+use crate::model::RadianceField;
+use crate::settings::{FitSettings, ModelKind};
+use crate::sparse::SparseGrid;
+use crate::train::{fit, FitResult};
 
-use crate::common::ball_dataset;
+use crate::testing::ball_dataset;
 
 fn negative(data: &Dataset) -> Dataset {
     let flip = |views: &[View]| -> Vec<View> {

@@ -2,14 +2,14 @@
 //! central differences and its taped twin with nodes absent; which nodes a growth keeps;
 //! resampling; its checkpoint; and a fit that prunes and loses nothing to the dense grid.
 
-use fogray_fit::checkpoint;
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::{RadianceField, TrainingBackground};
-use fogray_fit::settings::{Budget, FitSettings, Method, ModelKind, SceneBox};
-use fogray_fit::shading::Shading;
-use fogray_fit::sparse::{keep_near_occupied, SparseGrid};
-use fogray_fit::state::TrainingState;
-use fogray_fit::train::fit;
+use crate::checkpoint;
+use crate::dense::DenseGrid;
+use crate::model::{RadianceField, TrainingBackground};
+use crate::settings::{Budget, FitSettings, Method, ModelKind, SceneBox};
+use crate::shading::Shading;
+use crate::sparse::{keep_near_occupied, SparseGrid};
+use crate::state::TrainingState;
+use crate::train::fit;
 use fogray_ops::grid::NodeIndex;
 use fogray_ops::rays::Aabb;
 use fogray_ops::sample::{CellPoints, OccupancyConfig, OccupancyGrid};
@@ -17,8 +17,8 @@ use fogray_tape::gradcheck::{gradcheck, GradcheckOptions};
 use fogray_tape::{Tape, TapeError, Var};
 use ndarray::{arr2, Array1, Array2, Array4, ArrayD, Ix2};
 
-use crate::common::{ball_dataset, temp};
-use crate::dense::{raw_grid, setup};
+use crate::dense::tests::{raw_grid, setup};
+use crate::testing::{ball_dataset, temp};
 
 const BACKGROUND: [f64; 3] = [1.0, 0.95, 0.9];
 
@@ -212,7 +212,7 @@ fn a_checkpoint_keeps_the_kept_nodes_and_their_values() {
         grid: 3,
         shift: -1.0,
         model: ModelKind::Sparse,
-        precision: fogray_fit::settings::Precision::F64,
+        precision: crate::settings::Precision::F64,
         ..FitSettings::default()
     };
     let path = temp("sparse.safetensors");

@@ -4,15 +4,15 @@
 use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
-use fogray_fit::checkpoint::{load, read_info, save, CheckpointError};
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::render::{render_picture, RenderOptions};
-use fogray_fit::settings::{Budget, FitSettings, Precision, Sampling};
-use fogray_fit::train::render_test_views;
+use crate::checkpoint::{load, read_info, save, CheckpointError};
+use crate::dense::DenseGrid;
+use crate::render::{render_picture, RenderOptions};
+use crate::settings::{Budget, FitSettings, Precision, Sampling};
+use crate::train::render_test_views;
 use safetensors::tensor::TensorView;
 use safetensors::SafeTensors;
 
-use crate::common::{ball_dataset, grid_bits, image_bits, run, temp};
+use crate::testing::{ball_dataset, grid_bits, image_bits, run, temp};
 
 #[test]
 fn a_reloaded_model_renders_bitwise_as_the_fit_and_as_render_picture() {

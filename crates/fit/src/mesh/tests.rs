@@ -5,13 +5,13 @@
 
 use std::collections::HashMap;
 
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::mesh::{extract, march, write_ply, Lattice, Level, Mesh, MeshError, MeshOptions};
-use fogray_fit::model::RadianceField;
-use fogray_fit::settings::SceneBox;
-use fogray_fit::shading::Shading;
-use fogray_fit::sparse::SparseGrid;
-use fogray_fit::FitError;
+use crate::dense::DenseGrid;
+use crate::mesh::{extract, march, write_ply, Lattice, Level, Mesh, MeshError, MeshOptions};
+use crate::model::RadianceField;
+use crate::settings::SceneBox;
+use crate::shading::Shading;
+use crate::sparse::SparseGrid;
+use crate::FitError;
 use fogray_ops::grid::NodeIndex;
 use fogray_ops::rays::Aabb;
 use ndarray::{Array2, Array4};
@@ -249,7 +249,7 @@ fn a_sparse_grid_of_the_same_values_gives_the_same_mesh() {
     let mut sparse = SparseGrid::<f32>::new(scene_box(), NODES, index, shading, 0.0).unwrap();
     let raw = ball_raw(4, |c| RAW_COLOR[c - 1]);
     let rows = raw.into_shape_with_order((NODES * NODES * NODES, 4)).unwrap();
-    let id = sparse.params().id(fogray_fit::sparse::DATA).unwrap();
+    let id = sparse.params().id(crate::sparse::DATA).unwrap();
     sparse.params_mut().get_mut(id).unwrap().assign(&rows);
     let a = extract(&dense, &half_inside()).unwrap();
     let b = extract(&sparse, &half_inside()).unwrap();

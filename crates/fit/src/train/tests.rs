@@ -1,11 +1,11 @@
 //! The training loop: the learning rate's schedule and its checks, and the step profile.
 
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::schedule::{learning_rate, ANNEAL_START};
-use fogray_fit::settings::{Budget, FitSettings, Method};
-use fogray_fit::train::fit;
+use crate::dense::DenseGrid;
+use crate::schedule::{learning_rate, ANNEAL_START};
+use crate::settings::{Budget, FitSettings, Method};
+use crate::train::fit;
 
-use crate::common::ball_dataset;
+use crate::testing::ball_dataset;
 
 #[test]
 fn the_learning_rate_anneals_geometrically_over_the_end_of_the_budget() {
@@ -140,8 +140,8 @@ fn a_fit_whose_densities_are_all_below_the_threshold_keeps_sampling() {
 
 #[test]
 fn the_training_views_psnr_renders_evenly_spaced_training_views() {
-    use fogray_fit::dataset::Dataset;
-    use fogray_fit::train::{render_test_views, test_psnr, training_views_psnr};
+    use crate::dataset::Dataset;
+    use crate::train::{render_test_views, test_psnr, training_views_psnr};
     let ball = ball_dataset(6, 2, 8);
     let settings = FitSettings {
         grid: 8,

@@ -2,13 +2,13 @@
 //! the training loss (fused and taped alike), and a fit with them clears fog of the
 //! background's colour that a fit over the fixed background cannot see.
 
-use fogray_fit::dataset::Dataset;
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::{RadianceField, TrainingBackground};
-use fogray_fit::render::{render_picture, RenderOptions};
-use fogray_fit::settings::{Budget, FitSettings, Method, Sampling, SceneBox};
-use fogray_fit::state::{Start, TrainingState};
-use fogray_fit::train::fit_from;
+use crate::dataset::Dataset;
+use crate::dense::DenseGrid;
+use crate::model::{RadianceField, TrainingBackground};
+use crate::render::{render_picture, RenderOptions};
+use crate::settings::{Budget, FitSettings, Method, Sampling, SceneBox};
+use crate::state::{Start, TrainingState};
+use crate::train::fit_from;
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{Spacing, Uniform};
 use fogray_tape::Tape;
@@ -16,7 +16,7 @@ use ndarray::{arr2, s, Array2, Array4};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha12Rng;
 
-use crate::common::alpha_ball_dataset;
+use crate::testing::alpha_ball_dataset;
 
 /// The grey of the fog below and of the background it hides in: a fresh grid's colour.
 const GREY: [f64; 3] = [0.5; 3];
@@ -93,7 +93,7 @@ fn fog_settings(random_background: bool) -> FitSettings {
         lr: 0.1,
         lr_final: 0.1,
         evaluations: 1,
-        precision: fogray_fit::settings::Precision::F64,
+        precision: crate::settings::Precision::F64,
         random_background,
         ..FitSettings::default()
     }

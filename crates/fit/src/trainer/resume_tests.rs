@@ -5,15 +5,15 @@
 
 use std::collections::BTreeMap;
 
-use fogray_fit::checkpoint::{load, save};
-use fogray_fit::dataset::Dataset;
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::model::RadianceField;
-use fogray_fit::sampling::FIT_REFRESH;
-use fogray_fit::settings::{Budget, FitSettings, Precision, Sampling};
+use crate::checkpoint::{load, save};
+use crate::dataset::Dataset;
+use crate::dense::DenseGrid;
+use crate::model::RadianceField;
+use crate::sampling::FIT_REFRESH;
+use crate::settings::{Budget, FitSettings, Precision, Sampling};
 use fogray_tape::Float;
 
-use crate::common::{alpha_ball_dataset, ball_dataset, grid_bits, image_bits, run, temp};
+use crate::testing::{alpha_ball_dataset, ball_dataset, grid_bits, image_bits, run, temp};
 
 fn data() -> Dataset {
     ball_dataset(8, 2, 10)
@@ -129,7 +129,7 @@ fn a_fit_with_a_learned_background_saved_and_continued_equals_the_whole_bitwise(
     let first = run::<f32>(&data(), &learned.with_budget(Budget::Steps(5)), None, None);
     save(&file, &first.model, &first.training, &learned, &BTreeMap::new()).unwrap();
     let back = load::<f32, DenseGrid<f32>>(&file).unwrap().start.model;
-    let id = |m: &DenseGrid<f32>| m.params().id(fogray_fit::environment::ENVIRONMENT).unwrap();
+    let id = |m: &DenseGrid<f32>| m.params().id(crate::environment::ENVIRONMENT).unwrap();
     let (saved, read) = (
         first.model.params().get(id(&first.model)).unwrap(),
         back.params().get(id(&back)).unwrap(),

@@ -4,15 +4,15 @@
 
 use std::collections::{BTreeMap, HashMap};
 
-use fogray_fit::checkpoint::{load, read_info, save, CheckpointError};
-use fogray_fit::dense::DenseGrid;
-use fogray_fit::settings::{Budget, FitSettings, ModelKind, Sampling};
-use fogray_fit::FitError;
+use crate::checkpoint::{load, read_info, save, CheckpointError};
+use crate::dense::DenseGrid;
+use crate::settings::{Budget, FitSettings, ModelKind, Sampling};
+use crate::FitError;
 use fogray_ops::limits::Bytes;
 use safetensors::tensor::TensorView;
 use safetensors::SafeTensors;
 
-use crate::common::{ball_dataset, run, temp};
+use crate::testing::{ball_dataset, run, temp};
 
 /// The one-line message of a refused size.
 fn too_large(settings: &FitSettings, available: Option<Bytes>) -> String {

@@ -3,8 +3,8 @@
 //! channel_axis=-1`, the field's settings) on fixed images that both sides build from the same
 //! formulas, and against closed forms.
 
-use fogray_fit::images::ImageError;
-use fogray_fit::metrics::ssim;
+use crate::images::ImageError;
+use crate::metrics::ssim;
 use ndarray::Array3;
 
 const H: usize = 24;
@@ -69,7 +69,7 @@ fn ssim_refuses_what_it_cannot_measure() {
 
 #[test]
 fn view_scores_split_the_psnr_of_all_views_by_their_squared_error() {
-    use fogray_fit::metrics::{psnr, view_scores};
+    use crate::metrics::{psnr, view_scores};
     let (exact, a, b) = (smooth(), perturbed(), noise());
     // Clamped as psnr clamps: a render above 1 where the picture is 1 costs nothing.
     let mut over = exact.clone();
@@ -98,4 +98,43 @@ fn view_scores_split_the_psnr_of_all_views_by_their_squared_error() {
         scores[2].psnr
     );
     assert!(view_scores(&[], &[]).is_err());
+}
+
+#[test]
+fn the_mean_of_view_psnrs_is_not_the_psnr_of_all_views() -> Result<(), ImageError> {
+    use crate::metrics::{mean_psnr, psnr, view_scores};
+    // Errors of 0.1 and 0.001 everywhere: 20 dB and 60 dB, a mean of 40 dB; the MSE over both,
+    // (0.01 + 1e-6) / 2, is 23.01 dB.
+    let exact = Array3::from_elem((2, 2, 3), 0.5);
+    let (a, b) = (Array3::from_elem((2, 2, 3), 0.6), Array3::from_elem((2, 2, 3), 0.501));
+    let (r, e) = ([a.view(), b.view()], [exact.view(), exact.view()]);
+    assert!((mean_psnr(&view_scores(&r, &e)?) - 40.0).abs() < 1e-9);
+    assert!((psnr(&r, &e)? - 23.0099).abs() < 1e-4);
+    assert!(view_scores(&[], &[]).is_err() && view_scores(&r[..1], &e).is_err());
+    Ok(())
+}
+
+#[test]
+fn view_scores_are_each_pairs_psnr_and_share_of_the_squared_error() -> Result<(), ImageError> {
+    use crate::metrics::view_scores;
+    // Errors of 0.1 and 0.2 everywhere: MSE 0.01 and 0.04, 20 dB and 13.98 dB, a fifth and
+    // four fifths of the squared error.
+    let exact = Array3::from_elem((2, 2, 3), 0.5);
+    let (a, b) = (Array3::from_elem((2, 2, 3), 0.6), Array3::from_elem((2, 2, 3), 0.3));
+    let s = view_scores(&[a.view(), b.view()], &[exact.view(), exact.view()])?;
+    assert!((s[0].psnr - 20.0).abs() < 1e-9 && (s[1].psnr - 13.979400086720377).abs() < 1e-9);
+    assert!((s[0].share_of_error - 0.2).abs() < 1e-12 && (s[1].share_of_error - 0.8).abs() < 1e-12);
+    Ok(())
+}
+
+#[test]
+fn ssim_of_flat_images_is_the_luminance_term() -> Result<(), ImageError> {
+    // Two flat images: only the luminance term is left, (2ab + C1) / (a^2 + b^2 + C1).
+    let a = Array3::from_elem((16, 16, 3), 0.2);
+    let b = Array3::from_elem((16, 16, 3), 0.6);
+    let c1 = 0.01f64.powi(2);
+    let expected = (2.0 * 0.2 * 0.6 + c1) / (0.2f64.powi(2) + 0.6f64.powi(2) + c1);
+    assert!((ssim(&[a.view()], &[b.view()])? - expected).abs() < 1e-12);
+    assert_eq!(ssim(&[a.view()], &[a.view()])?, 1.0);
+    Ok(())
 }

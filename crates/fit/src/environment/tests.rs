@@ -2,16 +2,16 @@
 //! and a fit of a ball in front of a sky (no alpha) that learns the sky instead of painting it
 //! into the box.
 
-use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::environment::{Environment, ENVIRONMENT};
-use fogray_fit::model::RadianceField;
-use fogray_fit::settings::{FitSettings, SceneBox};
+use crate::dataset::{Dataset, View};
+use crate::environment::{Environment, ENVIRONMENT};
+use crate::model::RadianceField;
+use crate::settings::{FitSettings, SceneBox};
 use fogray_ops::sh::basis::{C0, C1};
 use ndarray::{Array2, ArrayView1};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha12Rng;
 
-use crate::common::{alpha_ball_dataset, ball_dataset, run, BACKGROUND};
+use crate::testing::{alpha_ball_dataset, ball_dataset, run, BACKGROUND};
 
 /// The sky's colour logits at the horizon, per channel, and how much brighter it gets upwards.
 const LOGITS: [f64; 3] = [-0.5, 0.2, 1.0];
@@ -145,8 +145,22 @@ fn a_learned_background_is_refused_for_views_with_alpha() {
         learn_background: true,
         ..FitSettings::default()
     };
-    let e = fogray_fit::train::fit::<f64, fogray_fit::dense::DenseGrid<f64>>(&data, &settings, &mut |_| {})
+    let e = crate::train::fit::<f64, crate::dense::DenseGrid<f64>>(&data, &settings, &mut |_| {})
         .unwrap_err()
         .to_string();
     assert!(e.starts_with("--learn-background"), "{e}");
+}
+
+#[test]
+fn fresh_coefficients_are_grey_from_every_direction() -> Result<(), Box<dyn std::error::Error>> {
+    use ndarray::arr2;
+
+    let environment = Environment::new(2)?;
+    assert_eq!(environment.coefficient_count(), 27);
+    let coefficients = Array2::<f64>::zeros((1, environment.coefficient_count()));
+    let directions = arr2(&[[0.0, 0.0, 1.0], [0.6, 0.8, 0.0]]);
+    // Fresh coefficients are 0: grey (sigmoid 0) from every direction.
+    let colors = environment.colors(coefficients.view(), directions.view())?;
+    assert!(colors.iter().all(|&c| c == 0.5));
+    Ok(())
 }
