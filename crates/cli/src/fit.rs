@@ -8,7 +8,6 @@ use std::time::Instant;
 use fogray_data::{LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::file_floor::model_file_floor;
 use fogray_fit::metrics::{haze_fraction, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::session::{self, FitReport, SessionOutcome, SessionPlan};
@@ -408,13 +407,13 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
 }
 
 /// What a fit with `args` and `settings` will write, each with the fewest bytes it takes: the
-/// model file ([`model_file_floor`]) and the report (of one held-out view, the fewest a fit
-/// has: [`crate::fit_report::report_floor`]).
+/// model file ([`FitSettings::model_file_floor`]) and the report (of one held-out view, the
+/// fewest a fit has: [`crate::fit_report::report_floor`]).
 pub fn outputs(args: &FitArgs, settings: &FitSettings) -> Vec<crate::disk_room::Output> {
     let model = args.save_model.iter().map(|path| crate::disk_room::Output {
         path: path.clone(),
         what: "the model file",
-        floor: model_file_floor(settings),
+        floor: settings.model_file_floor(),
     });
     let report = args.out.iter().map(|dir| crate::disk_room::Output {
         path: dir.clone(),

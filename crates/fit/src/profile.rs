@@ -11,7 +11,7 @@ use serde::Serialize;
 
 /// The phases of a training step, in order.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Phases {
+pub(crate) struct Phases {
     /// Drawing the batch and gathering its rays and colours.
     pub batch: Duration,
     /// Placing the samples along the rays (uniform, or the occupancy grid's midpoint sampler).
@@ -29,7 +29,7 @@ pub struct Phases {
 /// A fit's step profile. The training seconds also hold what no phase does: the learning
 /// rate's update and, at the growth stages, the grid's resampling.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct StepProfile {
+pub(crate) struct StepProfile {
     /// Steps profiled.
     pub steps: usize,
     /// Wall time per phase, summed over the steps.

@@ -15,7 +15,7 @@ use fogray_tape::Float;
 
 use crate::checkpoint::{self, CheckpointError, ModelInfo};
 use crate::dataset::Dataset;
-use crate::dispatch::{with_field, with_float, FieldWork, FloatWork};
+use crate::dispatch::{with_field_kind, with_float, FieldWork, FloatWork};
 use crate::error::FitError;
 use crate::interrupt::StopFlag;
 use crate::metrics::{mean_psnr, view_scores, ViewScore};
@@ -157,7 +157,7 @@ pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, Session
         stop: &stop,
     };
     match plan.settings.model.field() {
-        Some(field) => with_field(plan.settings.precision, field, work),
+        Some(field) => with_field_kind(plan.settings.precision, field, work),
         None => with_float(plan.settings.precision, work),
     }
 }

@@ -25,9 +25,9 @@ pub struct TrainingState<F> {
     pub occupancy: Option<OccupancyState>,
 }
 
-impl<F> TrainingState<F> {
-    /// The state of a fit that has not started.
-    pub fn fresh() -> Self {
+/// The state of a fit that has not started.
+impl<F> Default for TrainingState<F> {
+    fn default() -> Self {
         TrainingState {
             step: 0,
             seconds: 0.0,

@@ -13,7 +13,7 @@ use crate::dataset::{Dataset, View};
 use crate::error::FitError;
 use crate::metrics::{psnr, ssim, SSIM_WINDOW};
 use crate::model::RadianceField;
-use crate::profile::StepProfile;
+use crate::profile::ProfileTable;
 use crate::render::{render_picture, RenderOptions, RenderedView};
 use crate::settings::FitSettings;
 use crate::state::{Start, TrainingState};
@@ -64,8 +64,9 @@ pub struct FitResult<F: Float, M> {
     pub interrupted: bool,
     /// The final occupancy grid, with occupancy sampling.
     pub occupancy: Option<OccupancyGrid>,
-    /// Where this call's training time went, phase by phase and op by op.
-    pub profile: StepProfile,
+    /// Where this call's training time went, phase by phase and op by op, in milliseconds a
+    /// step (as a session's report shows it).
+    pub profile: ProfileTable,
 }
 
 /// Progress reported after every step.
@@ -226,7 +227,7 @@ pub(crate) fn fit_from<F: Float, M: RadianceField<F>>(
     let steps_taken = trainer.steps_taken();
     let samples_per_ray_mean = trainer.samples() as f64 / (steps_taken * settings.batch) as f64;
     let training = trainer.state()?;
-    let profile = trainer.profile();
+    let profile = trainer.profile().table();
     let seconds = trainer.seconds();
     let (model, occupancy) = trainer.into_parts();
     Ok(FitResult {

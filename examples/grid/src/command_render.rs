@@ -40,15 +40,13 @@ pub(crate) fn run_render(args: RenderArgs) -> Result<()> {
     if views.is_empty() {
         anyhow::bail!("no view to render: the ring has no test views; pass --view I or --all");
     }
-    let kind = ModelKind::of_kind(&info.kind)
-        .and_then(ModelKind::field)
-        .with_context(|| {
-            format!(
-                "{}: a {:?} model, which fogray-grid does not know",
-                args.model.display(),
-                info.kind
-            )
-        })?;
+    let kind = ModelKind::of_kind(&info.kind).with_context(|| {
+        format!(
+            "{}: a {:?} model, which fogray-grid does not know",
+            args.model.display(),
+            info.kind
+        )
+    })?;
     create_dir(&args.out)?;
     let work = RenderWork {
         args: &args,
@@ -56,7 +54,7 @@ pub(crate) fn run_render(args: RenderArgs) -> Result<()> {
         scene: &scene,
         views: &views,
     };
-    with_field(info.settings.precision, kind, work)
+    with_field(info.settings.precision, kind, work)?
 }
 
 /// The views to render from the model file, as fogray-fit's dispatch runs it.

@@ -37,7 +37,7 @@ pub enum ModelKind {
     /// ([`SparseGrid`](crate::sparse::SparseGrid)): memory follows the scene.
     Sparse,
     /// 3-D Gaussians composited by projection onto the image, densified where the picture
-    /// needs them ([`SplatModel`](crate::splats::SplatModel)).
+    /// needs them (`SplatModel`).
     Splats,
 }
 

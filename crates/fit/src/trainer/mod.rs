@@ -164,7 +164,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
             Some(s) => (s.model, s.training),
             None => (
                 M::fresh(settings, Growth::first_nodes(settings))?,
-                TrainingState::fresh(),
+                TrainingState::default(),
             ),
         };
         let mut occupancy = match settings.sampling {
