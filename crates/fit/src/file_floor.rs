@@ -16,7 +16,7 @@
 use fogray_ops::limits;
 
 use crate::schedule::growth_stages;
-use crate::settings::{FitSettings, ModelKind, Precision};
+use crate::settings::{FitSettings, ModelKind};
 
 /// Bytes of a safetensors file before its header's text: the header's length, a `u64`.
 const SAFETENSORS_PREFIX: u64 = 8;
@@ -41,10 +41,7 @@ impl FitSettings {
         let lattice = nodes.saturating_mul(nodes).saturating_mul(nodes);
         match self.model {
             ModelKind::Dense => {
-                let float_bytes: u64 = match self.precision {
-                    Precision::F32 => 4,
-                    Precision::F64 => 8,
-                };
+                let float_bytes = self.precision.bytes() as u64;
                 let channels = limits::grid_channels(self.sh_degree) as u64;
                 lattice
                     .saturating_mul(channels)
@@ -60,6 +57,7 @@ impl FitSettings {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::settings::Precision;
 
     fn settings(model: ModelKind, grid: usize, grow: bool) -> FitSettings {
         FitSettings {
