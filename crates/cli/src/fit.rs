@@ -121,7 +121,7 @@ pub struct FitArgs {
     pub save_model: Option<PathBuf>,
     /// Write a report into this directory: report.md (the final figures, PSNR and SSIM
     /// against training seconds, each held-out view beside its photograph, the settings, the
-    /// machine and the command), test/<name>.png, psnr.png, ssim.png and fit.json.
+    /// machine and the command), `test/<name>.png`, psnr.png, ssim.png and fit.json.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print {"final_test_psnr", "seconds", "steps", "log": [...]} on stdout instead of a
@@ -137,15 +137,15 @@ pub struct FitArgs {
 pub struct FitSummary<'a> {
     /// PSNR (dB) over all held-out views at the end: of the mean squared error over them.
     pub final_test_psnr: f64,
-    /// The mean of the held-out views' own PSNRs (dB) at the end ([`mean_psnr`]): the
-    /// figure the NeRF literature and nerfstudio report; never below `final_test_psnr` for views of one size.
+    /// The mean of the held-out views' own PSNRs (dB) at the end: the figure the NeRF
+    /// literature and nerfstudio report; never below `final_test_psnr` for views of one size.
     pub final_test_psnr_view_mean: f64,
     /// SSIM (Gaussian window 11, sigma 1.5) over the held-out views at the end; null for views
     /// smaller than its window.
     pub final_test_ssim: f64,
     /// PSNR (dB) at the end over as many training views as there are held-out ones, spread
-    /// through the training list ([`FitResult::training_views_psnr`]): its gap to `final_test_psnr` is
-    /// how much better the fit reproduces its own views than new ones.
+    /// through the training list: its gap to `final_test_psnr` is how much better the fit
+    /// reproduces its own views than new ones.
     pub train_views_psnr: f64,
     /// Training seconds (evaluations and loading excluded).
     pub seconds: f64,

@@ -1,8 +1,7 @@
 //! Where a fit's training time went: the wall time of each phase of a step, and the tape's
-//! time op by op ([`fogray_tape::Profile`]), summed over the steps of one [`fit_from`] call.
-//! Fused against taped, the two tables say what the fused ops buy and what both share.
-//!
-//! [`fit_from`]: crate::train::fit_from
+//! time op by op ([`fogray_tape::Profile`]), summed over the steps of one fit
+//! ([`FitResult::profile`](crate::train::FitResult::profile)). Fused against taped, the two
+//! tables say what the fused ops buy and what both share.
 
 use std::time::Duration;
 
@@ -60,7 +59,8 @@ pub(crate) struct OpRow {
     pub backward_ms: f64,
 }
 
-/// [`StepProfile`] as written out by `fogray-grid fit --profile`.
+/// A fit's step profile as written out by `fogray fit --profile` and `fogray-grid fit
+/// --profile`: milliseconds a step, phase by phase and op by op.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ProfileTable {
     /// Steps profiled.

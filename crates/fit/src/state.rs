@@ -1,5 +1,5 @@
 //! Where a fit stands between two steps: the model, and the rest of what
-//! [`fit_from`](crate::train::fit_from) needs to continue it exactly (Adam's moments, the step,
+//! [`Trainer::new`](crate::trainer::Trainer::new) needs to continue it exactly (Adam's moments, the step,
 //! the training seconds, the growth stage, the position in the stream of random batches, the
 //! occupancy grid). [`checkpoint`](crate::checkpoint) writes both to a file and reads them back.
 

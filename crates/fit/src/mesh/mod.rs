@@ -1,8 +1,8 @@
 //! A fitted model as a surface mesh, for tools that open meshes rather than radiance fields
-//! (MeshLab, Blender, trimesh): the model's density sampled on a lattice over its box
-//! ([`Lattice`]), the surface where it crosses a level by marching cubes ([`marching`]),
-//! coloured by the model's view-independent colour at each vertex
-//! ([`RadianceField::base_colors`]), and written as binary PLY ([`ply`]).
+//! (MeshLab, Blender, trimesh): the model's density sampled on a lattice over its box, the
+//! surface where it crosses a level by marching cubes ([`extract`]), coloured by the model's
+//! view-independent colour at each vertex ([`RadianceField::base_colors`]), and written as
+//! binary PLY ([`Mesh::write_ply`]).
 //!
 //! The level is a density, or an opacity: the opacity `1 - exp(-sigma step)` of one sample
 //! step of the model ([`RadianceField::sample_step`]), which needs no knowledge of the

@@ -8,9 +8,9 @@ use super::{Budget, FitSettings, ModelKind, MAX_EVALUATIONS, MAX_SECONDS, MAX_ST
 use crate::error::FitError;
 
 impl FitSettings {
-    /// Checks every setting's range, the budget against [`MAX_SECONDS`] and [`MAX_STEPS`], the
-    /// evaluations against [`MAX_EVALUATIONS`], and the grid and batch against the machine's
-    /// memory ([`FitSettings::check_memory`]).
+    /// Checks every setting's range, the budget against its caps (of seconds, and of steps:
+    /// [`MAX_STEPS`]), the evaluations against theirs, and the grid and batch against the
+    /// machine's memory.
     ///
     /// Errors: [`FitError::Config`] naming the flag, [`FitError::TooLarge`] naming the flag and
     /// the bytes it would need.

@@ -31,13 +31,13 @@ pub enum Sampling {
 #[serde(rename_all = "lowercase")]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ModelKind {
-    /// Every node of the grid stored ([`DenseGrid`](crate::dense::DenseGrid)): small scenes.
+    /// A dense grid, every node stored: small scenes.
     Dense,
-    /// Only the nodes near what the occupancy grid finds, pruned at each growth
-    /// ([`SparseGrid`](crate::sparse::SparseGrid)): memory follows the scene.
+    /// A sparse grid, only the nodes near what the occupancy grid finds, pruned at each
+    /// growth: memory follows the scene.
     Sparse,
-    /// 3-D Gaussians composited by projection onto the image, densified where the picture
-    /// needs them (`SplatModel`).
+    /// 3-D Gaussian splats composited by projection onto the image, densified where the
+    /// picture needs them.
     Splats,
 }
 
