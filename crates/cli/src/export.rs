@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 
 use fogray_data::{check_outputs, shown, AtomicFile, Inputs, Output};
 use fogray_fit::checkpoint;
-use fogray_fit::mesh::{extract, write_ply, Extraction, Level, MeshOptions, DEFAULT_OPACITY};
+use fogray_fit::mesh::{extract, Extraction, Level, MeshOptions};
 use fogray_fit::model::RadianceField;
 use fogray_tape::Float;
 
@@ -53,7 +53,7 @@ impl ExportArgs {
             (Some(sigma), None) => Level::Density(sigma),
             (None, Some(a)) if a > 0.0 && a < 1.0 => Level::Opacity(a),
             (None, Some(a)) => return Err(CliError::Option(format!("--opacity {a}: must be in (0, 1)"))),
-            (None, None) => Level::Opacity(DEFAULT_OPACITY),
+            (None, None) => Level::default(),
         };
         if let Some(n) = self.resolution.filter(|&n| n < 2) {
             return Err(CliError::Option(format!(
@@ -116,7 +116,10 @@ impl WithModel for ExportMesh<'_> {
         )
         .replace(['\n', '\r'], " ");
         let mut file = self.file;
-        write_ply(&extraction.mesh, &comment, &mut file).map_err(CliError::file("write", self.destination))?;
+        extraction
+            .mesh
+            .write_ply(&comment, &mut file)
+            .map_err(CliError::file("write", self.destination))?;
         file.commit()?;
         Ok(extraction)
     }

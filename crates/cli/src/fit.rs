@@ -8,7 +8,6 @@ use std::time::Instant;
 use fogray_data::{LoadOptions, SceneData};
 use fogray_fit::checkpoint;
 use fogray_fit::dataset::{Dataset, View};
-use fogray_fit::file_floor::model_file_floor;
 use fogray_fit::metrics::{haze_fraction, ViewScore};
 use fogray_fit::profile::ProfileTable;
 use fogray_fit::session::{self, FitReport, SessionOutcome, SessionPlan};
@@ -122,7 +121,7 @@ pub struct FitArgs {
     pub save_model: Option<PathBuf>,
     /// Write a report into this directory: report.md (the final figures, PSNR and SSIM
     /// against training seconds, each held-out view beside its photograph, the settings, the
-    /// machine and the command), test/<name>.png, psnr.png, ssim.png and fit.json.
+    /// machine and the command), `test/<name>.png`, psnr.png, ssim.png and fit.json.
     #[arg(long, value_name = "DIR")]
     pub out: Option<PathBuf>,
     /// Print {"final_test_psnr", "seconds", "steps", "log": [...]} on stdout instead of a
@@ -138,15 +137,15 @@ pub struct FitArgs {
 pub struct FitSummary<'a> {
     /// PSNR (dB) over all held-out views at the end: of the mean squared error over them.
     pub final_test_psnr: f64,
-    /// The mean of the held-out views' own PSNRs (dB) at the end ([`mean_psnr`]): the
-    /// figure the NeRF literature and nerfstudio report; never below `final_test_psnr` for views of one size.
+    /// The mean of the held-out views' own PSNRs (dB) at the end: the figure the NeRF
+    /// literature and nerfstudio report; never below `final_test_psnr` for views of one size.
     pub final_test_psnr_view_mean: f64,
     /// SSIM (Gaussian window 11, sigma 1.5) over the held-out views at the end; null for views
     /// smaller than its window.
     pub final_test_ssim: f64,
     /// PSNR (dB) at the end over as many training views as there are held-out ones, spread
-    /// through the training list ([`FitResult::training_views_psnr`]): its gap to `final_test_psnr` is
-    /// how much better the fit reproduces its own views than new ones.
+    /// through the training list: its gap to `final_test_psnr` is how much better the fit
+    /// reproduces its own views than new ones.
     pub train_views_psnr: f64,
     /// Training seconds (evaluations and loading excluded).
     pub seconds: f64,
@@ -408,13 +407,13 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
 }
 
 /// What a fit with `args` and `settings` will write, each with the fewest bytes it takes: the
-/// model file ([`model_file_floor`]) and the report (of one held-out view, the fewest a fit
-/// has: [`crate::fit_report::report_floor`]).
+/// model file ([`FitSettings::model_file_floor`]) and the report (of one held-out view, the
+/// fewest a fit has: [`crate::fit_report::report_floor`]).
 pub fn outputs(args: &FitArgs, settings: &FitSettings) -> Vec<crate::disk_room::Output> {
     let model = args.save_model.iter().map(|path| crate::disk_room::Output {
         path: path.clone(),
         what: "the model file",
-        floor: model_file_floor(settings),
+        floor: settings.model_file_floor(),
     });
     let report = args.out.iter().map(|dir| crate::disk_room::Output {
         path: dir.clone(),

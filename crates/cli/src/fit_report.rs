@@ -85,7 +85,7 @@ pub fn write_out(
         }
     }
     if let Some(framing) = &summary.space.framing {
-        fogray_fit::space_picture::write_framing_png(&dir.join("framing.png"), data, framing)?;
+        framing.write_png(&dir.join("framing.png"), data)?;
     }
     let curve = [Curve {
         label: "fogray fit".into(),

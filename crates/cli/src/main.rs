@@ -45,7 +45,7 @@ enum Command {
     )]
     Fit(Box<fit::FitArgs>),
     /// Render a model saved by `fogray fit --save-model` from every camera of a transforms
-    /// file, or from N cameras orbiting its scene box: DIR/<name>.png, 8-bit RGB, over the
+    /// file, or from N cameras orbiting its scene box: `DIR/<name>.png`, 8-bit RGB, over the
     /// model's background; with --depth its depth maps, with --gif (an orbit) an animated GIF.
     #[command(allow_negative_numbers = true)]
     Render(render::RenderArgs),

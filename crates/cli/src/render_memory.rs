@@ -8,7 +8,6 @@ use std::path::Path;
 
 use fogray_fit::checkpoint::ModelInfo;
 use fogray_fit::render::CHUNK;
-use fogray_fit::settings::Precision;
 use fogray_ops::limits::{self, Bytes, GridShape};
 use fogray_ops::{Intrinsics, PinholeCamera};
 
@@ -20,10 +19,7 @@ pub fn render_need(info: &ModelInfo, frames: usize, [width, height]: [usize; 2])
     let grid = GridShape {
         nodes: info.nodes.max(info.settings.grid),
         channels: limits::grid_channels(info.settings.sh_degree),
-        float_bytes: match info.settings.precision {
-            Precision::F32 => 4,
-            Precision::F64 => 8,
-        },
+        float_bytes: info.settings.precision.bytes(),
     };
     let rays = CHUNK.min(width.saturating_mul(height));
     limits::render_bytes(frames, width, height).plus(grid.render_chunk_bytes(rays))

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use fogray_fit::checkpoint::{read_info, ModelInfo};
-use fogray_fit::dispatch::{with_field, FieldKind, FieldWork};
+use fogray_fit::dispatch::{with_field, FieldWork};
 use fogray_fit::model::RadianceField;
 use fogray_fit::settings::ModelKind;
 use fogray_tape::Float;
@@ -32,7 +32,7 @@ pub struct SavedModel {
     /// Its metadata (settings, nodes, the application's entries).
     pub info: ModelInfo,
     /// Its kind (a field: a splat fit is saved as a 3DGS PLY file, not as a model file).
-    pub kind: FieldKind,
+    pub kind: ModelKind,
 }
 
 impl SavedModel {
@@ -42,15 +42,13 @@ impl SavedModel {
     /// command line does not know.
     pub fn open(path: &Path, command: &str) -> Result<Self, CliError> {
         let info = read_info(path)?;
-        let kind = ModelKind::of_kind(&info.kind)
-            .and_then(ModelKind::field)
-            .ok_or_else(|| {
-                CliError::Option(format!(
-                    "{}: a {:?} model, which {command} does not know",
-                    path.display(),
-                    info.kind
-                ))
-            })?;
+        let kind = ModelKind::of_kind(&info.kind).ok_or_else(|| {
+            CliError::Option(format!(
+                "{}: a {:?} model, which {command} does not know",
+                path.display(),
+                info.kind
+            ))
+        })?;
         Ok(SavedModel {
             path: path.to_path_buf(),
             info,
@@ -60,10 +58,10 @@ impl SavedModel {
 
     /// Runs `work` with the model type of the file's kind and precision.
     ///
-    /// Errors: `work`'s.
+    /// Errors: `work`'s (the kind, read by [`SavedModel::open`], is a field's).
     pub fn with<W: WithModel>(&self, work: W) -> Result<W::Output, CliError> {
         let at = AtPath { work, path: &self.path };
-        with_field(self.info.settings.precision, self.kind, at)
+        with_field(self.info.settings.precision, self.kind, at)?
     }
 }
 

@@ -26,7 +26,7 @@
 //!
 //! let settings = FitSettings { grid: 4, ..FitSettings::default() };
 //! let model = DenseGrid::<f32>::fresh(&settings, 4)?;
-//! let training = TrainingState::fresh();
+//! let training = TrainingState::default();
 //! let extra = BTreeMap::from([("views".to_string(), "8".to_string())]);
 //! let file = std::env::temp_dir().join(format!("checkpoint-doc-{}.safetensors", std::process::id()));
 //! save(&file, &model, &training, &settings, &extra)?;

@@ -242,7 +242,7 @@ impl<F: Float> RadianceField<F> for DenseGrid<F> {
     }
 
     /// The fused method records the composite and the loss as one op
-    /// ([`Composite::apply_mse`], one pass per ray for forward and backward); the taped one
+    /// ([`Composite::apply_mse`](fogray_ops::Composite::apply_mse), one pass per ray for forward and backward); the taped one
     /// the stable twin, then `sub`, `square` and `mean`.
     fn training_loss(
         &self,

@@ -3,16 +3,16 @@
 //! place where the pipeline's model types are listed, so that a command line, an example and
 //! a sweep dispatch the same way.
 //!
-//! A model kind is of one of two classes: a [`FieldKind`], a field of density and colour
-//! marched along rays ([`RadianceField`]: what every command that renders, meshes or resumes
-//! a model file handles), or the splats, drawn by projection, which only a fit's session
-//! runs ([`with_float`]). [`ModelKind::field`] says which, so that work on fields is never
-//! asked of splats.
+//! A model kind is of one of two classes: a field of density and colour marched along rays
+//! ([`RadianceField`]: what every command that renders, meshes or resumes a model file
+//! handles, run by [`with_field`]), or the splats, drawn by projection, which only a fit's
+//! session runs. [`with_field`] refuses the splats, so that work on fields is never asked of
+//! them; [`ModelKind::of_kind`] reads a model file's kind, always a field's.
 //!
 //! ```
-//! use fogray_fit::dispatch::{with_field, FieldKind, FieldWork};
+//! use fogray_fit::dispatch::{with_field, FieldWork};
+//! use fogray_fit::model::RadianceField;
 //! use fogray_fit::settings::{ModelKind, Precision};
-//! use fogray_fit::RadianceField;
 //! use fogray_tape::Float;
 //!
 //! /// The kind name of the model type, and the bytes of its float.
@@ -25,22 +25,23 @@
 //!     }
 //! }
 //!
-//! assert_eq!(with_field(Precision::F64, FieldKind::Sparse, Describe), ("sparse-grid", 8));
+//! assert_eq!(with_field(Precision::F64, ModelKind::Sparse, Describe)?, ("sparse-grid", 8));
+//! assert!(with_field(Precision::F32, ModelKind::Splats, Describe).is_err());
 //! assert_eq!(ModelKind::of_kind("dense-grid"), Some(ModelKind::Dense));
-//! assert_eq!(ModelKind::Splats.field(), None);
+//! # Ok::<(), fogray_fit::FitError>(())
 //! ```
 
 use fogray_tape::Float;
 
 use crate::dense::DenseGrid;
+use crate::error::FitError;
 use crate::model::RadianceField;
 use crate::settings::{ModelKind, Precision};
 use crate::sparse::SparseGrid;
-use crate::splats::SplatModel;
 
 /// The model kinds that are fields marched along rays.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum FieldKind {
+pub(crate) enum FieldKind {
     /// [`DenseGrid`].
     Dense,
     /// [`SparseGrid`].
@@ -64,7 +65,18 @@ pub(crate) trait FloatWork {
 }
 
 /// Runs `work` with the field type of `kind` in the float type of `precision`.
-pub fn with_field<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) -> W::Output {
+///
+/// Errors: [`FitError::NotAField`] for a kind that is not a field (the splats), before the
+/// work runs.
+pub fn with_field<W: FieldWork>(precision: Precision, kind: ModelKind, work: W) -> Result<W::Output, FitError> {
+    match kind.field() {
+        Some(field) => Ok(with_field_kind(precision, field, work)),
+        None => Err(FitError::NotAField(kind)),
+    }
+}
+
+/// Runs `work` with the field type of `kind` in the float type of `precision`.
+pub(crate) fn with_field_kind<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) -> W::Output {
     match (precision, kind) {
         (Precision::F32, FieldKind::Dense) => work.run::<f32, DenseGrid<f32>>(),
         (Precision::F64, FieldKind::Dense) => work.run::<f64, DenseGrid<f64>>(),
@@ -83,7 +95,7 @@ pub(crate) fn with_float<W: FloatWork>(precision: Precision, work: W) -> W::Outp
 
 impl ModelKind {
     /// The field kind of a model marched along rays; `None` for the splats.
-    pub fn field(self) -> Option<FieldKind> {
+    pub(crate) fn field(self) -> Option<FieldKind> {
         match self {
             ModelKind::Dense => Some(FieldKind::Dense),
             ModelKind::Sparse => Some(FieldKind::Sparse),
@@ -91,17 +103,14 @@ impl ModelKind {
         }
     }
 
-    /// The kind whose model type has [`RadianceField::KIND`] (or the splats'
-    /// [`SplatModel::KIND`]) `kind` (a model file's `model` entry,
-    /// [`ModelInfo::kind`](crate::checkpoint::ModelInfo::kind)); `None` for a kind the
-    /// pipeline does not know.
+    /// The field kind whose model type has [`RadianceField::KIND`] `kind` (a model file's
+    /// `model` entry, [`ModelInfo::kind`](crate::checkpoint::ModelInfo::kind)); `None` for a
+    /// kind the pipeline does not know as a field, the splats' included (a splat fit is saved
+    /// as a 3DGS PLY file, never as a model file).
     pub fn of_kind(kind: &str) -> Option<ModelKind> {
-        if kind == SplatModel::<f32>::KIND {
-            return Some(ModelKind::Splats);
-        }
         [ModelKind::Dense, ModelKind::Sparse].into_iter().find(|k| {
             k.field()
-                .is_some_and(|f| with_field(Precision::F32, f, KindName) == kind)
+                .is_some_and(|f| with_field_kind(Precision::F32, f, KindName) == kind)
         })
     }
 }

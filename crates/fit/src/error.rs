@@ -8,6 +8,7 @@ use thiserror::Error;
 
 use crate::images::ImageError;
 use crate::mesh::MeshError;
+use crate::settings::ModelKind;
 
 /// Why a fit, a render or a model could not run.
 #[non_exhaustive]
@@ -36,6 +37,10 @@ pub enum FitError {
     /// before anything was allocated.
     #[error(transparent)]
     TooLarge(#[from] fogray_ops::limits::TooLarge),
+    /// Work on a field marched along rays asked of a model kind that is not one (the splats,
+    /// drawn by projection).
+    #[error("{} is not a model kind marched along rays (a dense or sparse grid)", .0.name())]
+    NotAField(ModelKind),
     /// More splats than the settings allow (`max_splats`), refused before allocation.
     #[error("{count} splats exceed the cap of {cap}")]
     TooManySplats {

@@ -16,46 +16,48 @@
 use fogray_ops::limits;
 
 use crate::schedule::growth_stages;
-use crate::settings::{FitSettings, ModelKind, Precision};
+use crate::settings::{FitSettings, ModelKind};
 
 /// Bytes of a safetensors file before its header's text: the header's length, a `u64`.
 const SAFETENSORS_PREFIX: u64 = 8;
 
-/// The fewest bytes the model file of a fit with `settings` can take when it is saved (see the
-/// [module docs](self)).
-///
-/// ```
-/// use fogray_fit::file_floor::model_file_floor;
-/// use fogray_fit::settings::{FitSettings, ModelKind};
-///
-/// // A dense 32^3 grid that does not grow, density and RGB in f32: 32^3 nodes x 4 channels
-/// // x 4 bytes, after the 8 bytes of the header's length.
-/// let s = FitSettings { grid: 32, grow: false, model: ModelKind::Dense, sh_degree: 0, ..FitSettings::default() };
-/// assert_eq!(model_file_floor(&s), 8 + 32 * 32 * 32 * 4 * 4);
-/// ```
-pub fn model_file_floor(settings: &FitSettings) -> u64 {
-    let nodes = growth_stages(settings).first().map_or(settings.grid, |&(_, n)| n) as u64;
-    let lattice = nodes.saturating_mul(nodes).saturating_mul(nodes);
-    match settings.model {
-        ModelKind::Dense => {
-            let float_bytes: u64 = match settings.precision {
-                Precision::F32 => 4,
-                Precision::F64 => 8,
-            };
-            let channels = limits::grid_channels(settings.sh_degree) as u64;
-            lattice
-                .saturating_mul(channels)
-                .saturating_mul(float_bytes)
-                .saturating_add(SAFETENSORS_PREFIX)
+impl FitSettings {
+    /// The fewest bytes the model file of a fit with these settings can take when it is saved:
+    /// what a tool checks against the free space of the file's disk before the fit trains. A
+    /// floor, never an estimate: a dense grid counts the grid of its first growth stage, a
+    /// sparse grid the mask of its nodes (a byte each), splats their PLY header; the header's
+    /// text, the optimiser's moments and the occupancy grid are not counted.
+    ///
+    /// ```
+    /// use fogray_fit::settings::{FitSettings, ModelKind};
+    ///
+    /// // A dense 32^3 grid that does not grow, density and RGB in f32: 32^3 nodes x 4 channels
+    /// // x 4 bytes, after the 8 bytes of the header's length.
+    /// let s = FitSettings { grid: 32, grow: false, model: ModelKind::Dense, sh_degree: 0, ..FitSettings::default() };
+    /// assert_eq!(s.model_file_floor(), 8 + 32 * 32 * 32 * 4 * 4);
+    /// ```
+    pub fn model_file_floor(&self) -> u64 {
+        let nodes = growth_stages(self).first().map_or(self.grid, |&(_, n)| n) as u64;
+        let lattice = nodes.saturating_mul(nodes).saturating_mul(nodes);
+        match self.model {
+            ModelKind::Dense => {
+                let float_bytes = self.precision.bytes() as u64;
+                let channels = limits::grid_channels(self.sh_degree) as u64;
+                lattice
+                    .saturating_mul(channels)
+                    .saturating_mul(float_bytes)
+                    .saturating_add(SAFETENSORS_PREFIX)
+            }
+            ModelKind::Sparse => lattice.saturating_add(SAFETENSORS_PREFIX),
+            ModelKind::Splats => crate::splats::ply::header(self.sh_degree, 0).len() as u64,
         }
-        ModelKind::Sparse => lattice.saturating_add(SAFETENSORS_PREFIX),
-        ModelKind::Splats => crate::splats::ply::header(settings.sh_degree, 0).len() as u64,
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::settings::Precision;
 
     fn settings(model: ModelKind, grid: usize, grow: bool) -> FitSettings {
         FitSettings {
@@ -72,11 +74,11 @@ mod tests {
     fn a_growing_dense_grid_counts_its_first_stage() {
         // Grid 64 grows from 16 (64 / 4); degree 1 has 1 + 3 * 4 = 13 channels; f64.
         assert_eq!(
-            model_file_floor(&settings(ModelKind::Dense, 64, true)),
+            settings(ModelKind::Dense, 64, true).model_file_floor(),
             8 + 16 * 16 * 16 * 13 * 8
         );
         assert_eq!(
-            model_file_floor(&settings(ModelKind::Dense, 64, false)),
+            settings(ModelKind::Dense, 64, false).model_file_floor(),
             8 + 64 * 64 * 64 * 13 * 8
         );
     }
@@ -84,7 +86,7 @@ mod tests {
     #[test]
     fn a_sparse_grid_counts_its_mask_and_splats_their_header() {
         // Grid 9 grows from 3 (9 / 4 rounded up): a mask of 27 bytes.
-        assert_eq!(model_file_floor(&settings(ModelKind::Sparse, 9, true)), 8 + 27);
+        assert_eq!(settings(ModelKind::Sparse, 9, true).model_file_floor(), 8 + 27);
         // ply, format, comment and element lines, 3 + 3 + 3 + 9 + 1 + 3 + 4 properties of
         // degree 1, end_header: counted line by line.
         let mut properties = 0;
@@ -105,7 +107,7 @@ mod tests {
             + "element vertex 0\n".len()
             + "end_header\n".len();
         assert_eq!(
-            model_file_floor(&settings(ModelKind::Splats, 64, true)),
+            settings(ModelKind::Splats, 64, true).model_file_floor(),
             (fixed + properties) as u64
         );
     }
@@ -113,6 +115,6 @@ mod tests {
     #[test]
     fn a_lattice_too_large_to_count_saturates() {
         let huge = settings(ModelKind::Dense, usize::MAX, false);
-        assert_eq!(model_file_floor(&huge), u64::MAX);
+        assert_eq!(huge.model_file_floor(), u64::MAX);
     }
 }

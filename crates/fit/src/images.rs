@@ -201,8 +201,8 @@ pub(crate) fn write_row_png(path: &Path, panels: &[Panel<'_>], scale: u32) -> Re
     save_canvas(path, &pixels, size)
 }
 
-/// Writes the exact photograph, the render and `|render - exact|` times `gain` side by side
-/// (see [`write_row_png`]); a gain above 1 makes small errors visible.
+/// Writes the exact photograph, the render and `|render - exact|` times `gain` side by side,
+/// in one row; a gain above 1 makes small errors visible.
 pub fn write_comparison_png(
     path: &Path,
     exact: ArrayView3<'_, f64>,

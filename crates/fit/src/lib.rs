@@ -3,10 +3,10 @@
 //! The pipeline around a training step, so that a renderer is written once and every scene
 //! (a synthetic one, a dataset on disk) is fitted, rendered and saved the same way:
 //!
-//! - [`model`]: what the pipeline asks of a radiance field ([`RadianceField`]); [`dense`]: the
+//! - [`model`]: what the pipeline asks of a radiance field ([`RadianceField`](model::RadianceField)); [`dense`]: the
 //!   dense grid of density and colour, its first implementation; [`dispatch`]: work generic
 //!   over the model run with the types that settings or a model file name;
-//! - [`settings`]: one settings struct ([`FitSettings`]) for the command line, the checkpoint
+//! - [`settings`]: one settings struct ([`FitSettings`](settings::FitSettings)) for the command line, the checkpoint
 //!   and resume;
 //! - [`dataset`], `batch`: views (a camera and its picture) to training rays and test views;
 //! - [`train`]: the training loop with its schedules (`schedule`), the occupancy grid's
@@ -80,7 +80,7 @@ pub mod depth;
 pub mod dispatch;
 mod environment;
 mod error;
-pub mod file_floor;
+mod file_floor;
 mod grid_model;
 pub mod images;
 pub mod interrupt;
@@ -97,7 +97,7 @@ pub mod session;
 pub mod settings;
 mod shading;
 pub mod space;
-pub mod space_picture;
+mod space_picture;
 pub mod sparse;
 mod splats;
 pub mod stamp;
@@ -108,5 +108,3 @@ pub mod train;
 pub mod trainer;
 
 pub use error::FitError;
-pub use model::RadianceField;
-pub use settings::FitSettings;

@@ -154,11 +154,9 @@ pub trait RadianceField<F: Float>: Sized + Sync {
 
     /// The view-independent colour `[m, 3]` at `positions` (`[m, 3]`), without a tape: for a
     /// mesh's vertex colours, which no view direction goes with (with spherical harmonics,
-    /// the degree-0 term through the colour activation: [`Shading::base_colors`]).
+    /// the degree-0 term through the colour activation).
     ///
     /// Errors: from the ops, or a NaN raw value (a diverged fit).
-    ///
-    /// [`Shading::base_colors`]: crate::shading::Shading::base_colors
     fn base_colors(&self, positions: ArrayView2<'_, F>) -> Result<Array2<F>, FitError>;
 }
 

@@ -1,8 +1,7 @@
 //! Where a fit's training time went: the wall time of each phase of a step, and the tape's
-//! time op by op ([`fogray_tape::Profile`]), summed over the steps of one [`fit_from`] call.
-//! Fused against taped, the two tables say what the fused ops buy and what both share.
-//!
-//! [`fit_from`]: crate::train::fit_from
+//! time op by op ([`fogray_tape::Profile`]), summed over the steps of one fit
+//! ([`FitResult::profile`](crate::train::FitResult::profile)). Fused against taped, the two
+//! tables say what the fused ops buy and what both share.
 
 use std::time::Duration;
 
@@ -11,7 +10,7 @@ use serde::Serialize;
 
 /// The phases of a training step, in order.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct Phases {
+pub(crate) struct Phases {
     /// Drawing the batch and gathering its rays and colours.
     pub batch: Duration,
     /// Placing the samples along the rays (uniform, or the occupancy grid's midpoint sampler).
@@ -29,7 +28,7 @@ pub struct Phases {
 /// A fit's step profile. The training seconds also hold what no phase does: the learning
 /// rate's update and, at the growth stages, the grid's resampling.
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct StepProfile {
+pub(crate) struct StepProfile {
     /// Steps profiled.
     pub steps: usize,
     /// Wall time per phase, summed over the steps.
@@ -60,7 +59,8 @@ pub(crate) struct OpRow {
     pub backward_ms: f64,
 }
 
-/// [`StepProfile`] as written out by `fogray-grid fit --profile`.
+/// A fit's step profile as written out by `fogray fit --profile` and `fogray-grid fit
+/// --profile`: milliseconds a step, phase by phase and op by op.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct ProfileTable {
     /// Steps profiled.

@@ -15,7 +15,7 @@ use fogray_tape::Float;
 
 use crate::checkpoint::{self, CheckpointError, ModelInfo};
 use crate::dataset::Dataset;
-use crate::dispatch::{with_field, with_float, FieldWork, FloatWork};
+use crate::dispatch::{with_field_kind, with_float, FieldWork, FloatWork};
 use crate::error::FitError;
 use crate::interrupt::StopFlag;
 use crate::metrics::{mean_psnr, view_scores, ViewScore};
@@ -74,8 +74,7 @@ pub struct FitReport {
     pub final_test_psnr_view_mean: f64,
     /// SSIM over the held-out views at the end (NaN for views smaller than its window).
     pub final_test_ssim: f64,
-    /// PSNR over as many training views as held-out ones
-    /// ([`training_views_psnr`](crate::train::training_views_psnr)).
+    /// PSNR over as many training views as held-out ones.
     pub train_views_psnr: f64,
     /// Each held-out view's PSNR and share of the squared error, in view order.
     pub view_scores: Vec<ViewScore>,
@@ -135,7 +134,7 @@ pub fn resume_settings(
 }
 
 /// Runs a session: the fit of `data` that `plan` describes, with the model type its settings
-/// name and its space decided from the data ([`space::resolve`]), stopped by Ctrl-C (which
+/// name and its space decided from the data ([`SpaceDecision`]), stopped by Ctrl-C (which
 /// saves it).
 ///
 /// Errors: bad settings, a model file that cannot be read or written, the ops' errors.
@@ -157,7 +156,7 @@ pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, Session
         stop: &stop,
     };
     match plan.settings.model.field() {
-        Some(field) => with_field(plan.settings.precision, field, work),
+        Some(field) => with_field_kind(plan.settings.precision, field, work),
         None => with_float(plan.settings.precision, work),
     }
 }

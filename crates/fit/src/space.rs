@@ -4,10 +4,11 @@
 //! (clipped to the box, or cut into pieces of equal contracted length) and how the occupancy
 //! grid judges a cell (in the contracted shell one step stands for a long stretch of world).
 //!
-//! The choice is made from the data unless a flag makes it ([`resolve`]): pictures with alpha
-//! (an object over nothing) keep the box, and so do pictures without alpha whose borders are
-//! all one colour (an object over a plain backdrop, [`plain_backdrop`]); other pictures
-//! without alpha (a capture, whose background is real) are contracted.
+//! The choice is made from the data unless a flag makes it ([`SpaceChoice::Auto`]): pictures
+//! with alpha (an object over nothing) keep the box, and so do pictures without alpha whose
+//! borders are all one colour (an object over a plain backdrop); other pictures without alpha
+//! (a capture, whose background is real) are contracted ([`SpaceDecision`] says which and
+//! why).
 
 use fogray_ops::rays::{Aabb, RayBatch};
 use fogray_ops::sample::{OccupancyGrid, PackedSamples, DEFAULT_FAR_GAP, MAX_CONTRACTED_PATH};

@@ -2,7 +2,7 @@
 //! matter are stored ([`SparseGridField`]: packed rows of raw density and colour, an index
 //! from each node to its row), shaded and composited as the dense grid is. It grows coarse to
 //! fine like the dense grid, and each growth prunes: the new lattice keeps the nodes within
-//! [`DILATION`] occupancy cells of an occupied one (the dilation lets surfaces still move),
+//! a few occupancy cells of an occupied one (the dilation lets surfaces still move),
 //! so the parameters, their gradient, Adam's moments and a step's scatter grow with the nodes
 //! kept, not with `N^3`; only the index (4 bytes a node) spans the lattice.
 //!
@@ -295,7 +295,7 @@ impl<F: Float> RadianceField<F> for SparseGrid<F> {
         .map(|g| g.with_contraction(contraction))
     }
 
-    /// Keeps the nodes within [`DILATION`] occupancy cells of a cell the fit's occupancy grid
+    /// Keeps the nodes within a few occupancy cells of a cell the fit's occupancy grid
     /// marks occupied: every node without an occupancy grid, or before its first refresh
     /// (when every cell is occupied, as nothing is known yet: a model that has barely started
     /// has no density above the threshold, and pruning by it would keep nothing).

@@ -1,5 +1,5 @@
 //! Where a fit stands between two steps: the model, and the rest of what
-//! [`fit_from`](crate::train::fit_from) needs to continue it exactly (Adam's moments, the step,
+//! [`Trainer::new`](crate::trainer::Trainer::new) needs to continue it exactly (Adam's moments, the step,
 //! the training seconds, the growth stage, the position in the stream of random batches, the
 //! occupancy grid). [`checkpoint`](crate::checkpoint) writes both to a file and reads them back.
 
@@ -25,9 +25,9 @@ pub struct TrainingState<F> {
     pub occupancy: Option<OccupancyState>,
 }
 
-impl<F> TrainingState<F> {
-    /// The state of a fit that has not started.
-    pub fn fresh() -> Self {
+/// The state of a fit that has not started.
+impl<F> Default for TrainingState<F> {
+    fn default() -> Self {
         TrainingState {
             step: 0,
             seconds: 0.0,

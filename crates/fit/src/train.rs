@@ -1,6 +1,7 @@
-//! A fit to a budget: [`fit_from`] steps a [`Trainer`] until its budget is spent or a stop
-//! flag is raised, with the test PSNR on the held-out views measured at intervals (outside the
-//! training clock), and returns the fitted model with its log ([`FitResult`]).
+//! A fit to a budget: [`fit`] steps a [`Trainer`] until its budget is spent (a session's fit,
+//! resumed or stopped by Ctrl-C, runs the same loop), with the test PSNR on the held-out views
+//! measured at intervals (outside the training clock), and returns the fitted model with its
+//! log ([`FitResult`]).
 
 use std::sync::atomic::AtomicBool;
 
@@ -13,7 +14,7 @@ use crate::dataset::{Dataset, View};
 use crate::error::FitError;
 use crate::metrics::{psnr, ssim, SSIM_WINDOW};
 use crate::model::RadianceField;
-use crate::profile::StepProfile;
+use crate::profile::ProfileTable;
 use crate::render::{render_picture, RenderOptions, RenderedView};
 use crate::settings::FitSettings;
 use crate::state::{Start, TrainingState};
@@ -30,8 +31,7 @@ pub struct LogEntry {
     pub train_loss: f64,
     /// Test PSNR (dB) over all test views.
     pub test_psnr: f64,
-    /// Test SSIM, the mean over the test views ([`ssim`](crate::metrics::ssim)); NaN for views
-    /// smaller than its window.
+    /// Test SSIM, the mean over the test views; NaN for views smaller than its window.
     pub test_ssim: f64,
     /// Training samples so far, over all rays of all steps (what a step's cost grows with).
     pub samples: usize,
@@ -58,14 +58,16 @@ pub struct FitResult<F: Float, M> {
     pub held_out: Vec<RenderedView>,
     /// The fitted model.
     pub model: M,
-    /// Where the fit stopped, beyond the model: with it, [`fit_from`] continues the fit.
+    /// Where the fit stopped, beyond the model: with it (as a [`Start`]), [`Trainer::new`]
+    /// continues the fit.
     pub training: TrainingState<F>,
     /// Whether the fit stopped early because its stop flag was raised.
     pub interrupted: bool,
     /// The final occupancy grid, with occupancy sampling.
     pub occupancy: Option<OccupancyGrid>,
-    /// Where this call's training time went, phase by phase and op by op.
-    pub profile: StepProfile,
+    /// Where this call's training time went, phase by phase and op by op, in milliseconds a
+    /// step (as a session's report shows it).
+    pub profile: ProfileTable,
 }
 
 /// Progress reported after every step.
@@ -163,7 +165,9 @@ pub(crate) fn held_out_ssim(colors: &[ArrayView3<f64>], data: &Dataset) -> Resul
     Ok(ssim(colors, &e)?)
 }
 
-/// Fits a fresh model to `data` for its budget: [`fit_from`] with no start and no stop flag.
+/// Fits a fresh model to `data` for its budget: a [`Trainer`] stepped through it, evaluated
+/// `settings.evaluations` times on the way and once at the end (with depth, for a report).
+/// Calls `progress` after every step.
 ///
 /// ```
 /// use fogray_fit::dense::DenseGrid;
@@ -187,7 +191,7 @@ pub(crate) fn held_out_ssim(colors: &[ArrayView3<f64>], data: &Dataset) -> Resul
 /// # Ok::<(), Box<dyn std::error::Error>>(())
 /// ```
 ///
-/// Errors: as [`fit_from`].
+/// Errors: as [`Trainer::new`] and [`Trainer::step`].
 pub fn fit<F: Float, M: RadianceField<F>>(
     data: &Dataset,
     settings: &FitSettings,
@@ -226,7 +230,7 @@ pub(crate) fn fit_from<F: Float, M: RadianceField<F>>(
     let steps_taken = trainer.steps_taken();
     let samples_per_ray_mean = trainer.samples() as f64 / (steps_taken * settings.batch) as f64;
     let training = trainer.state()?;
-    let profile = trainer.profile();
+    let profile = trainer.profile().table();
     let seconds = trainer.seconds();
     let (model, occupancy) = trainer.into_parts();
     Ok(FitResult {

@@ -94,18 +94,11 @@ fn resumed_settings(args: &FitArgs, resume: &Resume, given: &dyn Fn(&str) -> boo
     let (settings, _) = session::resume_settings(&resume.path, &args.settings, given)?;
     let extra = &resume.info.extra;
     let file_ring = RingArgs::saved(extra, &resume.path)?;
+    let pick = |id: &str, flag: usize, file: usize| if given(id) { flag } else { file };
     let ring = RingArgs {
-        views: if given("views") {
-            args.ring.views
-        } else {
-            file_ring.views
-        },
-        test_views: if given("test_views") {
-            args.ring.test_views
-        } else {
-            file_ring.test_views
-        },
-        size: if given("size") { args.ring.size } else { file_ring.size },
+        views: pick("views", args.ring.views, file_ring.views),
+        test_views: pick("test_views", args.ring.test_views, file_ring.test_views),
+        size: pick("size", args.ring.size, file_ring.size),
     };
     let scene = if given("scene") {
         args.scene.load()?

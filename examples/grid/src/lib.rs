@@ -30,7 +30,7 @@
 //! a command line, pictures and checkpoints; here a small grid for 40 steps):
 //!
 //! ```
-//! use fogray::fit::{dense::DenseGrid, train::fit, FitSettings};
+//! use fogray::fit::{dense::DenseGrid, settings::FitSettings, train::fit};
 //! use fogray_grid::{ring::Ring, scene::Scene, views::dataset};
 //!
 //! let data = dataset(&Scene::default(), &Ring::new(16, 2, 24)?)?;

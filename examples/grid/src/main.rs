@@ -20,12 +20,12 @@ use fogray::fit::depth::write_depth_png;
 use fogray::fit::dispatch::{with_field, FieldWork};
 use fogray::fit::images::{write_comparison_png, write_png};
 use fogray::fit::metrics::psnr;
+use fogray::fit::model::RadianceField;
 use fogray::fit::plots;
 use fogray::fit::render::{render_picture, RenderOptions};
 use fogray::fit::session::{self, FitReport, SessionOutcome, SessionPlan};
 use fogray::fit::settings::{FitSettings, ModelKind};
 use fogray::fit::train::Progress;
-use fogray::fit::RadianceField;
 use fogray_grid::capture::{self, CaptureSettings};
 use fogray_grid::photographs::{photograph, photographs};
 use fogray_grid::ring::Ring;
@@ -339,17 +339,9 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
                 transforms.display()
             );
         }
-        Command::Fit(args) => {
-            let fit = matches.subcommand_matches("fit");
-            let given = |id: &str| fit.and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine);
-            run_fit(args, &given)?
-        }
+        Command::Fit(args) => run_fit(args, &|id| given(matches, "fit", id))?,
         Command::Render(args) => run_render(args)?,
-        Command::Report(args) => {
-            let report = matches.subcommand_matches("report");
-            let given = |id: &str| report.and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine);
-            run_report(args, &given)?
-        }
+        Command::Report(args) => run_report(args, &|id| given(matches, "report", id))?,
         Command::Scene { out } => {
             let text = Scene::default().to_json_pretty() + "\n";
             match out {
@@ -360,6 +352,11 @@ fn run(cli: Cli, matches: &ArgMatches) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// Whether the flag of clap id `id` was given on the command line of subcommand `sub`.
+fn given(matches: &ArgMatches, sub: &str, id: &str) -> bool {
+    matches.subcommand_matches(sub).and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine)
 }
 
 /// One line on stderr and status 2.

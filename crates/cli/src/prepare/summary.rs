@@ -41,7 +41,9 @@ pub struct Prepared {
 impl Prepared {
     /// Reads what `out/sparse/0` registers of `names`.
     ///
-    /// Errors: those of [`model::registered_names`] and [`model::first_camera_width`].
+    /// Errors: [`PrepareError::File`] for a model file (`images.bin`, `cameras.bin`) that
+    /// cannot be opened, [`PrepareError::BadModel`] for one that ends early or counts more
+    /// than its size holds.
     pub fn read(
         out: &Path,
         names: &[OsString],

@@ -9,7 +9,6 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use fogray_fit::checkpoint::read_info;
-use fogray_fit::file_floor::model_file_floor;
 use fogray_fit::settings::{FitSettings, ModelKind};
 
 use crate::common::{arg, assert_refused, fogray, tiny_fit};
@@ -193,7 +192,7 @@ fn a_fit_that_fits_its_disk_runs_and_writes_no_less_than_the_floor() {
             },
             _ => read_info(&model).unwrap().settings,
         };
-        let floor = model_file_floor(&settings);
+        let floor = settings.model_file_floor();
         assert!(floor > 8, "{kind}: floor {floor}");
         assert!(written >= floor, "{kind}: {written} bytes written, floor {floor}");
     }

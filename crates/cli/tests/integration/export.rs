@@ -57,7 +57,7 @@ fn save_ball<F: Float, M: RadianceField<F>>(path: &Path, settings: &FitSettings)
     let mut values = model.params_mut().get_mut(id).unwrap();
     let shape = values.shape().to_vec();
     values.assign(&rows.into_shape_with_order(shape).unwrap());
-    save(path, &model, &TrainingState::fresh(), settings, &BTreeMap::new()).unwrap();
+    save(path, &model, &TrainingState::default(), settings, &BTreeMap::new()).unwrap();
 }
 
 /// The counts, colours and faces of a binary PLY written by `fogray export`.

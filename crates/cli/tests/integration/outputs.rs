@@ -73,7 +73,7 @@ pub fn write_model(path: &Path) {
         }
     });
     values.assign(&rows.into_shape_with_order(shape).unwrap());
-    save(path, &model, &TrainingState::fresh(), &settings, &BTreeMap::new()).unwrap();
+    save(path, &model, &TrainingState::default(), &settings, &BTreeMap::new()).unwrap();
 }
 
 /// Every file under `dir` (recursively) and its bytes; links as the path they name.

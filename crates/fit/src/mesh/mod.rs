@@ -1,12 +1,12 @@
 //! A fitted model as a surface mesh, for tools that open meshes rather than radiance fields
-//! (MeshLab, Blender, trimesh): the model's density sampled on a lattice over its box
-//! ([`Lattice`]), the surface where it crosses a level by marching cubes ([`marching`]),
-//! coloured by the model's view-independent colour at each vertex
-//! ([`RadianceField::base_colors`]), and written as binary PLY ([`ply`]).
+//! (MeshLab, Blender, trimesh): the model's density sampled on a lattice over its box, the
+//! surface where it crosses a level by marching cubes ([`extract`]), coloured by the model's
+//! view-independent colour at each vertex ([`RadianceField::base_colors`]), and written as
+//! binary PLY ([`Mesh::write_ply`]).
 //!
 //! The level is a density, or an opacity: the opacity `1 - exp(-sigma step)` of one sample
 //! step of the model ([`RadianceField::sample_step`]), which needs no knowledge of the
-//! density's scale. The default, [`DEFAULT_OPACITY`], is a tenth of the light a step: a
+//! density's scale. The default ([`Level::default`]) is a tenth of the light a step: a
 //! fitted surface is a shell a few steps thick that absorbs the light together, and few of its
 //! single steps absorb half of it, so a higher default loses parts of a fitted surface while a
 //! lower one takes in the faint fog around it.
@@ -47,11 +47,10 @@ use crate::model::RadianceField;
 use fogray_ops::space::InnerRegion;
 pub(crate) use lattice::Lattice;
 pub(crate) use marching::{march, Surface};
-pub use ply::write_ply;
 
 /// The opacity of one sample step at which [`Level::default`] puts the surface: a tenth of
 /// the light absorbed (see the [module docs](self) for why).
-pub const DEFAULT_OPACITY: f64 = 0.1;
+pub(crate) const DEFAULT_OPACITY: f64 = 0.1;
 
 /// Vertices whose colours are looked up at once.
 const COLOR_CHUNK: usize = 1 << 16;
@@ -126,7 +125,7 @@ pub enum Level {
 }
 
 impl Default for Level {
-    /// [`Level::Opacity`] of [`DEFAULT_OPACITY`].
+    /// [`Level::Opacity`] of a tenth of the light a step (the [module docs](self) say why).
     fn default() -> Self {
         Level::Opacity(DEFAULT_OPACITY)
     }

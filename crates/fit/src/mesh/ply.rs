@@ -10,41 +10,43 @@ use std::io::{self, Write};
 use super::Mesh;
 use crate::mesh::marching::MAX_VERTICES;
 
-/// Writes `mesh` to `out` as binary little-endian PLY, with `comment` (one line) in the
-/// header.
-///
-/// Errors: from `out`, or ([`io::ErrorKind::InvalidInput`]) a mesh whose colours are not one
-/// per vertex, a triangle with an index out of range, more vertices than a PLY `int` can
-/// index, a comment with a line break.
-pub fn write_ply<W: Write>(mesh: &Mesh, comment: &str, out: W) -> io::Result<()> {
-    check(mesh, comment).map_err(|m| io::Error::new(io::ErrorKind::InvalidInput, m))?;
-    let mut out = io::BufWriter::with_capacity(1 << 20, out);
-    write!(
-        out,
-        "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\n\
-         property float x\nproperty float y\nproperty float z\n\
-         property uchar red\nproperty uchar green\nproperty uchar blue\n\
-         element face {}\nproperty list uchar int vertex_indices\nend_header\n",
-        mesh.positions.len(),
-        mesh.triangles.len()
-    )?;
-    let mut record = [0u8; 15];
-    for (p, c) in mesh.positions.iter().zip(&mesh.colors) {
-        for (a, x) in p.iter().enumerate() {
-            record[4 * a..4 * a + 4].copy_from_slice(&x.to_le_bytes());
+impl Mesh {
+    /// Writes the mesh to `out` as binary little-endian PLY, with `comment` (one line) in the
+    /// header.
+    ///
+    /// Errors: from `out`, or ([`io::ErrorKind::InvalidInput`]) a mesh whose colours are not
+    /// one per vertex, a triangle with an index out of range, more vertices than a PLY `int`
+    /// can index, a comment with a line break.
+    pub fn write_ply<W: Write>(&self, comment: &str, out: W) -> io::Result<()> {
+        check(self, comment).map_err(|m| io::Error::new(io::ErrorKind::InvalidInput, m))?;
+        let mut out = io::BufWriter::with_capacity(1 << 20, out);
+        write!(
+            out,
+            "ply\nformat binary_little_endian 1.0\ncomment {comment}\nelement vertex {}\n\
+             property float x\nproperty float y\nproperty float z\n\
+             property uchar red\nproperty uchar green\nproperty uchar blue\n\
+             element face {}\nproperty list uchar int vertex_indices\nend_header\n",
+            self.positions.len(),
+            self.triangles.len()
+        )?;
+        let mut record = [0u8; 15];
+        for (p, c) in self.positions.iter().zip(&self.colors) {
+            for (a, x) in p.iter().enumerate() {
+                record[4 * a..4 * a + 4].copy_from_slice(&x.to_le_bytes());
+            }
+            record[12..15].copy_from_slice(c);
+            out.write_all(&record)?;
         }
-        record[12..15].copy_from_slice(c);
-        out.write_all(&record)?;
-    }
-    let mut face = [3u8; 13];
-    for t in &mesh.triangles {
-        for (a, &i) in t.iter().enumerate() {
-            // Checked above: every index fits an `int`.
-            face[1 + 4 * a..5 + 4 * a].copy_from_slice(&(i as i32).to_le_bytes());
+        let mut face = [3u8; 13];
+        for t in &self.triangles {
+            for (a, &i) in t.iter().enumerate() {
+                // Checked above: every index fits an `int`.
+                face[1 + 4 * a..5 + 4 * a].copy_from_slice(&(i as i32).to_le_bytes());
+            }
+            out.write_all(&face)?;
         }
-        out.write_all(&face)?;
+        out.flush()
     }
-    out.flush()
 }
 
 /// Why `mesh` cannot be written, if it cannot.

@@ -6,7 +6,7 @@
 use std::collections::HashMap;
 
 use crate::dense::DenseGrid;
-use crate::mesh::{extract, march, write_ply, Lattice, Level, Mesh, MeshError, MeshOptions};
+use crate::mesh::{extract, march, Lattice, Level, Mesh, MeshError, MeshOptions};
 use crate::model::RadianceField;
 use crate::settings::SceneBox;
 use crate::shading::Shading;
@@ -426,7 +426,7 @@ fn parse_ply(bytes: &[u8]) -> Ply {
 fn the_ply_reads_back_bit_for_bit() {
     let mesh = extract(&dense_ball(), &half_inside()).unwrap().mesh;
     let mut bytes = Vec::new();
-    write_ply(&mesh, "a ball", &mut bytes).unwrap();
+    mesh.write_ply("a ball", &mut bytes).unwrap();
     let ply = parse_ply(&bytes);
     assert_eq!(
         ply.header,
@@ -486,10 +486,10 @@ fn a_mesh_that_does_not_hold_together_is_not_written() {
     ];
     for mesh in &bad {
         let mut bytes = Vec::new();
-        let e = write_ply(mesh, "", &mut bytes).unwrap_err();
+        let e = mesh.write_ply("", &mut bytes).unwrap_err();
         assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
         assert!(bytes.is_empty());
     }
-    let e = write_ply(&Mesh::default(), "two\nlines", &mut Vec::new()).unwrap_err();
+    let e = Mesh::default().write_ply("two\nlines", &mut Vec::new()).unwrap_err();
     assert_eq!(e.kind(), std::io::ErrorKind::InvalidInput);
 }

@@ -35,7 +35,7 @@ pub fn psnr(renders: &[ArrayView3<'_, f64>], exacts: &[ArrayView3<'_, f64>]) -> 
     Ok(-10.0 * (sum / count as f64).log10())
 }
 
-/// One view's part in a PSNR over several ([`view_scores`]).
+/// One view's part in a PSNR over several.
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
 pub struct ViewScore {
     /// The view's own PSNR (dB), as [`psnr`] of it alone.

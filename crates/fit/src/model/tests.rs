@@ -147,7 +147,7 @@ fn a_fit_over_random_backgrounds_clears_fog_of_the_background_colour() {
     for random in [false, true] {
         let start = Start {
             model: foggy(),
-            training: TrainingState::fresh(),
+            training: TrainingState::default(),
         };
         let result = fit_from(&data, &fog_settings(random), Some(start), None, &mut |_| {}).unwrap();
         after.push(empty_space_opacity(&result.model, &data));

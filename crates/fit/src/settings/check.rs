@@ -4,13 +4,13 @@
 use fogray_ops::limits::{self, Bytes, GridShape};
 use serde_json::{Map, Value};
 
-use super::{Budget, FitSettings, ModelKind, Precision, MAX_EVALUATIONS, MAX_SECONDS, MAX_STEPS};
+use super::{Budget, FitSettings, ModelKind, MAX_EVALUATIONS, MAX_SECONDS, MAX_STEPS};
 use crate::error::FitError;
 
 impl FitSettings {
-    /// Checks every setting's range, the budget against [`MAX_SECONDS`] and [`MAX_STEPS`], the
-    /// evaluations against [`MAX_EVALUATIONS`], and the grid and batch against the machine's
-    /// memory ([`FitSettings::check_memory`]).
+    /// Checks every setting's range, the budget against its caps (of seconds, and of steps:
+    /// [`MAX_STEPS`]), the evaluations against theirs, and the grid and batch against the
+    /// machine's memory.
     ///
     /// Errors: [`FitError::Config`] naming the flag, [`FitError::TooLarge`] naming the flag and
     /// the bytes it would need.
@@ -81,10 +81,7 @@ impl FitSettings {
         let shape = |nodes| GridShape {
             nodes,
             channels: limits::grid_channels(self.sh_degree),
-            float_bytes: match self.precision {
-                Precision::F32 => 4,
-                Precision::F64 => 8,
-            },
+            float_bytes: self.precision.bytes(),
         };
         let model_bytes = |nodes| match self.model {
             ModelKind::Dense => shape(nodes).dense_bytes(),

@@ -31,13 +31,13 @@ pub enum Sampling {
 #[serde(rename_all = "lowercase")]
 #[cfg_attr(feature = "cli", derive(clap::ValueEnum))]
 pub enum ModelKind {
-    /// Every node of the grid stored ([`DenseGrid`](crate::dense::DenseGrid)): small scenes.
+    /// A dense grid, every node stored: small scenes.
     Dense,
-    /// Only the nodes near what the occupancy grid finds, pruned at each growth
-    /// ([`SparseGrid`](crate::sparse::SparseGrid)): memory follows the scene.
+    /// A sparse grid, only the nodes near what the occupancy grid finds, pruned at each
+    /// growth: memory follows the scene.
     Sparse,
-    /// 3-D Gaussians composited by projection onto the image, densified where the picture
-    /// needs them ([`SplatModel`](crate::splats::SplatModel)).
+    /// 3-D Gaussian splats composited by projection onto the image, densified where the
+    /// picture needs them.
     Splats,
 }
 
@@ -72,6 +72,15 @@ impl Precision {
         }
     }
 
+    /// Bytes of one float of this precision (4 or 8): what a grid, a model file or a render
+    /// holds per value.
+    pub fn bytes(self) -> usize {
+        match self {
+            Precision::F32 => 4,
+            Precision::F64 => 8,
+        }
+    }
+
     /// The precision of `F` (`f32` or `f64`, the two [`Float`](fogray_tape::Float) types).
     pub(crate) fn of<F: fogray_tape::Float>() -> Precision {
         if std::mem::size_of::<F>() == 4 {
@@ -99,5 +108,18 @@ impl Sampling {
             Sampling::Uniform => "uniform",
             Sampling::Occupancy => "occupancy",
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::Precision;
+
+    #[test]
+    fn a_precision_counts_the_bytes_of_its_float() {
+        assert_eq!(Precision::F32.bytes(), std::mem::size_of::<f32>());
+        assert_eq!(Precision::F64.bytes(), std::mem::size_of::<f64>());
+        assert_eq!(Precision::of::<f32>().bytes(), 4);
+        assert_eq!(Precision::of::<f64>().bytes(), 8);
     }
 }

@@ -214,7 +214,7 @@ impl FitSettings {
     /// - `distortion`: a little of mip-NeRF 360's loss pulls each ray's weights onto its
     ///   surface, which clears the haze a photograph cannot tell from a sheet; ten times more
     ///   costs PSNR;
-    /// - `space`: decided from the data ([`crate::space::resolve`]).
+    /// - `space`: decided from the data ([`SpaceChoice::Auto`]).
     pub const RECOMMENDED: FitSettings = FitSettings {
         grid: 128,
         model: ModelKind::Sparse,

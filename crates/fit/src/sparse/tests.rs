@@ -216,14 +216,14 @@ fn a_checkpoint_keeps_the_kept_nodes_and_their_values() {
         ..FitSettings::default()
     };
     let path = temp("sparse.safetensors");
-    checkpoint::save(&path, &model, &TrainingState::fresh(), &settings, &Default::default()).unwrap();
+    checkpoint::save(&path, &model, &TrainingState::default(), &settings, &Default::default()).unwrap();
     let loaded = checkpoint::load::<f64, SparseGrid<f64>>(&path).unwrap().start.model;
     assert_eq!(loaded.index(), model.index());
     let values = |m: &SparseGrid<f64>| m.params().get(m.params().ids().next().unwrap()).unwrap().to_owned();
     assert_eq!(values(&loaded), values(&model));
     // A dense grid's file is not a sparse grid.
     let dense = DenseGrid::<f64>::new(SceneBox::UNIT, 3, -1.0, 0.0).unwrap();
-    checkpoint::save(&path, &dense, &TrainingState::fresh(), &settings, &Default::default()).unwrap();
+    checkpoint::save(&path, &dense, &TrainingState::default(), &settings, &Default::default()).unwrap();
     assert!(checkpoint::load::<f64, SparseGrid<f64>>(&path).is_err());
 }
 

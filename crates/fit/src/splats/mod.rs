@@ -16,5 +16,3 @@ pub(crate) mod settings;
 mod tests;
 pub(crate) mod trainer;
 pub(crate) mod undistort;
-
-pub(crate) use model::SplatModel;

@@ -77,9 +77,6 @@ pub(crate) fn check_count(n: usize, cap: usize) -> Result<(), FitError> {
 }
 
 impl<F: Float> SplatModel<F> {
-    /// The model's name in a model file.
-    pub(crate) const KIND: &'static str = "splats";
-
     /// The model of `arrays`, whose colours are of spherical-harmonics degree `degree`.
     ///
     /// Errors: a degree above 3, rows that disagree in number or a wrong column count, a

@@ -4,7 +4,7 @@
 use fogray_ops::{Intrinsics, PinholeCamera};
 use ndarray::Array3;
 
-use super::model::SplatArraysOwned;
+use super::model::{SplatArraysOwned, SplatModel};
 use super::settings::SplatSettings;
 use super::trainer::SplatTrainer;
 use super::*;

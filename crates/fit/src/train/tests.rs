@@ -4,6 +4,7 @@ use crate::dense::DenseGrid;
 use crate::schedule::{learning_rate, ANNEAL_START};
 use crate::settings::{Budget, FitSettings, Method};
 use crate::train::fit;
+use crate::trainer::{run_budget, Trainer};
 
 use crate::testing::ball_dataset;
 
@@ -56,8 +57,18 @@ fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
             ..FitSettings::default()
         }
         .with_budget(Budget::Steps(7));
+        // A fit's result carries the profile as its table.
         let result = fit::<f32, DenseGrid<f32>>(&data, &settings, &mut |_| {}).unwrap();
-        let profile = &result.profile;
+        assert!(
+            result.profile.to_string().contains("mean over 7 steps"),
+            "{}",
+            result.profile
+        );
+        // The trainer's own profile, summed over the steps, as `fit` tabulates it.
+        let mut trainer = Trainer::<f32, DenseGrid<f32>>::new(&data, &settings, None).unwrap();
+        run_budget(&mut trainer, settings.evaluations, None, &mut |_, _| {}).unwrap();
+        let seconds = trainer.seconds();
+        let profile = &trainer.profile();
         assert_eq!(profile.steps, 7);
         let calls = |name: &str| profile.ops.get(name).map(|t| (t.forward_calls, t.backward_calls));
         // One render, loss and prior a step; the prior is the same op either way. The fused
@@ -77,11 +88,7 @@ fn the_profile_counts_the_steps_and_names_the_ops_each_method_runs() {
         // The phases are parts of the training clock.
         let p = profile.phases;
         let phases = p.batch + p.sample + p.forward + p.backward + p.optimiser + p.occupancy;
-        assert!(
-            phases.as_secs_f64() <= result.seconds,
-            "{phases:?} > {} s",
-            result.seconds
-        );
+        assert!(phases.as_secs_f64() <= seconds, "{phases:?} > {seconds} s");
         // The ops run inside the step's forward and backward phases.
         assert!(
             profile.ops.forward() <= p.forward,

@@ -1,6 +1,7 @@
 //! The trainer: a fit as a value that takes one step at a time. [`Trainer::step`] draws a
 //! batch of training rays, records the model's loss on a tape, runs the backward and Adam,
-//! with its policies around the step ([`Growth`], [`LearningRate`], [`OccupancyRefresh`]);
+//! with its policies around the step (the grid's growth, the learning rate's schedule, the
+//! occupancy grid's refresh);
 //! [`Trainer::evaluate`] renders the held-out views (colour, opacity and, if asked, depth in
 //! one pass) and scores them; [`Trainer::state`] is what a checkpoint saves to resume it.
 //!
@@ -164,7 +165,7 @@ impl<'d, F: Float, M: RadianceField<F>> Trainer<'d, F, M> {
             Some(s) => (s.model, s.training),
             None => (
                 M::fresh(settings, Growth::first_nodes(settings))?,
-                TrainingState::fresh(),
+                TrainingState::default(),
             ),
         };
         let mut occupancy = match settings.sampling {

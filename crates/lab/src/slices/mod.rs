@@ -15,8 +15,9 @@
 //! assert_eq!((z.values[[16, 16]], z.values[[0, 0]]), (40.0, 0.0)); // the centre, a corner
 //! ```
 
+use fogray_fit::model::RadianceField;
 use fogray_fit::settings::SceneBox;
-use fogray_fit::{FitError, RadianceField};
+use fogray_fit::FitError;
 use fogray_ops::sample::{GridAxis, OccupancyGrid};
 use fogray_ops::OpsError;
 use fogray_tape::Float;

@@ -144,10 +144,9 @@ pub(crate) fn run_config(
         progress,
     };
     // A sweep keeps density slices and grid statistics, which splats have not.
-    let field = fit_config.model.field().ok_or_else(|| {
+    with_field(config.precision, fit_config.model, work).map_err(|_| {
         SweepError::Config("a sweep fits grids; splats are fitted with `fogray fit --model splats`".into())
-    })?;
-    with_field(config.precision, field, work)
+    })?
 }
 
 /// [`run_config`]'s work, for one model type.

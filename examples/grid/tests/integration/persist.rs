@@ -99,7 +99,7 @@ fn a_saved_scene_that_does_not_parse_is_refused_with_one_line() {
         ..FitSettings::default()
     };
     let model = DenseGrid::<f32>::fresh(&settings, 4).unwrap();
-    let training = TrainingState::fresh();
+    let training = TrainingState::default();
     let good = dir.join("good.safetensors");
     let bad = dir.join("bad.safetensors");
     let scene = Scene::default().to_json_pretty();
