@@ -42,14 +42,13 @@ impl<F: Float> TrainingBatch<F> {
     /// the background they were composited over: `color + (b - from) (1 - alpha)` in `f64`,
     /// rounded to `F`; the colours themselves without alpha.
     ///
-    /// Errors: [`FitError::Config`] if `backgrounds` is not `[n, 3]`.
+    /// Errors: [`FitError::BackgroundsShape`] if `backgrounds` is not `[n, 3]`.
     pub(crate) fn colors_over(&self, from: [f64; 3], backgrounds: ArrayView2<'_, F>) -> Result<Array2<F>, FitError> {
         if backgrounds.dim() != self.colors.dim() {
-            return Err(FitError::Config(format!(
-                "backgrounds {:?} for a batch of {} pixels",
-                backgrounds.shape(),
-                self.colors.nrows()
-            )));
+            return Err(FitError::BackgroundsShape {
+                got: backgrounds.shape().to_vec(),
+                pixels: self.colors.nrows(),
+            });
         }
         let Some(alpha) = &self.alpha else {
             return Ok(self.colors.clone());
@@ -80,14 +79,14 @@ impl<'a> TrainingTable<'a> {
     /// that order (a pixel may repeat), each value rounded to `F` (to nearest) from the view's
     /// `f64`.
     ///
-    /// Errors: [`FitError::Config`] for a row past the last pixel (nothing is gathered), or
+    /// Errors: [`FitError::PixelOutOfRange`] for a row past the last pixel (nothing is gathered), or
     /// an error of [`RayBatch::new`] (no rows at all).
     pub(crate) fn gather<F: Float>(&self, rows: &[usize]) -> Result<TrainingBatch<F>, FitError> {
         if let Some(&bad) = rows.iter().find(|&&r| r >= self.pixels()) {
-            return Err(FitError::Config(format!(
-                "training pixel {bad} asked of a table of {}",
-                self.pixels()
-            )));
+            return Err(FitError::PixelOutOfRange {
+                pixel: bad,
+                pixels: self.pixels(),
+            });
         }
         let n = rows.len();
         let (mut o, mut d, mut c) = (vec![F::zero(); 3 * n], vec![F::zero(); 3 * n], vec![F::zero(); 3 * n]);
@@ -196,9 +195,10 @@ mod tests {
             assert!((targets[[1, c]] - backgrounds[[1, c]]).abs() < 1e-15, "{targets}");
             assert_eq!(targets[[2, c]], data.train[0].image[[0, 3, c]]);
         }
-        assert!(batch
+        let e = batch
             .colors_over([1.0; 3], backgrounds.slice(ndarray::s![..2, ..]))
-            .is_err());
+            .unwrap_err();
+        assert_eq!(e.to_string(), "backgrounds [2, 3] for a batch of 3 pixels");
         // Without alpha anywhere the batch carries none.
         assert_eq!(
             TrainingTable::new(&small_dataset()).gather::<f32>(&rows).unwrap().alpha,
@@ -209,13 +209,31 @@ mod tests {
     #[test]
     fn a_view_refuses_an_alpha_of_the_wrong_shape_or_range() {
         let view = small_dataset().train[0].clone();
-        for (alpha, says) in [
-            (Array2::from_elem((8, 7), 0.5), "alpha [8, 7]"),
-            (Array2::from_elem((8, 8), -0.1), "alpha -0.1 at row 0, column 0"),
-            (Array2::from_elem((8, 8), f64::NAN), "alpha NaN"),
+        for (alpha, size, says) in [
+            (
+                Array2::from_elem((8, 7), 0.5),
+                true,
+                "view 000: alpha [8, 7], but the camera's image is [8, 8]",
+            ),
+            (
+                Array2::from_elem((8, 8), -0.1),
+                false,
+                "view 000: alpha -0.1 at row 0, column 0 (must be in [0, 1])",
+            ),
+            (
+                Array2::from_elem((8, 8), f64::NAN),
+                false,
+                "view 000: alpha NaN at row 0, column 0 (must be in [0, 1])",
+            ),
         ] {
             let e = view.clone().with_alpha(alpha).unwrap_err();
-            assert!(matches!(e, FitError::Config(_)) && e.to_string().contains(says), "{e}");
+            let typed = if size {
+                matches!(e, FitError::ViewSize { what: "alpha", .. })
+            } else {
+                matches!(e, FitError::AlphaOutOfRange { row: 0, column: 0, .. })
+            };
+            assert!(typed, "{e:?}");
+            assert_eq!(e.to_string(), says);
         }
     }
 
@@ -226,6 +244,10 @@ mod tests {
         let pixels = data.training_pixels();
         assert_eq!(table.pixels(), pixels);
         let err = table.gather::<f64>(&[0, pixels]).unwrap_err();
-        assert!(err.to_string().contains(&format!("training pixel {pixels}")), "{err}");
+        assert_eq!(err, FitError::PixelOutOfRange { pixel: pixels, pixels });
+        assert_eq!(
+            err.to_string(),
+            format!("training pixel {pixels} asked of a table of {pixels}")
+        );
     }
 }

@@ -50,17 +50,17 @@ pub struct View {
 impl View {
     /// The view of `camera` with picture `image` (`[H][W][3]`, the camera's image size).
     ///
-    /// Errors: [`FitError::Config`] if the picture's size is not the camera's.
+    /// Errors: [`FitError::ViewSize`] if the picture's size is not the camera's.
     pub fn new(name: impl Into<String>, camera: &PinholeCamera, image: Array3<f64>) -> Result<View, FitError> {
         let k = camera.intrinsics();
         let name = name.into();
         if image.shape() != [k.height, k.width, 3] {
-            return Err(FitError::Config(format!(
-                "view {name}: picture {:?}, but the camera's image is [{}, {}, 3]",
-                image.shape(),
-                k.height,
-                k.width
-            )));
+            return Err(FitError::ViewSize {
+                view: name,
+                what: "picture",
+                got: image.shape().to_vec(),
+                expected: vec![k.height, k.width, 3],
+            });
         }
         Ok(View {
             name,
@@ -92,22 +92,25 @@ impl View {
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     ///
-    /// Errors: [`FitError::Config`] if `alpha` is not the picture's `[H][W]` or a value is not
-    /// in `[0, 1]` (NaN included).
+    /// Errors: [`FitError::ViewSize`] if `alpha` is not the picture's `[H][W]`,
+    /// [`FitError::AlphaOutOfRange`] if a value is not in `[0, 1]` (NaN included).
     pub fn with_alpha(self, alpha: Array2<f64>) -> Result<View, FitError> {
         let [h, w] = self.size();
         if alpha.shape() != [h, w] {
-            return Err(FitError::Config(format!(
-                "view {}: alpha {:?}, but the picture is [{h}, {w}]",
-                self.name,
-                alpha.shape()
-            )));
+            return Err(FitError::ViewSize {
+                view: self.name,
+                what: "alpha",
+                got: alpha.shape().to_vec(),
+                expected: vec![h, w],
+            });
         }
         if let Some(((row, col), a)) = alpha.indexed_iter().find(|(_, a)| !(0.0..=1.0).contains(*a)) {
-            return Err(FitError::Config(format!(
-                "view {}: alpha {a} at row {row}, column {col} (must be in [0, 1])",
-                self.name
-            )));
+            return Err(FitError::AlphaOutOfRange {
+                view: self.name,
+                row,
+                column: col,
+                value: *a,
+            });
         }
         Ok(View {
             alpha: Some(alpha),
@@ -178,33 +181,31 @@ pub struct Dataset {
 impl Dataset {
     /// The training views `train` and the held-out views `test`.
     ///
-    /// Errors: [`FitError::Config`] if there is no training pixel or no test view, or a view's
-    /// picture or alpha is not its camera's size (possible only if its fields were changed
+    /// Errors: [`FitError::NoTrainingPixel`], [`FitError::NoTestView`], or
+    /// [`FitError::ViewSize`] if a view's picture or alpha is not its camera's size (possible only if its fields were changed
     /// after [`View::new`] or [`View::with_alpha`]).
     pub fn new(train: Vec<View>, test: Vec<View>, background: [f64; 3]) -> Result<Dataset, FitError> {
         if test.is_empty() {
-            return Err(FitError::Config("the fit needs at least one test view".into()));
+            return Err(FitError::NoTestView);
         }
         for v in train.iter().chain(&test) {
             let k = v.camera.intrinsics();
             if v.size() != [k.height, k.width] || v.image.shape()[2] != 3 {
-                return Err(FitError::Config(format!(
-                    "view {}: picture {:?} for a camera of {} x {}",
-                    v.name,
-                    v.image.shape(),
-                    k.height,
-                    k.width
-                )));
+                return Err(FitError::ViewSize {
+                    view: v.name.clone(),
+                    what: "picture",
+                    got: v.image.shape().to_vec(),
+                    expected: vec![k.height, k.width, 3],
+                });
             }
             if let Some(alpha) = &v.alpha {
                 if alpha.shape() != [k.height, k.width] {
-                    return Err(FitError::Config(format!(
-                        "view {}: alpha {:?} for a camera of {} x {}",
-                        v.name,
-                        alpha.shape(),
-                        k.height,
-                        k.width
-                    )));
+                    return Err(FitError::ViewSize {
+                        view: v.name.clone(),
+                        what: "alpha",
+                        got: alpha.shape().to_vec(),
+                        expected: vec![k.height, k.width],
+                    });
                 }
             }
         }
@@ -214,7 +215,7 @@ impl Dataset {
             background,
         };
         if data.training_pixels() == 0 {
-            return Err(FitError::Config("the fit needs at least one training pixel".into()));
+            return Err(FitError::NoTrainingPixel);
         }
         Ok(data)
     }

@@ -22,12 +22,12 @@ pub const INTERRUPTED_STATUS: i32 = 130;
 /// every temporary file it is writing ([`fogray_data::remove_temporaries_and_exit`]): for
 /// commands with nothing to save (a render, an export), which then leave whole files only.
 ///
-/// Errors: [`FitError::Config`] if the process's handler is already set (once a process).
+/// Errors: [`FitError::CtrlC`] if the process's handler is already set (once a process).
 pub fn exit_on_ctrl_c() -> Result<(), FitError> {
     ctrlc::set_handler(|| {
         fogray_data::remove_temporaries_and_exit(INTERRUPTED_STATUS);
     })
-    .map_err(|e| FitError::Config(format!("cannot catch Ctrl-C: {e}")))
+    .map_err(|e| FitError::CtrlC { reason: e.to_string() })
 }
 
 /// A flag raised by Ctrl-C (or by [`StopFlag::raise`]); `StopFlag::default()` is one that
@@ -39,12 +39,12 @@ impl StopFlag {
     /// A flag that Ctrl-C raises (SIGINT; SIGTERM too on Unix where the `ctrlc` crate
     /// catches it).
     ///
-    /// Errors: [`FitError::Config`] if the process's handler is already set (once a process).
+    /// Errors: [`FitError::CtrlC`] if the process's handler is already set (once a process).
     pub fn on_ctrl_c() -> Result<Self, FitError> {
         let stop = StopFlag::default();
         let flag = Arc::clone(&stop.0);
         ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed))
-            .map_err(|e| FitError::Config(format!("cannot catch Ctrl-C: {e}")))?;
+            .map_err(|e| FitError::CtrlC { reason: e.to_string() })?;
         Ok(stop)
     }
 

@@ -12,60 +12,74 @@ impl FitSettings {
     /// [`MAX_STEPS`]), the evaluations against theirs, and the grid and batch against the
     /// machine's memory.
     ///
-    /// Errors: [`FitError::Config`] naming the flag, [`FitError::TooLarge`] naming the flag and
+    /// Errors: [`FitError::Setting`] naming the flag, [`FitError::BoxAxis`] or
+    /// [`FitError::BoxBeyondRange`] for `--box`, [`FitError::TooLarge`] naming the flag and
     /// the bytes it would need.
     pub fn check(&self) -> Result<(), FitError> {
-        let bad = |what: &str| Err(FitError::Config(what.into()));
+        let bad = |flag: &'static str, rule: &str| {
+            Err(FitError::Setting {
+                flag,
+                value: None,
+                rule: rule.into(),
+            })
+        };
         if self.grid < 2 {
-            return bad("--grid must be at least 2");
+            return bad("--grid", "must be at least 2");
         }
         if self.batch == 0 {
-            return bad("--batch must be at least 1");
+            return bad("--batch", "must be at least 1");
         }
         if !(self.lr.is_finite() && self.lr > 0.0) {
-            return bad("--lr must be finite and positive");
+            return bad("--lr", "must be finite and positive");
         }
         if !(self.lr_final.is_finite() && self.lr_final > 0.0) {
-            return bad("--lr-final must be finite and positive");
+            return bad("--lr-final", "must be finite and positive");
         }
         if !(self.tv.is_finite() && self.tv >= 0.0) {
-            return bad("--tv must be finite and non-negative");
+            return bad("--tv", "must be finite and non-negative");
         }
         if !self.shift.is_finite() {
-            return bad("--shift must be finite");
+            return bad("--shift", "must be finite");
         }
         if !(self.distortion.is_finite() && self.distortion >= 0.0) {
-            return bad("--distortion must be finite and non-negative");
+            return bad("--distortion", "must be finite and non-negative");
         }
         if self.sh_degree > 3 {
-            return bad("--sh-degree must be 0, 1, 2 or 3");
+            return bad("--sh-degree", "must be 0, 1, 2 or 3");
         }
         if self.background_degree > 3 {
-            return bad("--background-degree must be 0, 1, 2 or 3");
+            return bad("--background-degree", "must be 0, 1, 2 or 3");
         }
         if let Some(b) = self.scene_box {
             b.check()?;
         }
         if self.evaluations > MAX_EVALUATIONS {
-            return Err(FitError::Config(format!(
-                "--evaluations {}: at most {MAX_EVALUATIONS} (each renders every held-out view)",
-                self.evaluations
-            )));
+            return Err(FitError::Setting {
+                flag: "--evaluations",
+                value: Some(self.evaluations.to_string()),
+                rule: format!("at most {MAX_EVALUATIONS} (each renders every held-out view)"),
+            });
         }
         match self.budget() {
-            Budget::Steps(0) => return bad("--steps must be at least 1"),
+            Budget::Steps(0) => return bad("--steps", "must be at least 1"),
             Budget::Steps(n) if n > MAX_STEPS => {
-                return Err(FitError::Config(format!(
-                    "--steps {n}: at most {MAX_STEPS} (a budget that can end)"
-                )))
+                return Err(FitError::Setting {
+                    flag: "--steps",
+                    value: Some(n.to_string()),
+                    rule: format!("at most {MAX_STEPS} (a budget that can end)"),
+                })
             }
-            Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => return bad("--seconds must be finite and positive"),
+            Budget::Seconds(s) if !(s.is_finite() && s > 0.0) => {
+                return bad("--seconds", "must be finite and positive")
+            }
             Budget::Seconds(s) if s > MAX_SECONDS => {
                 // Rust writes a large float in all its digits: 1e308 as 309 of them.
                 let s = if s < 1e9 { s.to_string() } else { format!("{s:e}") };
-                return Err(FitError::Config(format!(
-                    "--seconds {s}: at most {MAX_SECONDS} (one week; a budget that can end)"
-                )));
+                return Err(FitError::Setting {
+                    flag: "--seconds",
+                    value: Some(s),
+                    rule: format!("at most {MAX_SECONDS} (one week; a budget that can end)"),
+                });
             }
             _ => {}
         }

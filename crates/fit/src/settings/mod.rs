@@ -262,9 +262,11 @@ impl FitSettings {
     pub(crate) fn field_space(&self) -> Result<FieldSpace, FitError> {
         match (self.space, self.framing) {
             (SpaceChoice::Contracted, Some(framing)) => Ok(FieldSpace::Contracted(framing.contraction()?)),
-            (SpaceChoice::Contracted, None) => Err(FitError::Config(
-                "--space contracted needs an inner region (framed from the cameras by fogray fit)".into(),
-            )),
+            (SpaceChoice::Contracted, None) => Err(FitError::Setting {
+                flag: "--space",
+                value: None,
+                rule: "contracted needs an inner region (framed from the cameras by fogray fit)".into(),
+            }),
             _ => {
                 let b = self.model_box();
                 Ok(FieldSpace::Box(fogray_ops::rays::Aabb::new(b.min, b.max)?))

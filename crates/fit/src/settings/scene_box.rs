@@ -39,22 +39,27 @@ impl SceneBox {
         side / (2 * (nodes - 1)) as f64
     }
 
-    /// Errors: [`FitError::Config`] for a bound that is not finite or an axis whose minimum is
-    /// not below its maximum.
+    /// Errors: [`FitError::BoxAxis`] for a bound that is not finite or an axis whose minimum is
+    /// not below its maximum, [`FitError::BoxBeyondRange`] for a bound too far from the origin.
     pub(crate) fn check(&self) -> Result<(), FitError> {
         for a in 0..3 {
             let (lo, hi) = (self.min[a], self.max[a]);
             if !(lo.is_finite() && hi.is_finite() && lo < hi) {
-                return Err(FitError::Config(format!(
-                    "--box: axis {a} runs from {lo} to {hi} (must be finite and increasing)"
-                )));
+                return Err(FitError::BoxAxis {
+                    axis: a,
+                    min: lo,
+                    max: hi,
+                });
             }
             // A scene's coordinates lie within what a dataset may give (fogray-data's range):
             // beyond it steps and distances overflow in the samplers.
             if lo.abs().max(hi.abs()) > MAX_BOX_COORDINATE {
-                return Err(FitError::Config(format!(
-                    "--box: axis {a} runs from {lo:e} to {hi:e}, beyond {MAX_BOX_COORDINATE:e} from the origin"
-                )));
+                return Err(FitError::BoxBeyondRange {
+                    axis: a,
+                    min: lo,
+                    max: hi,
+                    limit: MAX_BOX_COORDINATE,
+                });
             }
         }
         Ok(())

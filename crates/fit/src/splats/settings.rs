@@ -91,7 +91,7 @@ impl SplatSettings {
     }
 
     /// Errors: a zero budget, period or count, a degree above 3, or a rate, threshold or
-    /// fraction that is negative or not finite ([`FitError::Config`]).
+    /// fraction that is negative or not finite ([`FitError::Setting`]).
     pub(crate) fn check(&self) -> Result<(), FitError> {
         let rates = [
             self.means_lr[0],
@@ -107,24 +107,29 @@ impl SplatSettings {
             self.densify_until,
         ];
         if rates.iter().any(|r| !(r.is_finite() && *r >= 0.0)) || self.means_lr.contains(&0.0) {
-            return Err(FitError::Config(format!(
-                "splat rates, thresholds and fractions must be finite and >= 0 (means' > 0): {rates:?}"
-            )));
+            return Err(FitError::Setting {
+                flag: "splat rates, thresholds and fractions",
+                value: None,
+                rule: format!("must be finite and >= 0 (means' > 0): {rates:?}"),
+            });
         }
         let budget_ok = match self.budget {
             Budget::Steps(n) => n > 0,
             Budget::Seconds(s) => s.is_finite() && s > 0.0,
         };
         if !budget_ok || self.densify_every == 0 || self.max_splats == 0 || self.initial_splats == 0 {
-            return Err(FitError::Config(
-                "a splat fit's budget, densification period, initial count and cap must be positive".into(),
-            ));
+            return Err(FitError::Setting {
+                flag: "a splat fit's budget, densification period, initial count and cap",
+                value: None,
+                rule: "must be positive".into(),
+            });
         }
         if self.degree > 3 {
-            return Err(FitError::Config(format!(
-                "a splat colour degree of {} (0 to 3)",
-                self.degree
-            )));
+            return Err(FitError::Setting {
+                flag: "a splat colour degree",
+                value: None,
+                rule: format!("of {} (0 to 3)", self.degree),
+            });
         }
         Ok(())
     }
