@@ -8,7 +8,7 @@
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use fogray_data::{shown, AtomicFile};
+use fogray_data::AtomicFile;
 use fogray_fit::images::to_u8;
 use ndarray::ArrayView3;
 
@@ -35,12 +35,13 @@ impl GifWriter {
     /// Errors: a size beyond the format, a file that cannot be created.
     pub fn create(path: &Path, width: usize, height: usize) -> Result<Self, CliError> {
         let (Ok(w), Ok(h)) = (u16::try_from(width), u16::try_from(height)) else {
-            return Err(CliError::Option(format!(
-                "--gif: {width}x{height} frames, the format holds at most 65535 pixels each way"
-            )));
+            return Err(CliError::GifTooLarge { width, height });
         };
         let file = AtomicFile::create(path)?;
-        let gif_error = |e: gif::EncodingError| CliError::Option(format!("cannot write {}: {e}", shown(path)));
+        let gif_error = |source| CliError::Gif {
+            path: path.to_path_buf(),
+            source,
+        };
         let mut encoder = gif::Encoder::new(BufWriter::new(file), w, h, &[]).map_err(gif_error)?;
         encoder.set_repeat(gif::Repeat::Infinite).map_err(gif_error)?;
         Ok(GifWriter {
@@ -56,18 +57,19 @@ impl GifWriter {
     pub fn push(&mut self, image: ArrayView3<'_, f64>) -> Result<(), CliError> {
         let [w, h] = self.size;
         if image.dim() != (usize::from(h), usize::from(w), 3) {
-            return Err(CliError::Option(format!(
-                "{}: a frame of {:?}, the GIF's are {h}x{w}x3",
-                shown(&self.path),
-                image.dim()
-            )));
+            return Err(CliError::GifFrame {
+                path: self.path.clone(),
+                got: image.dim(),
+                size: self.size,
+            });
         }
         let rgb: Vec<u8> = image.iter().map(|&v| to_u8(v)).collect();
         let mut frame = gif::Frame::from_rgb_speed(w, h, &rgb, QUANTISE_SPEED);
         frame.delay = FRAME_DELAY;
-        self.encoder
-            .write_frame(&frame)
-            .map_err(|e| CliError::Option(format!("cannot write {}: {e}", shown(&self.path))))
+        self.encoder.write_frame(&frame).map_err(|source| CliError::Gif {
+            path: self.path.clone(),
+            source,
+        })
     }
 
     /// Ends the GIF and gives it its name; returns it.

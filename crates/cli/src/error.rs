@@ -1,8 +1,9 @@
 //! Why a `fogray` command failed: the one line it prints on stderr (exit status 2) is the
 //! error's message.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
+use fogray_data::shown;
 use fogray_ops::OpsError;
 use fogray_tape::TapeError;
 use thiserror::Error;
@@ -80,6 +81,9 @@ pub enum InputError {
     /// A `grad_depth` on a ray without sample depths.
     #[error("ray {0}: grad_depth needs t (the depth needs sample depths)")]
     GradDepthWithoutT(usize),
+    /// A `min_transmittance` other than 0 asked of a taped method.
+    #[error("min_transmittance is offered by the fused method only (the taped twins are exact)")]
+    MinTransmittanceNotFused,
 }
 
 /// Why a `fogray` command failed.
@@ -129,9 +133,128 @@ pub enum CliError {
     /// A fit session that could not run (settings, model file, data).
     #[error("{0}")]
     Session(#[from] fogray_fit::session::SessionError),
-    /// A command-line option outside its domain, or a combination of options not offered.
-    #[error("{0}")]
-    Option(String),
+    /// A flag's value outside its domain: the flag, the value as given when the line shows
+    /// it, and the rule it breaks (as fogray-fit's `FitError::Setting`).
+    #[error("{flag}{} {rule}", flag_value(.value))]
+    Flag {
+        /// The flag (`--opacity`).
+        flag: &'static str,
+        /// The value given, when the message shows it (`--projections 0` needs no repeat).
+        value: Option<String>,
+        /// The rule it breaks.
+        rule: String,
+    },
+    /// A flag's value that the op it configures refuses (`--fov`, `--orbit`): the op's error
+    /// holds the value and the rule.
+    #[error("{flag}: {source}")]
+    FlagOp {
+        /// The flag.
+        flag: &'static str,
+        /// The op's refusal.
+        source: OpsError,
+    },
+    /// Two flags given together that exclude each other.
+    #[error("{first} and {second} both given: {why}")]
+    FlagsExclude {
+        /// The first flag.
+        first: &'static str,
+        /// The second.
+        second: &'static str,
+        /// Why only one of them can hold.
+        why: &'static str,
+    },
+    /// A flag (or one of several) that the command needs and was not given.
+    #[error("give {give}")]
+    MissingFlag {
+        /// The flags, with their values' names (`--data PATH, or --resume FILE`).
+        give: &'static str,
+    },
+    /// A model file of a kind the command does not know (not a field's).
+    #[error("{}: a {kind:?} model, which {command} does not know", shown(.path))]
+    UnknownModelKind {
+        /// The model file.
+        path: PathBuf,
+        /// The kind it names.
+        kind: String,
+        /// The command (`fogray render`).
+        command: &'static str,
+    },
+    /// A model file without an entry a resumed fit needs (one not written by `fogray fit`).
+    #[error("{} has no saved {key} (it was not written by fogray fit): give --{key}", shown(.path))]
+    NoSavedEntry {
+        /// The model file.
+        path: PathBuf,
+        /// The entry, also the flag that stands in for it.
+        key: &'static str,
+    },
+    /// A model file's entry that cannot be read (its background, its dataset's downscale).
+    #[error("{}: its saved {key} {text:?} cannot be read: {reason}", shown(.path))]
+    SavedEntry {
+        /// The model file.
+        path: PathBuf,
+        /// The entry.
+        key: &'static str,
+        /// Its text.
+        text: String,
+        /// The parser's reason.
+        reason: String,
+    },
+    /// Two frames of a cameras file whose output files would have one name.
+    #[error("{}: two frames' files are named {name:?} (their PNGs would overwrite each other)", shown(.path))]
+    FrameNameClash {
+        /// The cameras file (or dataset).
+        path: PathBuf,
+        /// The name the frames share.
+        name: String,
+    },
+    /// Frames too large for a GIF.
+    #[error("--gif: {width}x{height} frames, the format holds at most 65535 pixels each way")]
+    GifTooLarge {
+        /// The frames' width.
+        width: usize,
+        /// Their height.
+        height: usize,
+    },
+    /// A frame of another size than the GIF's.
+    #[error("{}: a frame of {got:?}, the GIF's are {}x{}x3", shown(.path), .size[1], .size[0])]
+    GifFrame {
+        /// The GIF.
+        path: PathBuf,
+        /// The frame's `(height, width, channels)`.
+        got: (usize, usize, usize),
+        /// The GIF's `[width, height]`.
+        size: [u16; 2],
+    },
+    /// A GIF that could not be written.
+    #[error("cannot write {}: {source}", shown(.path))]
+    Gif {
+        /// The GIF.
+        path: PathBuf,
+        /// The encoder's error.
+        source: gif::EncodingError,
+    },
+    /// `fogray view`'s port that cannot be listened on.
+    #[error("--port {port}: cannot listen on 127.0.0.1: {source}")]
+    Listen {
+        /// The port.
+        port: u16,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The address listened on, which the system would not tell.
+    #[error("cannot read the address listened on: {0}")]
+    ListenAddress(#[source] std::io::Error),
+    /// `fogray view`'s server that stopped on an error.
+    #[error("serving {address}: {source}")]
+    Serve {
+        /// The address it served.
+        address: std::net::SocketAddr,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// report.md's text that could not be composed.
+    #[error("report.md: {0}")]
+    Report(#[source] std::fmt::Error),
     /// A size (of a render's frames, of the cameras' pictures) that needs more memory than
     /// the machine has, refused before anything was allocated.
     #[error(transparent)]
@@ -157,6 +280,12 @@ pub enum CliError {
     Missing(&'static str),
 }
 
+/// A flag's value as its message shows it: ` 0:` after the flag, or nothing where the rule reads
+/// on from the flag (`--projections must be at least 1`).
+fn flag_value(value: &Option<String>) -> String {
+    value.as_ref().map(|v| format!(" {v}:")).unwrap_or_default()
+}
+
 impl CliError {
     /// A file operation's error, naming the path.
     pub fn file<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> CliError + 'a {
@@ -167,3 +296,6 @@ impl CliError {
         }
     }
 }
+
+#[cfg(test)]
+mod tests;

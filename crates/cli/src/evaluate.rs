@@ -4,7 +4,7 @@ use fogray_ops::{twins, Background, Composite, CompositeInputs};
 use fogray_tape::{Float, Tape};
 use ndarray::{Array1, Array2};
 
-use super::error::CliError;
+use super::error::{CliError, InputError};
 use super::input::Packed;
 
 /// Which implementation of the composite.
@@ -88,9 +88,7 @@ pub fn evaluate<F: Float>(p: &Packed, method: CompositeMethod, want: Wanted<'_>)
         op = op.with_depth();
     }
     if method != CompositeMethod::Fused && p.min_transmittance != 0.0 {
-        return Err(CliError::Option(
-            "min_transmittance is offered by the fused method only (the taped twins are exact)".into(),
-        ));
+        return Err(InputError::MinTransmittanceNotFused.into());
     }
     let inputs = CompositeInputs {
         sigma,

@@ -46,19 +46,29 @@ impl ExportArgs {
     pub fn options(&self) -> Result<MeshOptions, CliError> {
         let level = match (self.level, self.opacity) {
             (Some(_), Some(_)) => {
-                return Err(CliError::Option(
-                    "--level and --opacity both given: the surface's level is one or the other".into(),
-                ))
+                return Err(CliError::FlagsExclude {
+                    first: "--level",
+                    second: "--opacity",
+                    why: "the surface's level is one or the other",
+                })
             }
             (Some(sigma), None) => Level::Density(sigma),
             (None, Some(a)) if a > 0.0 && a < 1.0 => Level::Opacity(a),
-            (None, Some(a)) => return Err(CliError::Option(format!("--opacity {a}: must be in (0, 1)"))),
+            (None, Some(a)) => {
+                return Err(CliError::Flag {
+                    flag: "--opacity",
+                    value: Some(a.to_string()),
+                    rule: "must be in (0, 1)".into(),
+                })
+            }
             (None, None) => Level::default(),
         };
         if let Some(n) = self.resolution.filter(|&n| n < 2) {
-            return Err(CliError::Option(format!(
-                "--resolution {n}: the lattice needs at least 2 nodes per axis"
-            )));
+            return Err(CliError::Flag {
+                flag: "--resolution",
+                value: Some(n.to_string()),
+                rule: "the lattice needs at least 2 nodes per axis".into(),
+            });
         }
         Ok(MeshOptions {
             level,

@@ -264,10 +264,9 @@ pub struct FitPlan {
 /// of, a saved dataset entry that cannot be read (naming the file).
 pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, CliError> {
     let Some(file) = &args.resume else {
-        let data = args
-            .data
-            .clone()
-            .ok_or_else(|| CliError::Option("give --data PATH, or --resume FILE".into()))?;
+        let data = args.data.clone().ok_or(CliError::MissingFlag {
+            give: "--data PATH, or --resume FILE",
+        })?;
         let mut settings = args.settings;
         if !given("grid") {
             settings.grid = FitSettings::recommended_grid(settings.budget());
@@ -280,16 +279,17 @@ pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, Cli
         });
     };
     let (settings, info) = session::resume_settings(file, &args.settings, given)?;
-    let entry = |key: &str| {
-        info.extra.get(key).ok_or_else(|| {
-            CliError::Option(format!(
-                "{} has no saved {key} (it was not written by fogray fit): give --{key}",
-                file.display()
-            ))
+    let entry = |key: &'static str| {
+        info.extra.get(key).ok_or_else(|| CliError::NoSavedEntry {
+            path: file.clone(),
+            key,
         })
     };
-    let unreadable = |key: &str, text: &str| {
-        CliError::Option(format!("{}: its saved {key} {text:?} cannot be read", file.display()))
+    let unreadable = |key: &'static str, text: &str, reason: &dyn std::fmt::Display| CliError::SavedEntry {
+        path: file.clone(),
+        key,
+        text: text.to_string(),
+        reason: reason.to_string(),
     };
     let data = match &args.data {
         Some(path) => path.clone(),
@@ -298,11 +298,11 @@ pub fn plan(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitPlan, Cli
     let mut data_args = args.data_args.clone();
     if !given("downscale") {
         let text = entry("downscale")?;
-        data_args.downscale = text.parse().map_err(|_| unreadable("downscale", text))?;
+        data_args.downscale = text.parse().map_err(|e| unreadable("downscale", text, &e))?;
     }
     if !given("background") {
         let text = entry("background")?;
-        data_args.background = serde_json::from_str(text).map_err(|_| unreadable("background", text))?;
+        data_args.background = serde_json::from_str(text).map_err(|e| unreadable("background", text, &e))?;
     }
     Ok(FitPlan {
         data,

@@ -137,7 +137,7 @@ fn markdown(
 ) -> Result<String, CliError> {
     let mut md = String::new();
     let [h, w] = s.size;
-    let w_ = |e: std::fmt::Error| CliError::Option(format!("report.md: {e}"));
+    let w_ = CliError::Report;
     writeln!(md, "# fogray fit of {}\n", plan.data.display()).map_err(w_)?;
     writeln!(md, "{}\n", stamp.markdown()).map_err(w_)?;
     writeln!(

@@ -106,27 +106,33 @@ pub fn dataset_views(model: &Path, info: &ModelInfo, centre: [f64; 3]) -> Option
 /// Errors: zero frames, an elevation outside (-90, 90) degrees, a radius that is not positive,
 /// a size of 0, a field of view outside (0, 180) degrees.
 pub fn check_flags(args: &RenderArgs) -> Result<(), CliError> {
-    let refuse = |message: String| Err(CliError::Option(message));
+    let refuse = |flag, value: &dyn std::fmt::Display, rule: &str| {
+        Err(CliError::Flag {
+            flag,
+            value: Some(value.to_string()),
+            rule: rule.into(),
+        })
+    };
     if args.orbit == Some(0) {
-        return refuse("--orbit 0: zero frames (at least one is needed)".into());
+        return refuse("--orbit", &0, "zero frames (at least one is needed)");
     }
     if let Some(e) = args.elevation.filter(|e| !(*e > -90.0 && *e < 90.0)) {
-        return refuse(format!("--elevation {e}: must be in (-90, 90) degrees"));
+        return refuse("--elevation", &e, "must be in (-90, 90) degrees");
     }
     if let Some(r) = args.radius.filter(|r| !(r.is_finite() && *r > 0.0)) {
-        return refuse(format!("--radius {r}: must be finite and positive"));
+        return refuse("--radius", &r, "must be finite and positive");
     }
     if let Some(f) = args.fov.filter(|f| !(*f > 0.0 && *f < 180.0)) {
-        return refuse(format!("--fov {f}: must be in (0, 180) degrees"));
+        return refuse("--fov", &f, "must be in (0, 180) degrees");
     }
     let zero = match (args.size, args.width, args.height) {
-        (Some(s), _, _) if s.width == 0 || s.height == 0 => Some(format!("--size {}x{}", s.width, s.height)),
-        (_, Some(0), _) => Some("--width 0".into()),
-        (_, _, Some(0)) => Some("--height 0".into()),
+        (Some(s), _, _) if s.width == 0 || s.height == 0 => Some(("--size", format!("{}x{}", s.width, s.height))),
+        (_, Some(0), _) => Some(("--width", "0".into())),
+        (_, _, Some(0)) => Some(("--height", "0".into())),
         _ => None,
     };
-    if let Some(flag) = zero {
-        return refuse(format!("{flag}: an image needs at least one pixel each way"));
+    if let Some((flag, value)) = zero {
+        return refuse(flag, &value, "an image needs at least one pixel each way");
     }
     Ok(())
 }
@@ -143,7 +149,7 @@ pub fn orbit_of(
     half_diagonal: f64,
 ) -> Result<(Orbit, Intrinsics), CliError> {
     check_flags(args)?;
-    let frames = args.orbit.ok_or(CliError::Option("an orbit needs --orbit N".into()))?;
+    let frames = args.orbit.ok_or(CliError::MissingFlag { give: "--orbit N" })?;
     let base = dataset.map_or(FALLBACK_SIZE, |d| d.size);
     let size = args.size.unwrap_or(ImageSize {
         width: args.width.unwrap_or(base.width),
@@ -154,7 +160,8 @@ pub fn orbit_of(
         (None, Some(d)) => d.fov_y,
         (None, None) => FALLBACK_FOV_DEGREES.to_radians(),
     };
-    let k = Intrinsics::from_vertical_fov(size.width, size.height, fov_y).map_err(|e| option_error("--fov", e))?;
+    let k = Intrinsics::from_vertical_fov(size.width, size.height, fov_y)
+        .map_err(|source| CliError::FlagOp { flag: "--fov", source })?;
     let radius = match (args.radius, dataset) {
         (Some(r), _) => r,
         (None, Some(d)) => d.radius,
@@ -170,12 +177,11 @@ pub fn orbit_of(
         elevation: args.elevation.unwrap_or(DEFAULT_ELEVATION_DEGREES).to_radians(),
         frames,
     };
-    orbit.check().map_err(|e| option_error("--orbit", e))?;
+    orbit.check().map_err(|source| CliError::FlagOp {
+        flag: "--orbit",
+        source,
+    })?;
     Ok((orbit, k))
-}
-
-fn option_error(flag: &str, e: fogray_ops::OpsError) -> CliError {
-    CliError::Option(format!("{flag}: {e}"))
 }
 
 #[cfg(test)]

@@ -163,18 +163,21 @@ pub fn run(args: &RenderArgs) -> Result<String, CliError> {
         for v in &views {
             let clash = !names.insert(v.name.clone()) || (args.depth && !names.insert(format!("{}-depth", v.name)));
             if clash {
-                return Err(CliError::Option(format!(
-                    "{}: two frames' files are named {:?} (their PNGs would overwrite each other)",
-                    shown(cameras),
-                    v.name
-                )));
+                return Err(CliError::FrameNameClash {
+                    path: cameras.clone(),
+                    name: v.name.clone(),
+                });
             }
         }
     }
     check_render_outputs(args, &views)?;
     let background = match info.extra.get("background") {
-        Some(text) => serde_json::from_str::<[f64; 3]>(text)
-            .map_err(|e| CliError::Option(format!("{}: its background {text:?}: {e}", args.model.display())))?,
+        Some(text) => serde_json::from_str::<[f64; 3]>(text).map_err(|e| CliError::SavedEntry {
+            path: args.model.clone(),
+            key: "background",
+            text: text.clone(),
+            reason: e.to_string(),
+        })?,
         None => [1.0; 3],
     };
     // Started before the first frame, so that a GIF that cannot be created costs no render.
@@ -245,9 +248,10 @@ fn views(args: &RenderArgs, info: &ModelInfo) -> Result<Vec<View>, CliError> {
     let (orbit, k) = framing::orbit_of(args, dataset.as_ref(), centre, half_diagonal)?;
     render_memory::check_orbit(info, orbit.frames, &k)?;
     let digits = (orbit.frames - 1).max(1).ilog10() as usize + 1;
-    let cameras = orbit
-        .cameras(k)
-        .map_err(|e| CliError::Option(format!("--orbit: {e}")))?;
+    let cameras = orbit.cameras(k).map_err(|source| CliError::FlagOp {
+        flag: "--orbit",
+        source,
+    })?;
     Ok(cameras
         .into_iter()
         .enumerate()

@@ -1,14 +1,13 @@
 //! A model file that a command reads (`fogray render`, `fogray export`): its metadata, read
 //! first, and the dispatch from its kind and precision to the model type that loads it
-//! (fogray-fit's [`with_field`]), so that each command writes its work once, generic over the
-//! model.
+//! (fogray-fit's [`with_field_kind`]), so that each command writes its work once, generic over
+//! the model.
 
 use std::path::{Path, PathBuf};
 
 use fogray_fit::checkpoint::{read_info, ModelInfo};
-use fogray_fit::dispatch::{with_field, FieldWork};
+use fogray_fit::dispatch::{with_field_kind, FieldKind, FieldWork};
 use fogray_fit::model::RadianceField;
-use fogray_fit::settings::ModelKind;
 use fogray_tape::Float;
 
 use crate::error::CliError;
@@ -32,7 +31,7 @@ pub struct SavedModel {
     /// Its metadata (settings, nodes, the application's entries).
     pub info: ModelInfo,
     /// Its kind (a field: a splat fit is saved as a 3DGS PLY file, not as a model file).
-    pub kind: ModelKind,
+    pub kind: FieldKind,
 }
 
 impl SavedModel {
@@ -40,14 +39,12 @@ impl SavedModel {
     ///
     /// Errors: a file that cannot be read or is not a fogray model, a model of a kind the
     /// command line does not know.
-    pub fn open(path: &Path, command: &str) -> Result<Self, CliError> {
+    pub fn open(path: &Path, command: &'static str) -> Result<Self, CliError> {
         let info = read_info(path)?;
-        let kind = ModelKind::of_kind(&info.kind).ok_or_else(|| {
-            CliError::Option(format!(
-                "{}: a {:?} model, which {command} does not know",
-                path.display(),
-                info.kind
-            ))
+        let kind = FieldKind::of_kind(&info.kind).ok_or_else(|| CliError::UnknownModelKind {
+            path: path.to_path_buf(),
+            kind: info.kind.clone(),
+            command,
         })?;
         Ok(SavedModel {
             path: path.to_path_buf(),
@@ -58,10 +55,10 @@ impl SavedModel {
 
     /// Runs `work` with the model type of the file's kind and precision.
     ///
-    /// Errors: `work`'s (the kind, read by [`SavedModel::open`], is a field's).
+    /// Errors: `work`'s.
     pub fn with<W: WithModel>(&self, work: W) -> Result<W::Output, CliError> {
         let at = AtPath { work, path: &self.path };
-        with_field(self.info.settings.precision, self.kind, at)?
+        with_field_kind(self.info.settings.precision, self.kind, at)
     }
 }
 

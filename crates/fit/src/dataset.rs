@@ -52,22 +52,14 @@ impl View {
     ///
     /// Errors: [`FitError::ViewSize`] if the picture's size is not the camera's.
     pub fn new(name: impl Into<String>, camera: &PinholeCamera, image: Array3<f64>) -> Result<View, FitError> {
-        let k = camera.intrinsics();
-        let name = name.into();
-        if image.shape() != [k.height, k.width, 3] {
-            return Err(FitError::ViewSize {
-                view: name,
-                what: "picture",
-                got: image.shape().to_vec(),
-                expected: vec![k.height, k.width, 3],
-            });
-        }
-        Ok(View {
-            name,
+        let view = View {
+            name: name.into(),
             camera: camera.clone(),
             image,
             alpha: None,
-        })
+        };
+        view.check_size()?;
+        Ok(view)
     }
 
     /// The view with the picture's opacity `alpha` (`[H][W]`, each value in `[0, 1]`): its
@@ -95,27 +87,47 @@ impl View {
     /// Errors: [`FitError::ViewSize`] if `alpha` is not the picture's `[H][W]`,
     /// [`FitError::AlphaOutOfRange`] if a value is not in `[0, 1]` (NaN included).
     pub fn with_alpha(self, alpha: Array2<f64>) -> Result<View, FitError> {
-        let [h, w] = self.size();
-        if alpha.shape() != [h, w] {
-            return Err(FitError::ViewSize {
-                view: self.name,
-                what: "alpha",
-                got: alpha.shape().to_vec(),
-                expected: vec![h, w],
-            });
-        }
-        if let Some(((row, col), a)) = alpha.indexed_iter().find(|(_, a)| !(0.0..=1.0).contains(*a)) {
-            return Err(FitError::AlphaOutOfRange {
-                view: self.name,
-                row,
-                column: col,
-                value: *a,
-            });
-        }
-        Ok(View {
+        let outside = alpha
+            .indexed_iter()
+            .find(|(_, a)| !(0.0..=1.0).contains(*a))
+            .map(|((row, column), &value)| (row, column, value));
+        let view = View {
             alpha: Some(alpha),
             ..self
-        })
+        };
+        view.check_size()?;
+        match outside {
+            Some((row, column, value)) => Err(FitError::AlphaOutOfRange {
+                view: view.name,
+                row,
+                column,
+                value,
+            }),
+            None => Ok(view),
+        }
+    }
+
+    /// Checks that the picture, and the alpha if there is one, are the size of the camera's
+    /// image: the one check behind [`View::new`], [`View::with_alpha`] and [`Dataset::new`]
+    /// (which sees views whose fields may have been changed since).
+    ///
+    /// Errors: [`FitError::ViewSize`] naming the view and which of the two.
+    fn check_size(&self) -> Result<(), FitError> {
+        let k = self.camera.intrinsics();
+        let refuse = |what, got: &[usize], expected: &[usize]| FitError::ViewSize {
+            view: self.name.clone(),
+            what,
+            got: got.to_vec(),
+            expected: expected.to_vec(),
+        };
+        let (h, w) = (k.height, k.width);
+        if self.image.shape() != [h, w, 3] {
+            return Err(refuse("picture", self.image.shape(), &[h, w, 3]));
+        }
+        match &self.alpha {
+            Some(alpha) if alpha.shape() != [h, w] => Err(refuse("alpha", alpha.shape(), &[h, w])),
+            _ => Ok(()),
+        }
     }
 
     /// The colour of pixel (`row`, `col`) over `to` instead of `from`, the background the
@@ -189,25 +201,7 @@ impl Dataset {
             return Err(FitError::NoTestView);
         }
         for v in train.iter().chain(&test) {
-            let k = v.camera.intrinsics();
-            if v.size() != [k.height, k.width] || v.image.shape()[2] != 3 {
-                return Err(FitError::ViewSize {
-                    view: v.name.clone(),
-                    what: "picture",
-                    got: v.image.shape().to_vec(),
-                    expected: vec![k.height, k.width, 3],
-                });
-            }
-            if let Some(alpha) = &v.alpha {
-                if alpha.shape() != [k.height, k.width] {
-                    return Err(FitError::ViewSize {
-                        view: v.name.clone(),
-                        what: "alpha",
-                        got: alpha.shape().to_vec(),
-                        expected: vec![k.height, k.width],
-                    });
-                }
-            }
+            v.check_size()?;
         }
         let data = Dataset {
             train,

@@ -76,9 +76,11 @@ impl<F: Float> DenseGrid<F> {
     /// Errors: a weight that is negative or not finite.
     pub(crate) fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
         if !(weight.is_finite() && weight >= 0.0) {
-            return Err(FitError::Config(format!(
-                "--distortion {weight}: must be finite and non-negative"
-            )));
+            return Err(FitError::Setting {
+                flag: "--distortion",
+                value: Some(weight.to_string()),
+                rule: "must be finite and non-negative".into(),
+            });
         }
         self.distortion = weight;
         Ok(self)
@@ -121,7 +123,7 @@ impl<F: Float> DenseGrid<F> {
         let mut params = Params::new();
         let grid = params.add(GRID, Array4::<F>::zeros((nodes, nodes, nodes, channels)))?;
         add_environment(&mut params, &shading)?;
-        let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
+        let prior = TotalVariation::new(smoothness).map_err(|source| FitError::SettingOp { flag: "--tv", source })?;
         Ok(DenseGrid {
             bounds: Aabb::new(scene_box.min, scene_box.max)?,
             params,

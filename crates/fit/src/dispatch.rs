@@ -7,10 +7,11 @@
 //! ([`RadianceField`]: what every command that renders, meshes or resumes a model file
 //! handles, run by [`with_field`]), or the splats, drawn by projection, which only a fit's
 //! session runs. [`with_field`] refuses the splats, so that work on fields is never asked of
-//! them; [`ModelKind::of_kind`] reads a model file's kind, always a field's.
+//! them; [`FieldKind::of_kind`] reads a model file's kind, always a field's, which
+//! [`with_field_kind`] then runs without a second check.
 //!
 //! ```
-//! use fogray_fit::dispatch::{with_field, FieldWork};
+//! use fogray_fit::dispatch::{with_field, with_field_kind, FieldKind, FieldWork};
 //! use fogray_fit::model::RadianceField;
 //! use fogray_fit::settings::{ModelKind, Precision};
 //! use fogray_tape::Float;
@@ -27,8 +28,10 @@
 //!
 //! assert_eq!(with_field(Precision::F64, ModelKind::Sparse, Describe)?, ("sparse-grid", 8));
 //! assert!(with_field(Precision::F32, ModelKind::Splats, Describe).is_err());
-//! assert_eq!(ModelKind::of_kind("dense-grid"), Some(ModelKind::Dense));
-//! # Ok::<(), fogray_fit::FitError>(())
+//! let kind = FieldKind::of_kind("dense-grid").ok_or("not a field's kind")?;
+//! assert_eq!(with_field_kind(Precision::F32, kind, Describe), ("dense-grid", 4));
+//! assert_eq!(FieldKind::of_kind("splats"), None);
+//! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
 use fogray_tape::Float;
@@ -39,9 +42,10 @@ use crate::model::RadianceField;
 use crate::settings::{ModelKind, Precision};
 use crate::sparse::SparseGrid;
 
-/// The model kinds that are fields marched along rays.
+/// The model kinds that are fields marched along rays: what a model file holds
+/// ([`FieldKind::of_kind`]), run by [`with_field_kind`] with no error left to give.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum FieldKind {
+pub enum FieldKind {
     /// [`DenseGrid`].
     Dense,
     /// [`SparseGrid`].
@@ -76,7 +80,7 @@ pub fn with_field<W: FieldWork>(precision: Precision, kind: ModelKind, work: W) 
 }
 
 /// Runs `work` with the field type of `kind` in the float type of `precision`.
-pub(crate) fn with_field_kind<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) -> W::Output {
+pub fn with_field_kind<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) -> W::Output {
     match (precision, kind) {
         (Precision::F32, FieldKind::Dense) => work.run::<f32, DenseGrid<f32>>(),
         (Precision::F64, FieldKind::Dense) => work.run::<f64, DenseGrid<f64>>(),
@@ -102,16 +106,17 @@ impl ModelKind {
             ModelKind::Splats => None,
         }
     }
+}
 
+impl FieldKind {
     /// The field kind whose model type has [`RadianceField::KIND`] `kind` (a model file's
     /// `model` entry, [`ModelInfo::kind`](crate::checkpoint::ModelInfo::kind)); `None` for a
     /// kind the pipeline does not know as a field, the splats' included (a splat fit is saved
     /// as a 3DGS PLY file, never as a model file).
-    pub fn of_kind(kind: &str) -> Option<ModelKind> {
-        [ModelKind::Dense, ModelKind::Sparse].into_iter().find(|k| {
-            k.field()
-                .is_some_and(|f| with_field_kind(Precision::F32, f, KindName) == kind)
-        })
+    pub fn of_kind(kind: &str) -> Option<FieldKind> {
+        [FieldKind::Dense, FieldKind::Sparse]
+            .into_iter()
+            .find(|&f| with_field_kind(Precision::F32, f, KindName) == kind)
     }
 }
 

@@ -29,9 +29,12 @@ impl Environment {
     /// direction) to 3. Degree 2 holds a sky brighter than the ground and a window on one
     /// side; 3 follows a room's walls a little further (reports/grid/capture.md).
     ///
-    /// Errors: [`FitError::Config`] for a degree above 3, naming the flag.
+    /// Errors: [`FitError::SettingOp`] for a degree above 3, naming the flag.
     pub(crate) fn new(degree: usize) -> Result<Self, FitError> {
-        let colour = ShColor::new(degree).map_err(|e| FitError::Config(format!("--background-degree: {e}")))?;
+        let colour = ShColor::new(degree).map_err(|source| FitError::SettingOp {
+            flag: "--background-degree",
+            source,
+        })?;
         Ok(Environment { colour })
     }
 

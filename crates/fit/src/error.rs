@@ -1,6 +1,9 @@
 //! Why a fit, a render or a model could not run: one error for the pipeline, which keeps the
 //! error of the op or library underneath it.
 
+use std::path::PathBuf;
+
+use fogray_data::shown;
 use fogray_ops::OpsError;
 use fogray_tape::params::ParamError;
 use fogray_tape::TapeError;
@@ -29,6 +32,27 @@ pub enum FitError {
         value: Option<String>,
         /// The rule it breaks.
         rule: String,
+    },
+    /// A setting refused by the op it configures (`--tv` by the total-variation prior,
+    /// `--sh-degree` and `--background-degree` by the spherical harmonics): the flag, and the
+    /// op's error, which holds the value and the rule.
+    #[error("{flag}: {source}")]
+    SettingOp {
+        /// The flag.
+        flag: &'static str,
+        /// The op's refusal.
+        source: OpsError,
+    },
+    /// A file of the fit's (the splats' PLY file) that could not be written: nothing was left
+    /// under its name.
+    #[error("{}: {what} cannot be written: {reason}", shown(.path))]
+    Write {
+        /// The file.
+        path: PathBuf,
+        /// What it holds (`"the splats"`).
+        what: &'static str,
+        /// The operating system's reason, on one line.
+        reason: String,
     },
     /// A `--box` whose bounds on some axis are not finite or not increasing.
     #[error("--box: axis {axis} runs from {min} to {max} (must be finite and increasing)")]

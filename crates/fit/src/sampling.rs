@@ -47,7 +47,11 @@ pub(crate) const OCCUPANCY_CELLS_MAX: usize = 128;
 /// Errors: fewer than 2 nodes.
 pub(crate) fn occupancy_grid(bounds: Aabb, grid: usize) -> Result<OccupancyGrid, FitError> {
     if grid < 2 {
-        return Err(FitError::Config("--grid must be at least 2".into()));
+        return Err(FitError::Setting {
+            flag: "--grid",
+            value: None,
+            rule: "must be at least 2".into(),
+        });
     }
     // The final stage's sample step (half its node spacing along the shortest side), as the
     // dense grid's: `1 / (grid - 1)` for [-1, 1]^3.

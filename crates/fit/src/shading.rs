@@ -78,12 +78,15 @@ impl Shading {
     /// The shading of density shift `shift` with spherical harmonics of `degree` (0:
     /// view-independent colour).
     ///
-    /// Errors: a shift that is not finite, a degree above 3 ([`FitError::Config`] naming the
+    /// Errors: a shift that is not finite, a degree above 3 ([`FitError::SettingOp`] naming the
     /// flag).
     pub(crate) fn new(shift: f64, degree: usize) -> Result<Self, FitError> {
         let sh = match degree {
             0 => None,
-            d => Some(ShColor::new(d).map_err(|e| FitError::Config(format!("--sh-degree: {e}")))?),
+            d => Some(ShColor::new(d).map_err(|source| FitError::SettingOp {
+                flag: "--sh-degree",
+                source,
+            })?),
         };
         Ok(Shading {
             activation: DensityColor::new(shift)?,

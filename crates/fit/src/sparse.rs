@@ -84,9 +84,11 @@ impl<F: Float> SparseGrid<F> {
     /// Errors: a weight that is negative or not finite.
     pub(crate) fn with_distortion(mut self, weight: f64) -> Result<Self, FitError> {
         if !(weight.is_finite() && weight >= 0.0) {
-            return Err(FitError::Config(format!(
-                "--distortion {weight}: must be finite and non-negative"
-            )));
+            return Err(FitError::Setting {
+                flag: "--distortion",
+                value: Some(weight.to_string()),
+                rule: "must be finite and non-negative".into(),
+            });
         }
         self.distortion = weight;
         Ok(self)
@@ -116,7 +118,7 @@ impl<F: Float> SparseGrid<F> {
         let mut params = Params::new();
         let data = params.add(DATA, Array2::<F>::zeros((field.index().kept(), channels)))?;
         add_environment(&mut params, &shading)?;
-        let prior = TotalVariation::new(smoothness).map_err(|e| FitError::Config(format!("--tv: {e}")))?;
+        let prior = TotalVariation::new(smoothness).map_err(|source| FitError::SettingOp { flag: "--tv", source })?;
         Ok(SparseGrid {
             params,
             data,

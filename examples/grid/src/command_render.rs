@@ -40,7 +40,7 @@ pub(crate) fn run_render(args: RenderArgs) -> Result<()> {
     if views.is_empty() {
         anyhow::bail!("no view to render: the ring has no test views; pass --view I or --all");
     }
-    let kind = ModelKind::of_kind(&info.kind).with_context(|| {
+    let kind = FieldKind::of_kind(&info.kind).with_context(|| {
         format!(
             "{}: a {:?} model, which fogray-grid does not know",
             args.model.display(),
@@ -54,7 +54,7 @@ pub(crate) fn run_render(args: RenderArgs) -> Result<()> {
         scene: &scene,
         views: &views,
     };
-    with_field(info.settings.precision, kind, work)?
+    with_field_kind(info.settings.precision, kind, work)
 }
 
 /// The views to render from the model file, as fogray-fit's dispatch runs it.

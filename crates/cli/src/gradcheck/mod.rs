@@ -278,13 +278,21 @@ fn check_with(mut p: Packed, s: &Settings, tamper: &dyn Fn(&mut InputGrads<f64>)
         Precision::F64 => F64_TOLERANCE,
     };
     let (atol, rtol) = (s.atol.unwrap_or(default_atol), s.rtol.unwrap_or(default_rtol));
-    for (what, v) in [("atol", atol), ("rtol", rtol)] {
+    for (flag, v) in [("--atol", atol), ("--rtol", rtol)] {
         if !(v.is_finite() && v >= 0.0) {
-            return Err(CliError::Option(format!("--{what} must be finite and >= 0, got {v}")));
+            return Err(CliError::Flag {
+                flag,
+                value: None,
+                rule: format!("must be finite and >= 0, got {v}"),
+            });
         }
     }
     if s.fast && s.projections == 0 {
-        return Err(CliError::Option("--projections must be at least 1".into()));
+        return Err(CliError::Flag {
+            flag: "--projections",
+            value: None,
+            rule: "must be at least 1".into(),
+        });
     }
     round_to(&mut p);
     let l = loss(&p);

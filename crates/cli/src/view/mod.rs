@@ -85,8 +85,12 @@ impl WithModel for Serve<'_> {
         let saved = checkpoint::load::<F, M>(path)?;
         let occupancy = saved.occupancy_grid()?;
         let background = match self.info.extra.get("background") {
-            Some(text) => serde_json::from_str::<[f64; 3]>(text)
-                .map_err(|e| CliError::Option(format!("{}: its background {text:?}: {e}", shown(path))))?,
+            Some(text) => serde_json::from_str::<[f64; 3]>(text).map_err(|e| CliError::SavedEntry {
+                path: path.to_path_buf(),
+                key: "background",
+                text: text.clone(),
+                reason: e.to_string(),
+            })?,
             None => [1.0; 3],
         };
         let scene = ModelScene::<F, M> {
@@ -103,11 +107,11 @@ impl WithModel for Serve<'_> {
         let views = dataset_cameras(path, self.info);
         let photos = dataset_photos(self.info, &views);
         let info = describe(path, self.info, background, &views, !photos.is_empty());
-        let listener = http::bind(self.args.port)
-            .map_err(|e| CliError::Option(format!("--port {}: cannot listen on 127.0.0.1: {e}", self.args.port)))?;
-        let address = listener
-            .local_addr()
-            .map_err(|e| CliError::Option(format!("cannot read the address listened on: {e}")))?;
+        let listener = http::bind(self.args.port).map_err(|source| CliError::Listen {
+            port: self.args.port,
+            source,
+        })?;
+        let address = listener.local_addr().map_err(CliError::ListenAddress)?;
         let site = Site {
             scene: &scene,
             info: info.to_string(),
@@ -119,7 +123,7 @@ impl WithModel for Serve<'_> {
         let mut out = std::io::stdout().lock();
         let _ = writeln!(out, "fogray view: http://{address}/").and_then(|()| out.flush());
         drop(out);
-        http::serve(&listener, &site, &self.stop).map_err(|e| CliError::Option(format!("serving {address}: {e}")))
+        http::serve(&listener, &site, &self.stop).map_err(|source| CliError::Serve { address, source })
     }
 }
 

@@ -4,8 +4,10 @@
 use ndarray::Array3;
 
 use crate::dataset::{Dataset, View};
+use crate::dense::DenseGrid;
 use crate::settings::{Budget, FitSettings, SceneBox};
 use crate::space::SpaceChoice;
+use crate::splats::model::SplatModel;
 use crate::splats::settings::SplatSettings;
 use crate::testing::view;
 use crate::FitError;
@@ -140,4 +142,77 @@ fn ctrl_c_refused_says_so() {
         reason: "a handler is already set".into(),
     };
     assert_eq!(e.to_string(), "cannot catch Ctrl-C: a handler is already set");
+}
+
+#[test]
+fn each_typed_refusal_reads_as_written_by_hand() {
+    use crate::environment::Environment;
+    use crate::shading::Shading;
+    use crate::splats::model::SplatArraysOwned;
+    use fogray_ops::OpsError;
+    use ndarray::{arr1, arr2, Array2};
+
+    let picture = || view(0, [3.0, 0.5, 0.0]);
+    let mut changed_alpha = picture().with_alpha(Array2::from_elem((8, 8), 0.5)).unwrap();
+    changed_alpha.alpha = Some(Array2::zeros((8, 2)));
+    let splats = SplatModel::<f64>::new(
+        SplatArraysOwned {
+            means: arr2(&[[0.0; 3]]),
+            log_scales: arr2(&[[-2.0; 3]]),
+            quats: arr2(&[[1.0, 0.0, 0.0, 0.0]]),
+            opacity_logits: arr1(&[0.0]),
+            sh: Array2::zeros((1, 3)),
+        },
+        0,
+    )
+    .unwrap();
+    let folder = std::env::temp_dir().join(format!("fogray-no-such-folder-{}", std::process::id()));
+    let ply = folder.join("m.ply");
+    let cases: [(FitError, String); 7] = [
+        (
+            Environment::new(4).unwrap_err(),
+            "--background-degree: sh_color: degree is 4 (must be 0, 1, 2 or 3)".into(),
+        ),
+        (
+            Shading::new(0.0, 5).unwrap_err(),
+            "--sh-degree: sh_color: degree is 5 (must be 0, 1, 2 or 3)".into(),
+        ),
+        (
+            picture().with_alpha(Array2::zeros((8, 7))).unwrap_err(),
+            "view 000: alpha [8, 7], but the camera's image is [8, 8]".into(),
+        ),
+        (
+            Dataset::new(vec![changed_alpha], vec![picture()], [1.0; 3]).unwrap_err(),
+            "view 000: alpha [8, 2], but the camera's image is [8, 8]".into(),
+        ),
+        (
+            crate::splats::ply::write_ply(&ply, &splats).unwrap_err(),
+            format!(
+                "{}: the splats cannot be written: No such file or directory (os error 2)",
+                ply.display()
+            ),
+        ),
+        (
+            DenseGrid::<f64>::new(SceneBox::UNIT, 2, 0.0, -1.0).err().unwrap(),
+            "--tv: total_variation: weight is -1 (must be finite and non-negative)".into(),
+        ),
+        (
+            DenseGrid::<f64>::new(SceneBox::UNIT, 2, 0.0, 0.0)
+                .and_then(|g| g.with_distortion(-0.5))
+                .err()
+                .unwrap(),
+            "--distortion -0.5: must be finite and non-negative".into(),
+        ),
+    ];
+    for (e, line) in cases {
+        assert_eq!(e.to_string(), line, "{e:?}");
+    }
+    // The op's refusal stays the error's source, typed.
+    let e = Environment::new(4).unwrap_err();
+    let source = std::error::Error::source(&e).and_then(|s| s.downcast_ref::<OpsError>());
+    assert_eq!(
+        source.map(ToString::to_string).as_deref(),
+        Some("sh_color: degree is 4 (must be 0, 1, 2 or 3)")
+    );
+    assert!(!folder.exists());
 }

@@ -97,6 +97,13 @@ pub(crate) fn splats_ply<F: Float>(model: &SplatModel<F>) -> Result<Vec<u8>, Fit
 /// Errors: the file cannot be written (naming it), a parameter lent to a tape.
 pub(crate) fn write_ply<F: Float>(path: &Path, model: &SplatModel<F>) -> Result<(), FitError> {
     let bytes = splats_ply(model)?;
-    fogray_data::write_atomic(path, |out| out.write_all(&bytes))
-        .map_err(|e| FitError::Config(format!("{}: the splats cannot be written: {e}", path.display())))
+    fogray_data::write_atomic(path, |out| out.write_all(&bytes)).map_err(|e| FitError::Write {
+        path: path.to_path_buf(),
+        what: "the splats",
+        reason: match e {
+            // Its message names the file again.
+            fogray_data::DataError::Io { message, .. } => message,
+            other => other.to_string(),
+        },
+    })
 }
