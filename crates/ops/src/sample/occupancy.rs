@@ -187,8 +187,11 @@ impl OccupancyGrid {
             return None;
         }
         let lo = self.bounds.min();
+        // Inside the box the quotient is at least 0 (or -0.0), where a saturating cast is
+        // `floor`: without the call, which x86-64's baseline makes to libm and which a march
+        // pays at every piece it asks about.
         Some(std::array::from_fn(|a| {
-            (((p[a] - lo[a]) / self.cell[a]).floor() as usize).min(self.resolution - 1)
+            (((p[a] - lo[a]) / self.cell[a]) as usize).min(self.resolution - 1)
         }))
     }
 

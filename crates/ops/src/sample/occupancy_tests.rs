@@ -334,3 +334,21 @@ fn known_cells_of_the_wrong_size_or_density_are_refused() {
         assert_eq!(grid.known_cells(), None);
     }
 }
+
+#[test]
+fn cell_of_by_hand_at_faces_and_boundaries() {
+    // [-1, 1]^3 in 4 cells a side of 0.5: cell k holds [-1 + 0.5 k, -0.5 + 0.5 k).
+    let grid = OccupancyGrid::new(cube(), 4, OccupancyConfig::density(1.0).unwrap()).unwrap();
+    let cell = |x: f64| grid.cell_of([x, 0.0, 0.0]).map(|c| c[0]);
+    assert_eq!(cell(-1.0), Some(0)); // the lower face
+    assert_eq!(cell(-0.75), Some(0)); // a cell's middle: rounding would give 1
+    assert_eq!(cell(f64::from_bits((-0.5f64).to_bits() + 1)), Some(0)); // just below a boundary
+    assert_eq!(cell(-0.5), Some(1)); // on a boundary: the upper cell
+    assert_eq!(cell(0.0), Some(2));
+    assert_eq!(cell(0.999_999_999_999), Some(3));
+    assert_eq!(cell(1.0), Some(3)); // the upper face belongs to the last cell
+    assert_eq!(cell(1.0 + 1e-12), None);
+    assert_eq!(cell(-1.0 - 1e-12), None);
+    assert_eq!(cell(f64::NAN), None);
+    assert_eq!(grid.cell_of([0.1, -0.6, 0.76]), Some([2, 0, 3]));
+}
