@@ -42,8 +42,8 @@ pub struct View {
     pub image: Array3<f64>,
     /// The picture's opacity `[H][W]` in `[0, 1]`, where it had an alpha channel (`None` for
     /// an opaque picture: a JPEG photograph, a synthetic scene's render). The picture over
-    /// another background `b` is `image + (b - background) (1 - alpha)`
-    /// ([`View::target_over`]).
+    /// another background `b` is `image + (b - background) (1 - alpha)`, as a training
+    /// batch composites it.
     pub alpha: Option<Array2<f64>>,
 }
 
@@ -79,8 +79,8 @@ impl View {
     /// assert!(view.clone().with_alpha(Array2::from_elem((1, 2), 1.5)).is_err()); // not in [0, 1]
     /// assert!(view.clone().with_alpha(Array2::from_elem((2, 1), 0.5)).is_err()); // not [H][W]
     /// let view = view.with_alpha(Array2::from_elem((1, 2), 0.5))?;
-    /// // Over black: 0.75 + (0 - 1) (1 - 0.5), the grey at half opacity.
-    /// assert_eq!(view.target_over(0, 1, [1.0; 3], [0.0; 3]), [0.25; 3]);
+    /// // A fit drawing black behind it trains on 0.75 + (0 - 1) (1 - 0.5) = 0.25.
+    /// assert_eq!(view.alpha.as_ref().map(|a| a[[0, 1]]), Some(0.5));
     /// # Ok::<(), Box<dyn std::error::Error>>(())
     /// ```
     ///
@@ -128,14 +128,6 @@ impl View {
             Some(alpha) if alpha.shape() != [h, w] => Err(refuse("alpha", alpha.shape(), &[h, w])),
             _ => Ok(()),
         }
-    }
-
-    /// The colour of pixel (`row`, `col`) over `to` instead of `from`, the background the
-    /// picture was composited over: `image + (to - from) (1 - alpha)`, the picture itself for
-    /// a view without alpha (opaque).
-    pub fn target_over(&self, row: usize, col: usize, from: [f64; 3], to: [f64; 3]) -> [f64; 3] {
-        let seen = self.alpha.as_ref().map_or(0.0, |a| 1.0 - a[[row, col]]);
-        std::array::from_fn(|c| self.image[[row, col, c]] + (to[c] - from[c]) * seen)
     }
 
     /// `[height, width]` of the picture.

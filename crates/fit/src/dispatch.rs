@@ -5,13 +5,14 @@
 //!
 //! A model kind is of one of two classes: a field of density and colour marched along rays
 //! ([`RadianceField`]: what every command that renders, meshes or resumes a model file
-//! handles, run by [`with_field`]), or the splats, drawn by projection, which only a fit's
-//! session runs. [`with_field`] refuses the splats, so that work on fields is never asked of
-//! them; [`FieldKind::of_kind`] reads a model file's kind, always a field's, which
-//! [`with_field_kind`] then runs without a second check.
+//! handles, run by [`with_field_kind`]), or the splats, drawn by projection, which only a fit's
+//! session runs. A [`FieldKind`] is the one check: from a fit's [`ModelKind`] by `try_from`,
+//! which refuses the splats, or from a model file's kind name by [`FieldKind::of_kind`]; so
+//! that work on fields is never asked of them, [`with_field_kind`] takes only a `FieldKind`
+//! and has nothing left to refuse.
 //!
 //! ```
-//! use fogray_fit::dispatch::{with_field, with_field_kind, FieldKind, FieldWork};
+//! use fogray_fit::dispatch::{with_field_kind, FieldKind, FieldWork};
 //! use fogray_fit::model::RadianceField;
 //! use fogray_fit::settings::{ModelKind, Precision};
 //! use fogray_tape::Float;
@@ -26,8 +27,9 @@
 //!     }
 //! }
 //!
-//! assert_eq!(with_field(Precision::F64, ModelKind::Sparse, Describe)?, ("sparse-grid", 8));
-//! assert!(with_field(Precision::F32, ModelKind::Splats, Describe).is_err());
+//! let sparse = FieldKind::try_from(ModelKind::Sparse)?;
+//! assert_eq!(with_field_kind(Precision::F64, sparse, Describe), ("sparse-grid", 8));
+//! assert!(FieldKind::try_from(ModelKind::Splats).is_err());
 //! let kind = FieldKind::of_kind("dense-grid").ok_or("not a field's kind")?;
 //! assert_eq!(with_field_kind(Precision::F32, kind, Describe), ("dense-grid", 4));
 //! assert_eq!(FieldKind::of_kind("splats"), None);
@@ -69,17 +71,6 @@ pub(crate) trait FloatWork {
 }
 
 /// Runs `work` with the field type of `kind` in the float type of `precision`.
-///
-/// Errors: [`FitError::NotAField`] for a kind that is not a field (the splats), before the
-/// work runs.
-pub fn with_field<W: FieldWork>(precision: Precision, kind: ModelKind, work: W) -> Result<W::Output, FitError> {
-    match kind.field() {
-        Some(field) => Ok(with_field_kind(precision, field, work)),
-        None => Err(FitError::NotAField(kind)),
-    }
-}
-
-/// Runs `work` with the field type of `kind` in the float type of `precision`.
 pub fn with_field_kind<W: FieldWork>(precision: Precision, kind: FieldKind, work: W) -> W::Output {
     match (precision, kind) {
         (Precision::F32, FieldKind::Dense) => work.run::<f32, DenseGrid<f32>>(),
@@ -105,6 +96,16 @@ impl ModelKind {
             ModelKind::Sparse => Some(FieldKind::Sparse),
             ModelKind::Splats => None,
         }
+    }
+}
+
+impl TryFrom<ModelKind> for FieldKind {
+    type Error = FitError;
+
+    /// The field kind of a model marched along rays. Errors: [`FitError::NotAField`] for the
+    /// splats.
+    fn try_from(kind: ModelKind) -> Result<FieldKind, FitError> {
+        kind.field().ok_or(FitError::NotAField(kind))
     }
 }
 

@@ -2,7 +2,7 @@
 //! keeping of each what a report shows: its log and figures, and pictures of its final model.
 
 use fogray_fit::dataset::Dataset;
-use fogray_fit::dispatch::{with_field, FieldWork};
+use fogray_fit::dispatch::{with_field_kind, FieldKind, FieldWork};
 use fogray_fit::model::RadianceField;
 use fogray_fit::settings::{FitSettings, SceneBox};
 use fogray_fit::train::{fit, FitResult, LogEntry, Progress};
@@ -144,9 +144,10 @@ pub(crate) fn run_config(
         progress,
     };
     // A sweep keeps density slices and grid statistics, which splats have not.
-    with_field(config.precision, fit_config.model, work).map_err(|_| {
+    let field = FieldKind::try_from(fit_config.model).map_err(|_| {
         SweepError::Config("a sweep fits grids; splats are fitted with `fogray fit --model splats`".into())
-    })?
+    })?;
+    with_field_kind(config.precision, field, work)
 }
 
 /// [`run_config`]'s work, for one model type.
