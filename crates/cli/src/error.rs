@@ -155,6 +155,10 @@ pub enum CliError {
     /// A computation that should have produced a value did not (a gradient missing...).
     #[error("{0}")]
     Missing(&'static str),
+    /// Something asked of a fit before it has it, or more than it gives while it trains (a
+    /// frame of `fogray fit --view` before the first step, or larger than it renders then).
+    #[error("{0}")]
+    NotYet(String),
 }
 
 impl CliError {
