@@ -233,18 +233,23 @@ pub enum CliError {
         /// The encoder's error.
         source: gif::EncodingError,
     },
-    /// `fogray view`'s port that cannot be listened on.
-    #[error("--port {port}: cannot listen on 127.0.0.1: {source}")]
+    /// A page's port that cannot be listened on (`fogray view --port`, `fogray fit --view-port`).
+    #[error("{flag} {port}: cannot listen on 127.0.0.1: {source}")]
     Listen {
+        /// The flag that gave the port.
+        flag: &'static str,
         /// The port.
         port: u16,
         /// Why.
         source: std::io::Error,
     },
+    /// The thread that renders `fogray fit --view`'s frames, which could not be started.
+    #[error("cannot start the page's render thread: {0}")]
+    RenderThread(#[source] rayon::ThreadPoolBuildError),
     /// The address listened on, which the system would not tell.
     #[error("cannot read the address listened on: {0}")]
     ListenAddress(#[source] std::io::Error),
-    /// `fogray view`'s server that stopped on an error.
+    /// A page's server that stopped on an error.
     #[error("serving {address}: {source}")]
     Serve {
         /// The address it served.
@@ -278,6 +283,10 @@ pub enum CliError {
     /// A computation that should have produced a value did not (a gradient missing...).
     #[error("{0}")]
     Missing(&'static str),
+    /// Something asked of a fit before it has it, or more than it gives while it trains (a
+    /// frame of `fogray fit --view` before the first step, or larger than it renders then).
+    #[error("{0}")]
+    NotYet(String),
 }
 
 /// A flag's value as its message shows it: ` 0:` after the flag, or nothing where the rule reads

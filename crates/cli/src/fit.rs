@@ -2,6 +2,7 @@
 //! recommended model and settings; the held-out views measured at intervals off the clock.
 
 use std::collections::BTreeMap;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -128,6 +129,14 @@ pub struct FitArgs {
     /// table (and no progress bar).
     #[arg(long)]
     pub json: bool,
+    /// Serve a page on 127.0.0.1 showing the model as it trains (turned with the mouse, as
+    /// `fogray view` shows a saved one), the held-out PSNR so far and the step; its address
+    /// is printed on stderr. After the fit, the page shows the final model until Ctrl-C.
+    #[arg(long)]
+    pub view: bool,
+    /// The port of the --view page; 0 lets the system choose a free one.
+    #[arg(long, value_name = "N", default_value_t = 0, requires = "view")]
+    pub view_port: u16,
     #[command(flatten)]
     pub settings: FitSettings,
 }
@@ -191,6 +200,8 @@ pub enum FitOutcome {
     Done(String),
     /// Ctrl-C stopped the fit; it was saved to this file.
     Interrupted(PathBuf),
+    /// The fit ended and its output was printed then; its `--view` page served on until Ctrl-C.
+    Served,
 }
 
 /// The dataset's views as the pipeline's: each picture (and its alpha, where the file had
@@ -341,6 +352,19 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
     )?;
     // Before anything is read: the outputs' disks have room for the least they will take.
     crate::disk_room::check(&outputs(args, &plan.settings), crate::disk_room::room)?;
+    // Before anything is read: a port in use fails at once.
+    let page = if args.view {
+        if plan.settings.model == fogray_fit::settings::ModelKind::Splats {
+            return Err(CliError::FlagsExclude {
+                first: "--view",
+                second: "--model splats",
+                why: "the page shows a grid as it trains (--model dense or sparse)",
+            });
+        }
+        Some(crate::view::live::LivePage::bind(args.view_port)?)
+    } else {
+        None
+    };
     // The same rule as the training bar's: --json asks for a quiet run.
     let (data, scene_box) = load_fit_data(&plan.data, &plan.data_args, !args.json)?;
     let settings = FitSettings {
@@ -369,17 +393,54 @@ pub fn run(args: &FitArgs, given: &dyn Fn(&str) -> bool) -> Result<FitOutcome, C
         tool: "fogray fit".into(),
         progress_bar: !args.json,
         announce: !args.json,
+        live: None,
     };
-    let report = match session::run(&data, &session_plan)? {
+    let Some(page) = page else {
+        let outcome = session::run(&data, &session_plan)?;
+        return finish(args, &plan, &data, outcome, load_seconds, created);
+    };
+    let entries = session_plan.entries.clone();
+    page.serve(&data, &settings, &entries, |hook| {
+        let live_plan = SessionPlan {
+            live: Some(hook),
+            ..session_plan
+        };
+        let outcome = session::run(&data, &live_plan)?;
+        match finish(args, &plan, &data, outcome, load_seconds, created)? {
+            FitOutcome::Done(text) => {
+                // Printed now: the page serves on until Ctrl-C.
+                let mut out = std::io::stdout().lock();
+                let _ = writeln!(out, "{text}").and_then(|()| out.flush());
+                eprintln!("fogray fit: the fit is done; its page shows the final model until Ctrl-C");
+                Ok((FitOutcome::Served, true))
+            }
+            other => Ok((other, false)),
+        }
+    })
+}
+
+/// The output of a fit whose session ended with `outcome`: the report written, the text to
+/// print; an interrupted fit's saved file.
+///
+/// Errors: a report that cannot be written.
+fn finish(
+    args: &FitArgs,
+    plan: &FitPlan,
+    data: &Dataset,
+    outcome: SessionOutcome,
+    load_seconds: f64,
+    created: crate::created_dirs::CreatedDirs,
+) -> Result<FitOutcome, CliError> {
+    let report = match outcome {
         SessionOutcome::Interrupted { saved, .. } => {
             created.keep();
             return Ok(FitOutcome::Interrupted(saved));
         }
         SessionOutcome::Finished(report) => report,
     };
-    let summary = summary(&report, &data, load_seconds);
+    let summary = summary(&report, data, load_seconds);
     if let Some(dir) = &args.out {
-        crate::fit_report::write_out(dir, &plan, &report.settings, &data, &summary, &report.held_out)?;
+        crate::fit_report::write_out(dir, plan, &report.settings, data, &summary, &report.held_out)?;
     }
     created.keep();
     if args.json {

@@ -238,6 +238,8 @@ fn main() -> ExitCode {
             matches.subcommand_matches("fit").and_then(|m| m.value_source(id)) == Some(ValueSource::CommandLine)
         }) {
             Ok(fit::FitOutcome::Done(text)) => ("fit", Ok(text)),
+            // Printed when the fit ended; the page then served until Ctrl-C.
+            Ok(fit::FitOutcome::Served) => return ExitCode::SUCCESS,
             Ok(fit::FitOutcome::Interrupted(path)) => {
                 eprintln!(
                     "fogray fit: interrupted: the fit is saved to {0} (continue it with fogray fit --resume {0})",

@@ -85,6 +85,7 @@ mod grid_model;
 pub mod images;
 pub mod interrupt;
 mod kernels;
+pub mod live;
 pub mod mesh;
 pub mod metrics;
 pub mod model;

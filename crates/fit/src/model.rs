@@ -43,8 +43,9 @@ pub struct RenderWanted {
     pub depth: bool,
 }
 
-/// A radiance field the pipeline can fit, render and save.
-pub trait RadianceField<F: Float>: Sized + Sync {
+/// A radiance field the pipeline can fit, render and save (and hand, copied, to a viewer's
+/// threads: [`crate::live`]).
+pub trait RadianceField<F: Float>: Sized + Send + Sync + 'static {
     /// The name of the model in a checkpoint's metadata.
     const KIND: &'static str;
 

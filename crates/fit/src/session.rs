@@ -18,6 +18,7 @@ use crate::dataset::Dataset;
 use crate::dispatch::{with_field_kind, with_float, FieldWork, FloatWork};
 use crate::error::FitError;
 use crate::interrupt::StopFlag;
+use crate::live::{snapshot, LiveHook};
 use crate::metrics::{mean_psnr, view_scores, ViewScore};
 use crate::model::RadianceField;
 use crate::profile::ProfileTable;
@@ -25,7 +26,7 @@ use crate::render::RenderedView;
 use crate::settings::FitSettings;
 use crate::space::{self, SpaceDecision};
 use crate::train::{training_views_psnr, LogEntry, Progress};
-use crate::trainer::{run_budget, Evaluation, Trainer};
+use crate::trainer::{run_budget, Evaluation, StepReport, Stepper, Trainer};
 
 /// Why a session failed.
 #[derive(Debug, thiserror::Error)]
@@ -61,6 +62,9 @@ pub struct SessionPlan {
     /// Whether to say on stderr, once the first step is done, what is trained and where
     /// Ctrl-C saves it.
     pub announce: bool,
+    /// A watcher of the fit as it trains, and the flag that stops it in place of Ctrl-C's
+    /// ([`crate::live`]; a splat fit tells it nothing yet).
+    pub live: Option<LiveHook>,
 }
 
 /// A fit's outcome as a tool reports it, whatever the model type.
@@ -148,7 +152,10 @@ pub fn run(data: &Dataset, plan: &SessionPlan) -> Result<SessionOutcome, Session
     if let Some(file) = &plan.save_model {
         checkpoint::check_destination(file)?;
     }
-    let stop = StopFlag::on_ctrl_c()?;
+    let stop = match &plan.live {
+        Some(live) => live.stop.clone(),
+        None => StopFlag::on_ctrl_c()?,
+    };
     let work = SessionWork {
         data,
         plan,
@@ -208,15 +215,43 @@ fn run_field<F: Float, M: RadianceField<F>>(
         None => String::new(),
     };
     let mut trainer = Trainer::<F, M>::new(data, settings, start)?;
-    let run = run_budget(&mut trainer, settings.evaluations, Some(stop.flag()), &mut |p, _| {
+    let live = plan.live.as_ref();
+    let mut watched = Watched {
+        trainer: &mut trainer,
+        live,
+    };
+    // A copy of the model that failed ends the fit after the loop, as a failed step would.
+    let mut copy_failed = None;
+    let run = run_budget(&mut watched, settings.evaluations, Some(stop.flag()), &mut |p, w| {
         bar.on_step(
             p,
             first_step,
             || (String::new(), from.clone(), save_path.clone()),
             format!("step {}", p.step),
-        )
+        );
+        if let Some(live) = live {
+            live.sink.step(p);
+            if live.sink.wants_model() && copy_failed.is_none() {
+                match snapshot(w.trainer.model(), w.trainer.occupancy(), settings, p.step) {
+                    Ok(copy) => live.sink.model(copy),
+                    Err(e) => copy_failed = Some(e),
+                }
+            }
+        }
     })?;
     bar.finish();
+    if let Some(e) = copy_failed {
+        return Err(e.into());
+    }
+    if let Some(live) = live {
+        live.sink.model(snapshot(
+            trainer.model(),
+            trainer.occupancy(),
+            settings,
+            trainer.steps(),
+        )?);
+        live.sink.finished(&run.log, run.interrupted);
+    }
     let training = trainer.state()?;
     if run.interrupted || plan.save_model.is_some() {
         checkpoint::save(&save_path, trainer.model(), &training, settings, &plan.entries)?;
@@ -253,6 +288,34 @@ fn run_field<F: Float, M: RadianceField<F>>(
         fit,
         bar.first_step_seconds,
     )?)))
+}
+
+/// A trainer whose evaluations a watcher sees as they are made.
+struct Watched<'t, 'd, F: Float, M> {
+    trainer: &'t mut Trainer<'d, F, M>,
+    live: Option<&'t LiveHook>,
+}
+
+impl<F: Float, M: RadianceField<F>> Stepper for Watched<'_, '_, F, M> {
+    fn step(&mut self) -> Result<StepReport, FitError> {
+        self.trainer.step()
+    }
+
+    fn evaluate(&self, depth: bool) -> Result<Evaluation, FitError> {
+        let evaluation = Stepper::evaluate(&*self.trainer, depth)?;
+        if let Some(live) = self.live {
+            live.sink.evaluated(&evaluation.entry);
+        }
+        Ok(evaluation)
+    }
+
+    fn fraction(&self) -> f64 {
+        Stepper::fraction(&*self.trainer)
+    }
+
+    fn steps(&self) -> usize {
+        Stepper::steps(&*self.trainer)
+    }
 }
 
 /// What a model's session measured beside the budget loop's evaluations.

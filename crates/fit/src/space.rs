@@ -318,7 +318,7 @@ pub struct SpaceDecision {
 /// capture: what lies beyond any box is real and must be modelled); a contracted space without a framing is framed from the training cameras.
 ///
 /// Errors: cameras that frame nothing.
-pub(crate) fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, SpaceDecision), FitError> {
+pub fn resolve(settings: &FitSettings, data: &Dataset) -> Result<(FitSettings, SpaceDecision), FitError> {
     let alpha = data.training_alpha();
     let (space, why) = match settings.space {
         SpaceChoice::Auto if alpha => (

@@ -75,6 +75,7 @@ pub(crate) fn run_fit(args: FitArgs, given: &dyn Fn(&str) -> bool) -> Result<()>
         tool: "fogray-grid".into(),
         progress_bar: !args.json,
         announce: true,
+        live: None,
     };
     match session::run(&data, &plan)? {
         SessionOutcome::Interrupted { step, saved } => {

@@ -107,10 +107,27 @@ fn each_refusal_reads_as_written_by_hand() {
         ),
         (
             CliError::Listen {
+                flag: "--port",
                 port: 8080,
                 source: failed(),
             },
             "--port 8080: cannot listen on 127.0.0.1: disk full",
+        ),
+        (
+            CliError::Listen {
+                flag: "--view-port",
+                port: 8080,
+                source: failed(),
+            },
+            "--view-port 8080: cannot listen on 127.0.0.1: disk full",
+        ),
+        (
+            CliError::FlagsExclude {
+                first: "--view",
+                second: "--model splats",
+                why: "the page shows a grid as it trains (--model dense or sparse)",
+            },
+            "--view and --model splats both given: the page shows a grid as it trains (--model dense or sparse)",
         ),
         (
             CliError::ListenAddress(failed()),

@@ -4,11 +4,13 @@
 //! and sends it as PNG.
 //!
 //! The pieces: [`camera`] reads a frame request's camera, [`server`] answers the routes from a
-//! [`server::Scene`] (what renders a camera), [`http`] is the bounded HTTP/1.1 around them.
+//! [`server::Scene`] (what renders a camera), [`http`] is the bounded HTTP/1.1 around them;
+//! [`live`] is the same page during `fogray fit --view`.
 //! Ctrl-C stops accepting, lets the frames under way finish, and exits with status 130.
 
 pub mod camera;
 pub mod http;
+pub mod live;
 pub mod server;
 
 use std::io::Write;
@@ -108,6 +110,7 @@ impl WithModel for Serve<'_> {
         let photos = dataset_photos(self.info, &views);
         let info = describe(path, self.info, background, &views, !photos.is_empty());
         let listener = http::bind(self.args.port).map_err(|source| CliError::Listen {
+            flag: "--port",
             port: self.args.port,
             source,
         })?;

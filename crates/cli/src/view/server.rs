@@ -4,6 +4,7 @@
 //! - `GET /info`: JSON: the model, its bounds or framing, a first camera, the dataset's views.
 //! - `GET /frame?...`: a frame from the camera the query names ([`super::camera`]), as PNG.
 //! - `GET /photo?view=N`: the dataset's photograph of view N.
+//! - `GET /progress`: JSON: a fit's step and evaluations so far (`fogray fit --view` only).
 //!
 //! Nothing else is served. The only files read are the photographs of the dataset the
 //! checkpoint names, by index into its list: no path (`/../x`, `/%2e%2e/x`) reaches a file;
@@ -34,14 +35,19 @@ pub struct RgbFrame {
     pub pixels: Vec<u8>,
 }
 
-/// Something that renders a camera's view: a model loaded from a file now; a fit under way
-/// later, whose implementation would render the latest model it published behind a lock
-/// (the server only ever asks through `&self`, from several threads).
+/// Something that renders a camera's view: a model loaded from a file, or a fit under way
+/// ([`super::live`]), which renders the latest copy of the model the fit handed it (the server
+/// only ever asks through `&self`, from several threads).
 pub trait Scene: Sync {
     /// The view from `camera`, with its intrinsics' size.
     ///
     /// Errors: a frame the machine has no memory for ([`CliError::TooLarge`]), the renderer's.
     fn render(&self, camera: &PinholeCamera) -> Result<RgbFrame, CliError>;
+
+    /// The JSON of `/progress` (a fit under way: [`super::live`]); none for a saved model.
+    fn progress(&self) -> Option<String> {
+        None
+    }
 }
 
 /// What the server answers from.
@@ -67,6 +73,10 @@ impl Handler for Site<'_> {
             "/info" => Response::ok("application/json", self.info.as_bytes().to_vec()),
             "/frame" => self.frame(&request.query),
             "/photo" => self.photo(&request.query),
+            "/progress" => match self.scene.progress() {
+                Some(json) => Response::ok("application/json", json.into_bytes()),
+                None => Response::refuse(404, "no fit under way: /progress is fogray fit --view's"),
+            },
             other => {
                 let shown: String = other.chars().take(80).collect();
                 Response::refuse(404, &format!("no such page: {}", fogray_data::escape_controls(&shown)))
@@ -92,7 +102,7 @@ impl Site<'_> {
         drop(guard);
         let frame = match rendered {
             Ok(f) => f,
-            Err(e @ CliError::TooLarge(_)) => return Response::refuse(503, &e.to_string()),
+            Err(e @ (CliError::TooLarge(_) | CliError::NotYet(_))) => return Response::refuse(503, &e.to_string()),
             Err(e) => return Response::refuse(500, &e.to_string()),
         };
         match png(&frame) {

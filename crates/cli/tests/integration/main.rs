@@ -7,6 +7,7 @@ mod common;
 mod disk_room;
 mod export;
 mod fit_render;
+mod fit_view;
 mod interrupt;
 mod lego;
 mod limits;

@@ -18,9 +18,9 @@ use serde_json::Value;
 use crate::common::{arg, assert_refused, cameras, fogray, intrinsics, render_cameras, write_ball, LENS, TINY_FIT};
 
 /// A running `fogray view`, stopped (SIGINT) when dropped.
-struct Server {
-    child: Child,
-    port: u16,
+pub(crate) struct Server {
+    pub(crate) child: Child,
+    pub(crate) port: u16,
 }
 
 impl Server {
@@ -50,7 +50,7 @@ impl Server {
     }
 
     /// Sends `raw` (a whole request) and returns the status and body.
-    fn raw(&self, raw: &[u8]) -> (u16, Vec<u8>) {
+    pub(crate) fn raw(&self, raw: &[u8]) -> (u16, Vec<u8>) {
         let mut stream = TcpStream::connect(("127.0.0.1", self.port)).unwrap();
         stream.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
         // The server may answer and close before a long request is all sent.
@@ -67,7 +67,7 @@ impl Server {
     }
 
     /// `GET target` (sent as written: no client normalises it).
-    fn get(&self, target: &str) -> (u16, Vec<u8>) {
+    pub(crate) fn get(&self, target: &str) -> (u16, Vec<u8>) {
         let request = format!(
             "GET {target} HTTP/1.1\r\nHost: 127.0.0.1:{}\r\nConnection: close\r\n\r\n",
             self.port
@@ -118,20 +118,20 @@ fn fit_model(dir: &Path, name: &str, flags: &[&str]) -> PathBuf {
 }
 
 /// An 8-bit RGB PNG as `[row][column][channel]`.
-fn decode(png: &[u8]) -> Array3<u8> {
+pub(crate) fn decode(png: &[u8]) -> Array3<u8> {
     let image = image::load_from_memory(png).unwrap().to_rgb8();
     let (w, h) = image.dimensions();
     Array3::from_shape_vec((h as usize, w as usize, 3), image.into_raw()).unwrap()
 }
 
 /// The largest difference between two pictures of one size, in 8-bit levels.
-fn worst(a: &Array3<u8>, b: &Array3<u8>) -> u8 {
+pub(crate) fn worst(a: &Array3<u8>, b: &Array3<u8>) -> u8 {
     assert_eq!(a.dim(), b.dim());
     a.iter().zip(b).map(|(x, y)| x.abs_diff(*y)).max().unwrap_or(0)
 }
 
 /// `fogray render`'s frame of `camera` from `model` (written as a one-frame transforms file).
-fn rendered(dir: &Path, model: &Path, camera: &PinholeCamera) -> Array3<u8> {
+pub(crate) fn rendered(dir: &Path, model: &Path, camera: &PinholeCamera) -> Array3<u8> {
     let k = camera.intrinsics();
     let photo = Array3::from_elem((k.height, k.width, 3), 0.5);
     let transforms = write_instant_ngp(&dir.join("cameras"), &[("probe", camera, &photo)]).unwrap();
@@ -142,7 +142,7 @@ fn rendered(dir: &Path, model: &Path, camera: &PinholeCamera) -> Array3<u8> {
 }
 
 /// The look-at camera of a frame query's numbers.
-fn look_at(eye: [f64; 3], fov: f64, [w, h]: [usize; 2]) -> (PinholeCamera, String) {
+pub(crate) fn look_at(eye: [f64; 3], fov: f64, [w, h]: [usize; 2]) -> (PinholeCamera, String) {
     let k = Intrinsics::from_vertical_fov(w, h, fov.to_radians()).unwrap();
     let camera = PinholeCamera::look_at(k, eye, [0.0; 3], [0.0, 0.0, 1.0]).unwrap();
     let list = |v: [f64; 3]| v.map(|x| x.to_string()).join(",");
@@ -299,6 +299,7 @@ fn bad_requests_are_refused_in_one_line() {
         ("/..%2f..%2fetc%2fpasswd".into(), 404, "no such page"),
         ("/frame/../info".into(), 404, "no such page"),
         ("/nothing".into(), 404, "no such page"),
+        ("/progress".into(), 404, "no fit under way"),
         ("/photo?view=../../etc/passwd".into(), 404, "8 photographs are offered"),
         ("/photo?view=8".into(), 404, "8 photographs are offered"),
         ("/photo?file=/etc/passwd".into(), 400, "view=N alone"),
